@@ -1,0 +1,108 @@
+"""Baseline trackers for side-by-side comparison with PZC.
+
+* :class:`PIDTracker`, the paper's Section 5 comparison controller, on the raw measurement:
+      u_p       = k_P (p_ref - p) + k_I int (p_ref - p) + k_D (p_ref' - p')
+      omega_ref = k_P (phi_ref - phi) + k_I int (phi_ref - phi) + k_D (phi_ref' - phi')
+  with phi_ref = atan2(u_y, u_x) as for PZC (eq. 20), the paper's gains k_P 3.5, k_I 0.5, k_D 0.5,
+  and the same speed law, limits and anti-windup as the PZC tracker (so the comparison is of the
+  feedback laws, not of the speed law). p' and phi' are the vehicle's own velocity estimates
+  (LOCAL_POSITION_NED vx, vy and ATTITUDE yawspeed); phi_ref' is differenced between steps.
+* :class:`KanayamaTracker`, Kanayama et al. (ICRA 1990), the classic kinematic tracking law:
+      e_x = cos(th)(x_r - x) + sin(th)(y_r - y),  e_y = -sin(th)(x_r - x) + cos(th)(y_r - y)
+      v = v_r cos(e_th) + K_x e_x,  omega = omega_r + v_r (K_y e_y + K_th sin(e_th))
+  with v_r, th_r, omega_r taken from the reference's first and second derivatives.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from . import ops as _ops
+from .angles import wrap
+from .limits import Limits, clamp, speed_from_up
+from .pzc import reference_heading_rate
+from .signals import Command, Measurement, Num, Reference
+
+
+@dataclass(frozen=True)
+class PIDGains:
+    """The paper's "well-tuned" PID gains (Section 5), tuned there for f_r 0.04 Hz, d_cen 0."""
+
+    kp: Num = 3.5
+    ki: Num = 0.5
+    kd: Num = 0.5
+    speed_law: str = "projected"
+
+
+class PIDTracker:
+    name = "pid"
+
+    def __init__(self, gains: PIDGains = PIDGains(), limits: Limits = Limits(), n: int | None = None):
+        self.gains, self.limits, self.n = gains, limits, n
+        self._m = _ops.for_size(n)
+        self.reset()
+
+    def reset(self) -> None:
+        zero = self._m.zeros(self.n)
+        self.t = None
+        self.int_x = self.int_y = self.int_yaw = zero
+        self.prev_yaw_ref = zero
+
+    def step(self, t: float, meas: Measurement, ref: Reference) -> Command:
+        m, g = self._m, self.gains
+        first = self.t is None
+        dt = 0.0 if first else t - self.t
+        self.t = t
+        ex, ey = ref.x - meas.x, ref.y - meas.y
+        int_x, int_y = self.int_x + ex * dt, self.int_y + ey * dt
+        ux = g.kp * ex + g.ki * int_x + g.kd * (ref.vx - meas.vx)
+        uy = g.kp * ey + g.ki * int_y + g.kd * (ref.vy - meas.vy)
+
+        yaw_ref = m.atan2(uy, ux)
+        yaw_ref_rate = 0.0 if first else wrap(yaw_ref - self.prev_yaw_ref) / dt
+        self.prev_yaw_ref = yaw_ref
+        eyaw = wrap(yaw_ref - meas.yaw)
+        int_yaw = self.int_yaw + eyaw * dt
+        yaw_rate = g.kp * eyaw + g.ki * int_yaw + g.kd * (yaw_ref_rate - meas.yaw_rate)
+
+        speed = speed_from_up(m, g.speed_law, ux, uy, meas.yaw)
+        cmd, speed_free, rate_free = clamp(m, self.limits, speed, yaw_rate, ux, uy)
+        self.int_x = m.where(speed_free, int_x, self.int_x)
+        self.int_y = m.where(speed_free, int_y, self.int_y)
+        self.int_yaw = m.where(rate_free, int_yaw, self.int_yaw)
+        return cmd
+
+
+@dataclass(frozen=True)
+class KanayamaGains:
+    """K_x (1/s), K_y (1/m^2), K_th (1/m); chosen by hand on the paper's f_r 0.04 Hz ellipse."""
+
+    kx: Num = 3.0
+    ky: Num = 4.0
+    kth: Num = 3.0
+
+
+class KanayamaTracker:
+    name = "kanayama"
+
+    def __init__(self, gains: KanayamaGains = KanayamaGains(), limits: Limits = Limits(),
+                 n: int | None = None):
+        self.gains, self.limits, self.n = gains, limits, n
+        self._m = _ops.for_size(n)
+
+    def reset(self) -> None:
+        pass
+
+    def step(self, t: float, meas: Measurement, ref: Reference) -> Command:
+        m, g = self._m, self.gains
+        c, s = m.cos(meas.yaw), m.sin(meas.yaw)
+        dx, dy = ref.x - meas.x, ref.y - meas.y
+        ex = c * dx + s * dy
+        ey = -s * dx + c * dy
+        v_r = m.hypot(ref.vx, ref.vy)
+        eth = wrap(m.atan2(ref.vy, ref.vx) - meas.yaw)
+        speed = v_r * m.cos(eth) + g.kx * ex
+        yaw_rate = reference_heading_rate(ref, m) + v_r * (g.ky * ey + g.kth * m.sin(eth))
+        # u_p: the commanded velocity vector, for a velocity-vector autopilot.
+        cmd, _, _ = clamp(m, self.limits, speed, yaw_rate, speed * c, speed * s)
+        return cmd

@@ -1,0 +1,63 @@
+"""``companion``: the command-line entry point.
+
+Each sub-command lives in its own module under :mod:`companion.commands` and exposes
+``register(subparsers)``, which adds its parser and sets ``func(args) -> int``. Heavy imports
+(numpy simulation, pymavlink, zenoh) happen inside ``func`` so ``--help`` stays instant.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+
+from . import __version__
+from .errors import UserError
+
+# Sub-command modules, in the order ``companion --help`` lists them.
+COMMANDS = [
+    "demo",
+    "run",
+    "paper_table",
+    "tune",
+]
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse, but a usage error is one line (plus the usage) and exit code 2, as before."""
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = _Parser(prog="companion", description=(
+        "Companion-computer trajectory tracker for differential-drive rovers: the model-free "
+        "filter and PZC PI law of Lee et al. (2024), over MAVLink."))
+    parser.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
+    for name in COMMANDS:
+        try:
+            module = importlib.import_module(f"companion.commands.{name}")
+        except ModuleNotFoundError as exc:
+            if exc.name == f"companion.commands.{name}":
+                continue  # a command still being written is simply not offered
+            raise
+        module.register(sub)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        return int(args.func(args) or 0)
+    except UserError as err:
+        print(f"companion {args.command}: error: {err}", file=sys.stderr)
+        return err.exit_code
+    except KeyboardInterrupt:
+        print(f"companion {args.command}: interrupted", file=sys.stderr)
+        return 130
+    except BrokenPipeError:
+        return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,53 @@
+"""From the position-loop output u_p to a command within the vehicle's limits.
+
+Shared by every tracker (PZC and the PID baseline), so the speed law, the clamps and the
+anti-windup rule are written once.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from .signals import Command, Num
+
+SPEED_LAWS = ("projected", "paper")
+
+
+@dataclass(frozen=True)
+class Limits:
+    """Command limits: |v_ref| <= max_speed (m/s), |omega_ref| <= max_yaw_rate (rad/s)."""
+
+    max_speed: float = math.inf
+    max_yaw_rate: float = math.inf
+
+    def __post_init__(self):
+        for name in ("max_speed", "max_yaw_rate"):
+            value = getattr(self, name)
+            if not value > 0:
+                raise ValueError(f"{name} must be > 0, not {value!r}")
+
+
+def speed_from_up(m, speed_law: str, ux: Num, uy: Num, yaw: Num) -> Num:
+    """v_ref from u_p: the paper's |u_p| (eq. 20) or its projection on the heading (default).
+
+    See :mod:`companion.pzc` for why the projection is the default.
+    """
+    if speed_law == "paper":
+        return m.hypot(ux, uy)
+    return ux * m.cos(yaw) + uy * m.sin(yaw)
+
+
+def clamp(m, lim: Limits, speed: Num, yaw_rate: Num, ux: Num, uy: Num):
+    """Clamp a raw command to the limits.
+
+    Returns ``(command, speed_free, rate_free)``; the two flags are False where a clamp bit, and
+    the caller must then hold the matching integrator (conditional-integration anti-windup).
+    """
+    speed_free = abs(speed) <= lim.max_speed
+    rate_free = abs(yaw_rate) <= lim.max_yaw_rate
+    speed = m.clip(speed, -lim.max_speed, lim.max_speed)
+    yaw_rate = m.clip(yaw_rate, -lim.max_yaw_rate, lim.max_yaw_rate)
+    # u_p for a velocity-vector autopilot (PX4) obeys the same speed limit.
+    scale = m.minimum(1.0, lim.max_speed / m.maximum(m.hypot(ux, uy), 1e-12))
+    return Command(speed, yaw_rate, ux * scale, uy * scale), speed_free, rate_free

@@ -1,0 +1,39 @@
+"""Elementwise maths for one vehicle (Python floats) or many (numpy arrays).
+
+The tracking mathematics is written once against one of these two namespaces, so the live loop
+runs on plain floats (about 60 ns for ``math.atan2`` against 0.7 us for ``numpy.arctan2`` on a
+scalar) and batch simulation runs the very same code on arrays of thousands of vehicles.
+"""
+
+from __future__ import annotations
+
+import math
+from types import SimpleNamespace
+
+import numpy as np
+
+
+def _clip(x, lo, hi):
+    return lo if x < lo else (hi if x > hi else x)
+
+
+def _where(cond, a, b):
+    return a if cond else b
+
+
+scalar = SimpleNamespace(
+    sin=math.sin, cos=math.cos, atan2=math.atan2, hypot=math.hypot, exp=math.exp,
+    sqrt=math.sqrt, clip=_clip, where=_where, maximum=max, minimum=min, isfinite=math.isfinite,
+    floor=math.floor, zeros=lambda n: 0.0,
+)
+
+array = SimpleNamespace(
+    sin=np.sin, cos=np.cos, atan2=np.arctan2, hypot=np.hypot, exp=np.exp, sqrt=np.sqrt,
+    clip=np.clip, where=np.where, maximum=np.maximum, minimum=np.minimum, isfinite=np.isfinite,
+    floor=np.floor, zeros=lambda n: np.zeros(n),
+)
+
+
+def for_size(n: int | None) -> SimpleNamespace:
+    """The namespace for ``n`` vehicles: ``None`` means one vehicle on plain floats."""
+    return scalar if n is None else array
