@@ -1,0 +1,151 @@
+"""Tuned-gains files: what ``companion tune`` writes and every other command reads.
+
+A small TOML file::
+
+    # written by `companion tune`
+    rate_hz = 40.0          # controller rate the gains were tuned for
+    w_c = 1.2               # actuator bandwidth (rad/s) of the tuning plant
+    d_cen = 0.0
+    cost = 12.3             # tuner's objective (sum of f_cost over its reference speeds)
+
+    [filter]                # paper: k_{d,f}, lambda_f
+    k_df = 300.0
+    lambda_f = 40.0
+
+    [pzc]                   # paper: k_{d,c}, lambda_c; the rest are extensions (see companion.pzc)
+    k_dc = 4.0
+    lambda_c = 2.0
+    k_dc_yaw = 8.0
+    lambda_c_yaw = 3.0
+    velocity_ff = true
+    heading_rate_ff = true
+    speed_law = "projected"
+
+Files for the rates and actuators we ship with live in ``companion/tuned/``.
+"""
+
+from __future__ import annotations
+
+import math
+import tomllib
+from dataclasses import dataclass, fields
+from pathlib import Path
+
+from .errors import UserError
+from .filter import FilterGains
+from .pzc import PZCGains
+
+TUNED_DIR = Path(__file__).parent / "tuned"
+
+
+@dataclass(frozen=True)
+class TunedGains:
+    filter: FilterGains
+    pzc: PZCGains
+    rate_hz: float
+    w_c: float
+    d_cen: float = 0.0
+    cost: float | None = None
+    source: str = ""
+
+    def to_toml(self) -> str:
+        lines = ["# written by `companion tune`",
+                 f"rate_hz = {self.rate_hz!r}", f"w_c = {self.w_c!r}", f"d_cen = {self.d_cen!r}"]
+        if self.cost is not None:
+            lines.append(f"cost = {self.cost!r}")
+        lines += ["", "[filter]", f"k_df = {float(self.filter.k_df)!r}",
+                  f"lambda_f = {float(self.filter.lambda_f)!r}", "", "[pzc]"]
+        for f in fields(PZCGains):
+            value = getattr(self.pzc, f.name)
+            if value is None:
+                continue
+            if f.name in ("velocity_ff", "heading_rate_ff"):
+                lines.append(f"{f.name} = {'true' if value else 'false'}")
+            elif isinstance(value, str):
+                lines.append(f'{f.name} = "{value}"')
+            else:
+                lines.append(f"{f.name} = {float(value)!r}")
+        return "\n".join(lines) + "\n"
+
+    def save(self, path: str | Path) -> None:
+        Path(path).write_text(self.to_toml())
+
+
+def _number(table: dict, key: str, where: str, positive: bool = True) -> float:
+    if key not in table:
+        raise UserError(f"{where}: missing key '{key}'")
+    value = table[key]
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+        raise UserError(f"{where}: '{key}' must be a finite number, not {value!r}")
+    if positive and value <= 0:
+        raise UserError(f"{where}: '{key}' must be > 0, not {value!r}")
+    return float(value)
+
+
+def parse(data: dict, where: str) -> TunedGains:
+    """Validate a parsed gains table (also used for a mission file's gains section)."""
+    known_top = {"rate_hz", "w_c", "d_cen", "cost", "filter", "pzc"}
+    for key in data:
+        if key not in known_top:
+            raise UserError(f"{where}: unknown key '{key}'")
+    filt = data.get("filter", {})
+    pzc = data.get("pzc", {})
+    if not isinstance(filt, dict) or not isinstance(pzc, dict):
+        raise UserError(f"{where}: 'filter' and 'pzc' must be tables")
+    for key in filt:
+        if key not in ("k_df", "lambda_f"):
+            raise UserError(f"{where}: unknown key 'filter.{key}'")
+    pzc_names = {f.name for f in fields(PZCGains)}
+    for key in pzc:
+        if key not in pzc_names:
+            raise UserError(f"{where}: unknown key 'pzc.{key}'")
+    fg = FilterGains(_number(filt, "k_df", f"{where}: filter"),
+                     _number(filt, "lambda_f", f"{where}: filter"))
+    kwargs = {"k_dc": _number(pzc, "k_dc", f"{where}: pzc"),
+              "lambda_c": _number(pzc, "lambda_c", f"{where}: pzc")}
+    for key in ("k_dc_yaw", "lambda_c_yaw"):
+        if key in pzc:
+            kwargs[key] = _number(pzc, key, f"{where}: pzc")
+    for key in ("velocity_ff", "heading_rate_ff"):
+        if key in pzc:
+            if not isinstance(pzc[key], bool):
+                raise UserError(f"{where}: pzc.{key} must be true or false, not {pzc[key]!r}")
+            kwargs[key] = pzc[key]
+    if "speed_law" in pzc:
+        if pzc["speed_law"] not in ("projected", "paper"):
+            raise UserError(f"{where}: pzc.speed_law must be \"projected\" or \"paper\", "
+                            f"not {pzc['speed_law']!r}")
+        kwargs["speed_law"] = pzc["speed_law"]
+    return TunedGains(
+        filter=fg, pzc=PZCGains(**kwargs),
+        rate_hz=_number(data, "rate_hz", where) if "rate_hz" in data else math.nan,
+        w_c=_number(data, "w_c", where) if "w_c" in data else math.nan,
+        d_cen=_number(data, "d_cen", where, positive=False) if "d_cen" in data else 0.0,
+        cost=_number(data, "cost", where, positive=False) if "cost" in data else None,
+        source=where)
+
+
+def load(path: str | Path) -> TunedGains:
+    """Read a tuned-gains file; any problem is a one-line :class:`UserError` naming file and key."""
+    path = Path(path)
+    try:
+        data = tomllib.loads(path.read_text())
+    except FileNotFoundError:
+        raise UserError(f"{path}: no such file") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise UserError(f"{path}: cannot read: {exc}") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise UserError(f"{path}: not valid TOML: {exc}") from None
+    return parse(data, str(path))
+
+
+def tuned_path(rate_hz: float, w_c: float, d_cen: float = 0.0) -> Path:
+    """Where the shipped gains for this rate, actuator bandwidth and d_cen live."""
+    name = f"rate{rate_hz:g}_wc{w_c:g}" + (f"_dcen{d_cen:g}" if d_cen else "") + ".toml"
+    return TUNED_DIR / name
+
+
+def find_tuned(rate_hz: float, w_c: float = 20.0, d_cen: float = 0.0) -> TunedGains | None:
+    """The shipped tuned gains for exactly this rate and w_c (and d_cen), or None."""
+    path = tuned_path(rate_hz, w_c, d_cen)
+    return load(path) if path.exists() else None
