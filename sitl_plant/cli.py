@@ -1,0 +1,177 @@
+"""``sitl-plant``: a MAVLink-speaking software rover (ArduPilot Rover or PX4 personality).
+
+Parses the command line into a :class:`~sitl_plant.config.PlantConfig`, opens the link, runs the
+plant until ``--duration`` or SIGTERM / SIGINT, and exits 0. A user's mistake is one line on
+stderr and exit code 2, never a traceback.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import signal
+import socket
+import sys
+
+from companion.plant import RoverParams
+
+from .config import DEFAULT_URL, PlantConfig
+from .modes import Autopilot
+from .telemetry import TelemetryConfig
+from .vehicle import VehicleConfig
+
+PRESETS = {"paper": RoverParams.paper, "stock": RoverParams.stock_rover}
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse whose usage errors are a single line (and exit code 2)."""
+
+    def error(self, message: str):
+        self.exit(2, f"{self.prog}: error: {message} (see --help)\n")
+
+
+def _number(kind: str, ok, what: str, allow_inf: bool = False):
+    def parse(text: str) -> float:
+        try:
+            value = float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
+        if math.isnan(value) or (math.isinf(value) and not allow_inf) or not ok(value):
+            raise argparse.ArgumentTypeError(f"{text!r}: must be {what}")
+        return value
+    parse.__name__ = kind
+    return parse
+
+
+_positive = _number("positive", lambda v: v > 0, "a finite number > 0")
+_positive_or_inf = _number("limit", lambda v: v > 0, "> 0 (inf for no limit)", allow_inf=True)
+_non_negative = _number("non-negative", lambda v: v >= 0, "a finite number >= 0")
+_probability = _number("probability", lambda v: 0 <= v <= 1, "between 0 and 1")
+_finite = _number("finite", lambda v: True, "a finite number")
+
+
+def _sysid(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not an integer") from None
+    if not 1 <= value <= 255:
+        raise argparse.ArgumentTypeError(f"{text!r}: must be 1..255")
+    return value
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = _Parser(prog="sitl-plant", description=(
+        "A two-wheeled rover (the paper's model, companion.plant) behind a MAVLink 2 autopilot "
+        "that behaves like ArduPilot Rover (or PX4): heartbeat, modes, arming, message rates, "
+        "SET_POSITION_TARGET_LOCAL_NED, the guided timeout."))
+    link = p.add_argument_group("link")
+    link.add_argument("--connect", metavar="URL", default=DEFAULT_URL,
+                      help=f"any pymavlink connection string (default {DEFAULT_URL})")
+    link.add_argument("--sysid", type=_sysid, default=1, help="MAVLink system id (default 1)")
+    link.add_argument("--autopilot", choices=[a.value for a in Autopilot], default="ardupilot",
+                      help="personality (default ardupilot)")
+    link.add_argument("--loop-rate", type=_positive, default=50.0, metavar="HZ",
+                      help="scheduler rate; message rates above 0.8x are refused (default 50)")
+    link.add_argument("--arm-delay", type=_non_negative, default=0.0, metavar="S",
+                      help="arming refused for the first S s of vehicle time (default 0)")
+    clock = p.add_argument_group("clock")
+    clock.add_argument("--speedup", type=_positive, default=1.0, metavar="N",
+                       help="vehicle time runs N x wall time (default 1)")
+    clock.add_argument("--lockstep", action="store_true",
+                       help="advance to the next telemetry tick only once a setpoint answered")
+    clock.add_argument("--lockstep-timeout", type=_positive, default=0.25, metavar="S",
+                       help="wall s to wait for that setpoint (default 0.25)")
+    clock.add_argument("--physics-dt", type=_positive, default=0.001, metavar="S",
+                       help="integration step, vehicle s (default 0.001)")
+    clock.add_argument("--duration", type=_positive, default=None, metavar="S",
+                       help="exit after S s of vehicle time (default: run until a signal)")
+    veh = p.add_argument_group("vehicle")
+    veh.add_argument("--preset", choices=sorted(PRESETS), default="paper",
+                     help="paper: the paper's plant; stock: a stock ArduPilot skid-steer rover")
+    veh.add_argument("--d-cen", type=_non_negative, metavar="M", help="axle to tracked point")
+    veh.add_argument("--w-c", type=_positive, metavar="RAD_S", help="speed-loop bandwidth")
+    veh.add_argument("--w-c-yaw", type=_positive, metavar="RAD_S", help="turn-rate bandwidth")
+    veh.add_argument("--max-speed", type=_positive_or_inf, metavar="M_S")
+    veh.add_argument("--max-yaw-rate", type=_positive_or_inf, metavar="RAD_S")
+    veh.add_argument("--max-accel", type=_positive_or_inf, metavar="M_S2")
+    veh.add_argument("--start", type=_finite, nargs=3, metavar=("X", "Y", "YAW"),
+                     default=(0.0, 0.0, 0.0), help="start pose: north m, east m, yaw rad")
+    tel = p.add_argument_group("telemetry")
+    tel.add_argument("--noise-pos", type=_non_negative, default=0.0, metavar="M")
+    tel.add_argument("--noise-yaw", type=_non_negative, default=0.0, metavar="RAD")
+    tel.add_argument("--seed", type=int, default=None, help="noise/dropout seed (default sysid)")
+    tel.add_argument("--latency", type=_non_negative, default=0.0, metavar="S",
+                     help="telemetry sent S s of vehicle time after sampling")
+    tel.add_argument("--dropout", type=_probability, default=0.0, metavar="P",
+                     help="each pose message lost with probability P")
+    return p
+
+
+def config_from_args(args: argparse.Namespace) -> PlantConfig:
+    params = PRESETS[args.preset]()
+    overrides = {name: getattr(args, name) for name in
+                 ("d_cen", "w_c", "w_c_yaw", "max_speed", "max_yaw_rate", "max_accel")
+                 if getattr(args, name) is not None}
+    params = params.with_(**overrides)
+    vehicle = VehicleConfig(params=params, autopilot=Autopilot(args.autopilot),
+                            arm_delay=args.arm_delay, start=tuple(args.start))
+    telemetry = TelemetryConfig(noise_pos=args.noise_pos, noise_yaw=args.noise_yaw,
+                                latency=args.latency, dropout=args.dropout,
+                                seed=args.sysid if args.seed is None else args.seed)
+    return PlantConfig(connect=args.connect, sysid=args.sysid, loop_rate=args.loop_rate,
+                       speedup=args.speedup, lockstep=args.lockstep,
+                       lockstep_timeout=args.lockstep_timeout, physics_dt=args.physics_dt,
+                       duration=args.duration, preset=args.preset, vehicle=vehicle,
+                       telemetry=telemetry)
+
+
+def _install_signals(server) -> socket.socket:
+    """SIGTERM / SIGINT end the run cleanly; the wake-up socket interrupts the loop's wait."""
+    wake_r, wake_w = socket.socketpair()
+    wake_r.setblocking(False)
+    wake_w.setblocking(False)
+    signal.set_wakeup_fd(wake_w.fileno(), warn_on_full_buffer=False)
+
+    def stop(signum, frame):
+        server.stopping = True
+
+    signal.signal(signal.SIGTERM, stop)
+    signal.signal(signal.SIGINT, stop)
+    server.wake = wake_r
+    return wake_w
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    config = config_from_args(args)
+    from .link import Link, LinkError
+    from .server import PlantServer
+    try:
+        link = Link(config.connect, config.sysid, config.compid)
+    except LinkError as err:
+        print(f"sitl-plant: error: {err}", file=sys.stderr)
+        return 2
+    server = PlantServer(config, link)
+    _install_signals(server)
+    clock = "lockstep" if config.lockstep else "paced"
+    print(f"sitl-plant: sysid {config.sysid} on {config.connect}, preset {config.preset}, "
+          f"{config.vehicle.autopilot.value}, {clock} x{config.speedup:g}",
+          file=sys.stderr, flush=True)
+    try:
+        server.run()
+    finally:
+        link.close()
+    v = server.vehicle
+    ignored = sum(v.setpoints_ignored.values())
+    print(f"sitl-plant: sysid {config.sysid} stopped at t={server.t_us / 1e6:.3f} s: "
+          f"{link.received} messages in, {link.bad_data} bad, {v.setpoints_used} setpoints used, "
+          f"{ignored} ignored {dict(sorted(v.setpoints_ignored.items()))}, "
+          f"{server.gate.timeouts} lockstep timeouts", file=sys.stderr, flush=True)
+    if link.peer_closed:
+        print("sitl-plant: the TCP peer closed the connection", file=sys.stderr)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,26 @@
+"""Everything one plant process is configured with (built by :mod:`sitl_plant.cli`)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+from .telemetry import TelemetryConfig
+from .vehicle import VehicleConfig
+
+DEFAULT_URL = "udpout:127.0.0.1:14550"
+
+
+@dataclass(frozen=True)
+class PlantConfig:
+    connect: str = DEFAULT_URL
+    sysid: int = 1
+    compid: int = 1
+    loop_rate: float = 50.0          # Hz, SCHED_LOOP_RATE: caps message rates at 0.8 x this
+    speedup: float = 1.0             # vehicle seconds per wall second when paced
+    lockstep: bool = False
+    lockstep_timeout: float = 0.25   # wall s to wait for a setpoint before running on
+    physics_dt: float = 0.001        # s of vehicle time per integration step
+    duration: float | None = None    # s of vehicle time, None: until a signal
+    preset: str = "paper"
+    vehicle: VehicleConfig = field(default_factory=VehicleConfig)
+    telemetry: TelemetryConfig = field(default_factory=TelemetryConfig)

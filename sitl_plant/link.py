@@ -1,0 +1,121 @@
+"""The plant's MAVLink endpoint: pymavlink's connection, and the messages an ArduPilot Rover sends.
+
+MAVLink 2 (MAVLINK20 is set before pymavlink is imported), dialect ardupilotmega, any mavutil
+connection string. Never raises on a bad peer: receive errors and garbage are counted, send errors
+are dropped (like a radio link).
+"""
+
+from __future__ import annotations
+
+import os
+import socket
+from typing import Any
+
+from . import modes
+from .telemetry import PoseSample
+
+MAV_TYPE_GROUND_ROVER = 10
+MAV_STATE_STANDBY = 3
+MAV_STATE_ACTIVE = 4
+
+
+class LinkError(Exception):
+    """The connection string cannot be opened (a user error)."""
+
+
+def _mavutil():
+    os.environ["MAVLINK20"] = "1"
+    from pymavlink import mavutil
+    return mavutil
+
+
+class Link:
+    def __init__(self, url: str, sysid: int, compid: int):
+        mavutil = _mavutil()
+        try:
+            self.conn = mavutil.mavlink_connection(
+                url, source_system=sysid, source_component=compid, dialect="ardupilotmega")
+        except Exception as exc:  # pymavlink raises anything from ValueError to SerialException
+            raise LinkError(f"cannot open {url!r}: {exc}") from None
+        self.mav = self.conn.mav
+        self.bad_data = 0
+        self.received = 0
+        self.peer_closed = False
+
+    @property
+    def fd(self) -> int | None:
+        return getattr(self.conn, "fd", None)
+
+    def recv(self) -> Any | None:
+        """One parsed message, or None when nothing (more) is waiting. Garbage is counted."""
+        try:
+            msg = self.conn.recv_msg()
+        except OSError:
+            return None
+        if msg is None:
+            return None
+        if msg.get_type() == "BAD_DATA":
+            self.bad_data += 1
+            return msg
+        self.received += 1
+        return msg
+
+    def check_eof(self) -> None:
+        """Called when the descriptor polled readable but no message came: a TCP peer may have
+        hung up, which pymavlink does not notice (the descriptor would stay readable forever).
+        ``tcpin`` goes back to listening for the next client; ``tcp`` sets :attr:`peer_closed`."""
+        port = getattr(self.conn, "port", None)
+        if not isinstance(port, socket.socket) or port.type != socket.SOCK_STREAM:
+            return
+        try:
+            at_eof = port.recv(1, socket.MSG_PEEK | socket.MSG_DONTWAIT) == b""
+        except BlockingIOError:
+            return
+        except OSError:
+            at_eof = True
+        if not at_eof:
+            return
+        listen = getattr(self.conn, "listen", None)
+        if isinstance(listen, socket.socket):
+            port.close()
+            self.conn.port = None
+            self.conn.fd = listen.fileno()
+        else:
+            self.peer_closed = True
+
+    def _send(self, fn, *args) -> None:
+        try:
+            fn(*args)
+        except OSError:
+            pass  # like a radio link: the next message may get through
+
+    def heartbeat(self, autopilot: modes.Autopilot, base_mode: int, custom_mode: int,
+                  armed: bool) -> None:
+        state = MAV_STATE_ACTIVE if armed else MAV_STATE_STANDBY
+        self._send(self.mav.heartbeat_send, MAV_TYPE_GROUND_ROVER,
+                   modes.heartbeat_autopilot(autopilot), base_mode, custom_mode, state)
+
+    def sys_status(self, receive_errors: int, setpoints_nonfinite: int) -> None:
+        self._send(self.mav.sys_status_send, 0, 0, 0, 0, 12600, -1, -1, 0,
+                   min(receive_errors, 0xFFFF), min(setpoints_nonfinite, 0xFFFF), 0, 0, 0)
+
+    def attitude(self, s: PoseSample) -> None:
+        self._send(self.mav.attitude_send, s.time_boot_ms, 0.0, 0.0, s.yaw, 0.0, 0.0, s.yaw_rate)
+
+    def local_position(self, s: PoseSample) -> None:
+        self._send(self.mav.local_position_ned_send, s.time_boot_ms, s.x, s.y, 0.0, s.vx, s.vy, 0.0)
+
+    def statustext(self, severity: int, text: str) -> None:
+        self._send(self.mav.statustext_send, severity, text.encode("ascii", "replace")[:50])
+
+    def ack(self, command: int, result: int, to_system: int, to_component: int) -> None:
+        self._send(self.mav.command_ack_send, command, result, 0, 0, to_system, to_component)
+
+    def message_interval(self, msg_id: int, interval_us: int) -> None:
+        self._send(self.mav.message_interval_send, msg_id, interval_us)
+
+    def close(self) -> None:
+        try:
+            self.conn.close()
+        except OSError:
+            pass

@@ -1,0 +1,248 @@
+"""The plant process: the vehicle on a clock, telemetry out, commands and setpoints in.
+
+One thread, one loop. Vehicle time is integer microseconds on a fixed physics step; telemetry,
+heartbeat and timers fall on that grid. Paced mode keeps vehicle time at wall time x speedup and
+brings the physics up to "now" before handling each message, so a setpoint acts at the vehicle
+time it arrived. Lockstep mode (while a companion is streaming setpoints) runs from one
+telemetry tick to the next as soon as a setpoint has answered the last one, so a run is
+deterministic and as fast as the two processes go.
+"""
+
+from __future__ import annotations
+
+import math
+import select
+import socket
+import time
+from typing import Any, Callable
+
+from . import streams
+from .clock import LockstepGate, Pacer
+from .config import PlantConfig
+from .link import Link
+from .modes import requested_custom_mode
+from .setpoint import Setpoint
+from .telemetry import TelemetryPipe
+from .vehicle import Result, Vehicle
+
+MAV_CMD_DO_SET_MODE = 176
+MAV_CMD_COMPONENT_ARM_DISARM = 400
+MAV_CMD_GET_MESSAGE_INTERVAL = 510
+MAV_CMD_SET_MESSAGE_INTERVAL = 511
+MAV_CMD_REQUEST_MESSAGE = 512
+MSG_ID_SET_MODE = 11
+FLAG_CUSTOM_MODE_ENABLED = 1
+SEVERITY_WARNING = 4
+MAX_WAIT = 0.1  # wall s: the loop wakes at least this often (signals, lockstep bookkeeping)
+
+
+class PlantServer:
+    def __init__(self, config: PlantConfig, link: Link, vehicle: Vehicle | None = None,
+                 wall: Callable[[], float] = time.monotonic):
+        self.config = config
+        self.link = link
+        self.vehicle = vehicle or Vehicle(config.vehicle)
+        self.wall = wall
+        self.streams = streams.StreamSchedule(config.loop_rate)
+        self.telemetry = TelemetryPipe(config.telemetry)
+        self.pacer = Pacer(config.speedup)
+        self.gate = LockstepGate(config.lockstep_timeout)
+        self.dt_us = max(1, int(round(config.physics_dt * 1e6)))
+        self.end_us = None if config.duration is None else int(round(config.duration * 1e6))
+        self.t_us = 0
+        self.stopping = False
+        self.wake: socket.socket | None = None  # becomes readable when a signal arrives
+        self.foreign = 0                  # messages addressed to another system
+
+    # --- the loop ---------------------------------------------------------------------------
+    def run(self) -> None:
+        self.pacer.anchor(self.wall(), 0)
+        self._tick()
+        while not self.stopping and not self.link.peer_closed:
+            lockstep = self.config.lockstep and self.gate.engaged(self.t_us)
+            if not lockstep:
+                self._catch_up()
+            self._drain()
+            if self.end_us is not None and self.t_us >= self.end_us:
+                return
+            if self.config.lockstep and self.gate.engaged(self.t_us):
+                self._lockstep_step()
+            else:
+                self._wait(self.pacer.wall_at(self._next_event_us()) - self.wall())
+
+    def _catch_up(self) -> None:
+        """Paced: run the physics up to the vehicle time that corresponds to now."""
+        now = self.wall()
+        if self.pacer.behind(now, self.t_us):
+            self.pacer.anchor(now, self.t_us)   # stalled (or just left lockstep): do not rush
+        target = min(self.pacer.vehicle_us(now), self._next_event_us())
+        self._advance_to(target - target % self.dt_us)
+
+    def _lockstep_step(self) -> None:
+        now = self.wall()
+        self.pacer.anchor(now, self.t_us)
+        deadline = self.gate.deadline()
+        if deadline is not None:
+            if now < deadline:
+                self._wait(deadline - now)
+                return
+            self.gate.expire()
+        self._advance_to(self._next_event_us())
+
+    def _next_send_us(self) -> int:
+        """Vehicle time of the next message due (a second ahead when nothing is)."""
+        candidates = (self.streams.next_due_us(), self.telemetry.next_release_us())
+        return min((c for c in candidates if c is not None), default=self.t_us + 1_000_000)
+
+    def _next_event_us(self) -> int:
+        """The next physics-grid instant at which something is sent or the run ends."""
+        nxt = self._next_send_us()
+        if self.end_us is not None:
+            nxt = min(nxt, self.end_us)
+        nxt = max(nxt, self.t_us + self.dt_us)
+        return -(-nxt // self.dt_us) * self.dt_us   # the first step at or after it
+
+    def _advance_to(self, target_us: int) -> None:
+        dt, vehicle = self.dt_us * 1e-6, self.vehicle
+        nxt = self._next_send_us()
+        while self.t_us < target_us:
+            vehicle.step(dt)
+            self.t_us += self.dt_us
+            if vehicle.texts:
+                self._flush_texts()
+            if self.t_us >= nxt:
+                self._tick()
+                nxt = self._next_send_us()
+
+    def _wait(self, timeout: float) -> None:
+        wake_fd = self.wake.fileno() if self.wake is not None else None
+        fds = [fd for fd in (self.link.fd, wake_fd) if fd is not None]
+        timeout = min(max(timeout, 0.0), MAX_WAIT)
+        if not fds:
+            time.sleep(timeout)
+            return
+        try:
+            ready, _, _ = select.select(fds, [], [], timeout)
+        except (OSError, ValueError):
+            return
+        if wake_fd is not None and wake_fd in ready:
+            try:
+                self.wake.recv(64)
+            except OSError:
+                pass
+        if self.link.fd in ready and not self._drain():
+            self.link.check_eof()
+
+    # --- output -----------------------------------------------------------------------------
+    def _tick(self) -> None:
+        """Send whatever is due at this instant: heartbeat, status, then pose telemetry."""
+        t_us, v, link = self.t_us, self.vehicle, self.link
+        sample = None
+        for mid in self.streams.due(t_us):
+            if mid == streams.HEARTBEAT:
+                link.heartbeat(v.autopilot, v.base_mode, v.custom_mode, v.armed)
+            elif mid == streams.SYS_STATUS:
+                link.sys_status(link.bad_data, v.setpoints_ignored.get("non-finite", 0))
+            else:
+                if sample is None:
+                    sample = self._sample()
+                self.telemetry.push(t_us, mid, sample)
+        sent = False
+        for mid, s in self.telemetry.release(t_us):
+            (link.attitude if mid == streams.ATTITUDE else link.local_position)(s)
+            sent = True
+        if sent and self.config.lockstep and self.gate.engaged(t_us):
+            self.gate.telemetry_sent(self.wall())
+
+    def _sample(self):
+        s = self.vehicle.state
+        vx, vy = self.vehicle.velocity()
+        return self.telemetry.sample(self.t_us, s.x, s.y, s.yaw, vx, vy, s.omega)
+
+    def _flush_texts(self) -> None:
+        for severity, text in self.vehicle.pop_texts():
+            self.link.statustext(severity, text)
+
+    # --- input ------------------------------------------------------------------------------
+    def _drain(self) -> int:
+        """Handle every message waiting; returns how many were read (garbage included)."""
+        n = 0
+        while True:
+            msg = self.link.recv()
+            if msg is None:
+                return n
+            n += 1
+            try:
+                self._handle(msg)
+            except (ValueError, TypeError, AttributeError, OverflowError):
+                self.link.bad_data += 1   # a well-formed frame with nonsense in it
+            if self.vehicle.texts:
+                self._flush_texts()
+
+    def _for_us(self, msg: Any) -> bool:
+        ours = getattr(msg, "target_system", 0) in (0, self.config.sysid)
+        if not ours:
+            self.foreign += 1
+        return ours
+
+    def _handle(self, msg: Any) -> None:
+        kind = msg.get_type()
+        if kind == "SET_POSITION_TARGET_LOCAL_NED":
+            if self._for_us(msg):
+                self.gate.setpoint_arrived(self.t_us)
+                self.vehicle.setpoint(Setpoint(
+                    msg.coordinate_frame, msg.type_mask, msg.x, msg.y, msg.vx, msg.vy,
+                    msg.afx, msg.afy, msg.yaw, msg.yaw_rate))
+        elif kind in ("COMMAND_LONG", "COMMAND_INT"):
+            if self._for_us(msg) and msg.target_component in (0, self.config.compid):
+                result = self._command(msg)
+                self.link.ack(msg.command, int(result), msg.get_srcSystem(),
+                              msg.get_srcComponent())
+        elif kind == "SET_MODE":
+            if self._for_us(msg):
+                if msg.base_mode & FLAG_CUSTOM_MODE_ENABLED:
+                    result = self.vehicle.set_mode(msg.custom_mode)
+                else:
+                    result = Result.FAILED
+                self.link.ack(MSG_ID_SET_MODE, int(result), msg.get_srcSystem(),
+                              msg.get_srcComponent())
+
+    def _command(self, msg: Any) -> Result:
+        cmd, p1, p2, p3 = msg.command, msg.param1, msg.param2, msg.param3
+        v = self.vehicle
+        if cmd == MAV_CMD_DO_SET_MODE:
+            if not (math.isfinite(p1) and int(p1) & FLAG_CUSTOM_MODE_ENABLED):
+                return Result.FAILED
+            return v.set_mode(requested_custom_mode(v.autopilot, p2, p3))
+        if cmd == MAV_CMD_COMPONENT_ARM_DISARM:
+            if p1 not in (0.0, 1.0):
+                return Result.UNSUPPORTED
+            return v.arm(p1 == 1.0)
+        if cmd == MAV_CMD_SET_MESSAGE_INTERVAL:
+            reply = self.streams.request(p1, p2, self.t_us)
+            if reply.text:
+                self.link.statustext(SEVERITY_WARNING, reply.text)
+            return Result(reply.result)
+        if cmd == MAV_CMD_GET_MESSAGE_INTERVAL:
+            if not math.isfinite(p1):
+                return Result.FAILED
+            self.link.message_interval(int(p1), self.streams.interval_us(int(p1)))
+            return Result.ACCEPTED
+        if cmd == MAV_CMD_REQUEST_MESSAGE:
+            return self._send_once(p1)
+        return Result.UNSUPPORTED
+
+    def _send_once(self, msg_id: float) -> Result:
+        """MAV_CMD_REQUEST_MESSAGE: one copy now, outside the streams (no noise-free shortcut)."""
+        v, link = self.vehicle, self.link
+        if msg_id == streams.HEARTBEAT:
+            link.heartbeat(v.autopilot, v.base_mode, v.custom_mode, v.armed)
+        elif msg_id == streams.SYS_STATUS:
+            link.sys_status(link.bad_data, v.setpoints_ignored.get("non-finite", 0))
+        elif msg_id == streams.ATTITUDE:
+            link.attitude(self._sample())
+        elif msg_id == streams.LOCAL_POSITION_NED:
+            link.local_position(self._sample())
+        else:
+            return Result.DENIED
+        return Result.ACCEPTED

@@ -1,0 +1,203 @@
+"""The simulated autopilot: mode / arming / guided-target state machine around the rover model.
+
+Pure and clock-free: the caller says how far to step (``step(dt)``), when a command or setpoint
+arrives, and drains :attr:`Vehicle.texts` (the STATUSTEXTs an autopilot would send). The rover's
+motion is :class:`companion.plant.RoverModel` (the paper's eqs. (1)-(2) with first-order
+actuators); this module only decides which (speed, turn-rate) commands it gets.
+
+Timers follow the firmware: ArduPilot's GUIDED speed/turn-rate and heading targets are dropped
+3 s after the last one arrived (Rover/mode_guided.cpp), PX4 leaves OFFBOARD for Hold when the
+setpoint stream stops for COM_OF_LOSS_T and only enters OFFBOARD after proof of life.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from enum import IntEnum
+
+from companion.angles import wrap
+from companion.plant import RoverModel, RoverParams, RoverState
+
+from . import guidance, modes
+from .modes import Autopilot
+from .setpoint import (STOP, Pose, PositionTarget, Rejected, Setpoint, Target,
+                       decode_ardupilot, decode_px4)
+
+GUIDED_TIMEOUT_TEXT = "target not received last 3secs, stopping"
+ARM_REFUSED_TEXT = "Arm: AHRS: not using configured AHRS type"
+OFFBOARD_REFUSED_TEXT = "Offboard: no setpoint stream (proof of life), mode change denied"
+OFFBOARD_LOST_TEXT = "Offboard signal lost, switching to Hold"
+
+# MAVLink severities used in STATUSTEXT.
+SEVERITY_WARNING = 4
+SEVERITY_INFO = 6
+
+
+class Result(IntEnum):
+    """MAV_RESULT values for COMMAND_ACK."""
+
+    ACCEPTED = 0
+    TEMPORARILY_REJECTED = 1
+    DENIED = 2
+    UNSUPPORTED = 3
+    FAILED = 4
+
+
+@dataclass(frozen=True)
+class VehicleConfig:
+    params: RoverParams = field(default_factory=RoverParams.paper)
+    autopilot: Autopilot = Autopilot.ARDUPILOT
+    arm_delay: float = 0.0                  # s of vehicle time during which arming is refused
+    start: tuple[float, float, float] = (0.0, 0.0, 0.0)  # x north, y east, yaw
+    guidance: guidance.GuidanceConfig = field(default_factory=guidance.GuidanceConfig)
+    guided_timeout: float = 3.0             # ArduPilot: speed/turn-rate and heading targets
+    offboard_loss_timeout: float = 0.5      # PX4 COM_OF_LOSS_T
+    proof_of_life_time: float = 1.0         # PX4: stream must have run this long ...
+    proof_of_life_gap: float = 0.5          # ... with no gap longer than this (> 2 Hz)
+
+
+class Vehicle:
+    """One rover and its autopilot. Times are seconds of vehicle time since boot."""
+
+    def __init__(self, config: VehicleConfig = VehicleConfig()):
+        self.config = config
+        self.model = RoverModel(config.params)
+        x, y, yaw = config.start
+        self.state = RoverState(x=x, y=y, yaw=wrap(yaw))
+        self.t = 0.0
+        self.autopilot = config.autopilot
+        self._modes = modes.mode_table(config.autopilot)
+        self.custom_mode = modes.initial_mode(config.autopilot)
+        self.armed = False
+        self.target: Target | None = None
+        self._target_time = 0.0
+        self._target_fresh = False                 # ArduPilot: not yet timed out
+        self._last_setpoint: float | None = None   # any setpoint for us, PX4 proof of life
+        self._stream_start: float | None = None
+        self.texts: list[tuple[int, str]] = []
+        self.setpoints_used = 0
+        self.setpoints_ignored: dict[str, int] = {}
+
+    # --- what the heartbeat reports -------------------------------------------------------
+    @property
+    def mode(self) -> modes.Mode:
+        return self._modes[self.custom_mode]
+
+    @property
+    def base_mode(self) -> int:
+        return modes.base_mode(self.mode, self.armed)
+
+    def commands(self) -> tuple[float, float]:
+        """(speed, yaw rate) the autopilot asks of the actuators right now."""
+        if not (self.armed and self.mode.follows_setpoints):
+            return 0.0, 0.0
+        return guidance.commands(self.target, self.state, self.config.params,
+                                 self.config.guidance)
+
+    # --- commands ---------------------------------------------------------------------------
+    def set_mode(self, custom_mode: int | None) -> Result:
+        mode = self._modes.get(custom_mode) if custom_mode is not None else None
+        if mode is None or not mode.settable:
+            self._say(SEVERITY_WARNING, f"Invalid mode: {custom_mode}")
+            return Result.FAILED if self.autopilot is Autopilot.ARDUPILOT else Result.DENIED
+        if custom_mode == self.custom_mode:
+            return Result.ACCEPTED
+        if (self.autopilot is Autopilot.PX4 and mode.follows_setpoints
+                and not self._proof_of_life()):
+            self._say(SEVERITY_WARNING, OFFBOARD_REFUSED_TEXT)
+            return Result.DENIED
+        self._enter(mode)
+        return Result.ACCEPTED
+
+    def arm(self, on: bool) -> Result:
+        if on == self.armed:
+            return Result.ACCEPTED
+        if on and self.t < self.config.arm_delay:
+            self._say(SEVERITY_WARNING, ARM_REFUSED_TEXT)
+            return Result.TEMPORARILY_REJECTED
+        self.armed = on
+        if not on and self.autopilot is Autopilot.ARDUPILOT:
+            self.target, self._target_fresh = None, False
+        px4 = self.autopilot is Autopilot.PX4
+        self._say(SEVERITY_INFO, ("Armed by external command" if on else "Disarmed by external command")
+                  if px4 else ("Throttle armed" if on else "Throttle disarmed"))
+        return Result.ACCEPTED
+
+    def setpoint(self, sp: Setpoint) -> str:
+        """Handle one SET_POSITION_TARGET_LOCAL_NED addressed to us; returns what became of it."""
+        px4 = self.autopilot is Autopilot.PX4
+        if px4:
+            self._note_stream()
+        elif not (self.armed and self.mode.follows_setpoints):
+            return self._ignored("not guided and armed")
+        pose = Pose(self.state.x, self.state.y, self.state.yaw)
+        decode = decode_px4 if px4 else decode_ardupilot
+        target = decode(sp, pose, self.config.params.max_speed)
+        if isinstance(target, Rejected):
+            return self._ignored(target.reason)
+        self.target, self._target_time, self._target_fresh = target, self.t, True
+        self.setpoints_used += 1
+        return "used"
+
+    # --- time -------------------------------------------------------------------------------
+    def step(self, dt: float) -> None:
+        """Advance ``dt`` seconds: timers first (they act on this instant), then the dynamics."""
+        if self.mode.follows_setpoints:
+            if self.autopilot is Autopilot.ARDUPILOT:
+                self._guided_timeout()
+            else:
+                self._offboard_loss()
+        speed, rate = self.commands()
+        s = self.model.step(self.state, speed, rate, dt)
+        if not -math.pi < s.yaw <= math.pi:
+            s.yaw = wrap(s.yaw)
+        self.state = s
+        self.t += dt
+
+    def velocity(self) -> tuple[float, float]:
+        """Eq. (1): the tracked point's velocity (LOCAL_POSITION_NED vx, vy)."""
+        return self.model.velocity(self.state)
+
+    # --- internals --------------------------------------------------------------------------
+    def _enter(self, mode: modes.Mode) -> None:
+        self.custom_mode = mode.custom_mode
+        if self.autopilot is Autopilot.ARDUPILOT:
+            # entering GUIDED starts stopped; other modes hold still
+            self.target, self._target_fresh = None, False
+        self._say(SEVERITY_INFO, f"Mode changed to {mode.name}")
+
+    def _guided_timeout(self) -> None:
+        if (self._target_fresh and not isinstance(self.target, PositionTarget)
+                and self.t - self._target_time >= self.config.guided_timeout - 1e-9):
+            self.target, self._target_fresh = STOP, False
+            self._say(SEVERITY_WARNING, GUIDED_TIMEOUT_TEXT)
+
+    def _offboard_loss(self) -> None:
+        last = self._last_setpoint
+        if last is None or self.t - last > self.config.offboard_loss_timeout:
+            self._enter(self._modes[modes.hold_mode(self.autopilot)])
+            self._say(SEVERITY_WARNING, OFFBOARD_LOST_TEXT)
+
+    def _note_stream(self) -> None:
+        last = self._last_setpoint
+        if last is None or self.t - last > self.config.proof_of_life_gap:
+            self._stream_start = self.t
+        self._last_setpoint = self.t
+
+    def _proof_of_life(self) -> bool:
+        last, start = self._last_setpoint, self._stream_start
+        return (last is not None and start is not None
+                and self.t - last <= self.config.proof_of_life_gap
+                and self.t - start >= self.config.proof_of_life_time - 1e-9)
+
+    def _ignored(self, reason: str) -> str:
+        self.setpoints_ignored[reason] = self.setpoints_ignored.get(reason, 0) + 1
+        return reason
+
+    def _say(self, severity: int, text: str) -> None:
+        self.texts.append((severity, text))
+
+    def pop_texts(self) -> list[tuple[int, str]]:
+        texts, self.texts = self.texts, []
+        return texts
