@@ -126,8 +126,9 @@ def config_from_args(args: argparse.Namespace) -> PlantConfig:
                        telemetry=telemetry)
 
 
-def _install_signals(server) -> socket.socket:
-    """SIGTERM / SIGINT end the run cleanly; the wake-up socket interrupts the loop's wait."""
+def _install_signals(server) -> tuple[socket.socket, socket.socket]:
+    """SIGTERM / SIGINT end the run cleanly; the wake-up socket interrupts the loop's wait.
+    The caller keeps the returned pair open for as long as the handlers are installed."""
     wake_r, wake_w = socket.socketpair()
     wake_r.setblocking(False)
     wake_w.setblocking(False)
@@ -139,7 +140,7 @@ def _install_signals(server) -> socket.socket:
     signal.signal(signal.SIGTERM, stop)
     signal.signal(signal.SIGINT, stop)
     server.wake = wake_r
-    return wake_w
+    return wake_r, wake_w
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -153,7 +154,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"sitl-plant: error: {err}", file=sys.stderr)
         return 2
     server = PlantServer(config, link)
-    _install_signals(server)
+    wake = _install_signals(server)
     clock = "lockstep" if config.lockstep else "paced"
     print(f"sitl-plant: sysid {config.sysid} on {config.connect}, preset {config.preset}, "
           f"{config.vehicle.autopilot.value}, {clock} x{config.speedup:g}",
@@ -162,6 +163,9 @@ def main(argv: list[str] | None = None) -> int:
         server.run()
     finally:
         link.close()
+        signal.set_wakeup_fd(-1)
+        for sock in wake:
+            sock.close()
     v = server.vehicle
     ignored = sum(v.setpoints_ignored.values())
     print(f"sitl-plant: sysid {config.sysid} stopped at t={server.t_us / 1e6:.3f} s: "

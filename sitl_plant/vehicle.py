@@ -65,7 +65,7 @@ class Vehicle:
         self.model = RoverModel(config.params)
         x, y, yaw = config.start
         self.state = RoverState(x=x, y=y, yaw=wrap(yaw))
-        self.t = 0.0
+        self.t_us = 0   # integer microseconds: timers compare exactly, long runs do not drift
         self.autopilot = config.autopilot
         self._modes = modes.mode_table(config.autopilot)
         self.custom_mode = modes.initial_mode(config.autopilot)
@@ -153,7 +153,12 @@ class Vehicle:
         if not -math.pi < s.yaw <= math.pi:
             s.yaw = wrap(s.yaw)
         self.state = s
-        self.t += dt
+        self.t_us += int(round(dt * 1e6))
+
+    @property
+    def t(self) -> float:
+        """Seconds of vehicle time since boot."""
+        return self.t_us * 1e-6
 
     def velocity(self) -> tuple[float, float]:
         """Eq. (1): the tracked point's velocity (LOCAL_POSITION_NED vx, vy)."""
