@@ -1,0 +1,440 @@
+"""Mission files: the reference trajectory a user asks for, checked before anything moves.
+
+A mission is a TOML file (or a QGroundControl ``.plan`` / ``QGC WPL 110`` ``.waypoints`` file,
+imported by :mod:`companion.plan_import`)::
+
+    name = "circle"
+    description = "5 m circle at 1.5 m/s"
+    frame = "start"          # "start" (default): relative to the start pose, x ahead, y right;
+                             # "local": LOCAL_NED (EKF origin); "geodetic": metres from `origin`
+    # origin = [lat, lon]    # only with frame = "geodetic"
+    laps = 3                 # or duration = 60 (s); default: the motion's end, or one lap
+    rate_hz = 40             # optional loop rate
+    # gains_file = "tuned.toml"   (or the tables [gains.filter] / [gains.pzc], as companion.gains)
+
+    [trajectory]
+    kind = "circle"          # ellipse | circle | figure8 | line | polyline | waypoints | plan
+    center = [0.0, 5.0]
+    radius = 5.0
+    speed = 1.5
+
+    [limits]                 # optional: the trajectory must stay within them
+    max_speed = 2.0
+    max_yaw_rate = 1.0
+
+    [vehicle]                # optional, for simulation: companion.plant.RoverParams fields
+    d_cen = 0.0
+    w_c = 20.0
+
+Every problem is one :class:`~companion.errors.UserError` line naming the file, the key path and
+the bad value: unknown keys, missing or mistyped fields, non-finite numbers, non-increasing
+waypoint times, a trajectory exceeding the limits, a file that is not there.
+
+The paper's ellipse starts at (6, 2) with the rover at rest at the origin facing north: in frame
+"start" that is where it starts for a rover anywhere, pointing anywhere.
+"""
+
+from __future__ import annotations
+
+import math
+import tomllib
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+from . import gains as _gains
+from . import paths
+from .errors import UserError
+from .filter import FilterGains
+from .limits import Limits
+from .plant import RoverParams
+from .profile import MotionProfile, limit_problem, measure
+from .pzc import PZCGains
+from .schema import Table, check_number, check_row, check_rows, fail, short
+from .trajectory import Ellipse, Trajectory
+
+FRAMES = ("start", "local", "geodetic")
+KINDS = ("ellipse", "circle", "figure8", "line", "polyline", "waypoints", "plan")
+SUFFIXES = (".toml", ".plan", ".waypoints")
+MAX_DURATION = 86400.0     # s: one day of tracking is plenty; bounds the checks' cost
+MAX_DISTANCE = 1e6         # m
+MAX_SPEED = 100.0          # m/s
+MIN_LENGTH = 1e-3          # m
+PLAN_CORNER_RADIUS = 2.0   # m: ArduPilot Rover's WP_RADIUS default, shrunk to fit short legs
+DEFAULT_ACCEL = 0.5        # m/s^2, peak along-path acceleration of line / polyline / plans
+
+
+@dataclass(frozen=True)
+class Mission:
+    name: str
+    description: str
+    trajectory: Trajectory            # sample(t) -> Reference (floats for float t), .duration
+    duration: float                   # seconds of tracking (from `duration` or `laps` x period)
+    rate_hz: float | None             # loop rate wanted, None = the companion's default (40 Hz)
+    filter_gains: FilterGains | None
+    pzc_gains: PZCGains | None
+    limits: Limits | None
+    vehicle: RoverParams | None       # for simulation (d_cen, w_c)
+    frame: str                        # "start" (relative to the start pose) or "local"
+    source: str                       # the file it came from
+    kind: str = ""                    # trajectory kind, e.g. "circle"
+    period: float | None = None       # s per lap for periodic trajectories
+    profile: MotionProfile | None = None   # length and peaks over the mission
+    warnings: tuple[str, ...] = ()    # one line per imported item that is not followed
+
+    def anchored(self, x0: float, y0: float, yaw0: float) -> Trajectory:
+        """The trajectory in the vehicle's local NED frame for a start pose (identity for frame
+        'local'; for 'start': rotate by yaw0 and translate by (x0, y0))."""
+        if self.frame == "local" or (x0, y0, yaw0) == (0.0, 0.0, 0.0):
+            return self.trajectory
+        return paths.Placed(self.trajectory, float(x0), float(y0), float(yaw0))
+
+    def summary(self) -> str:
+        """One line: kind, length, duration, peak speed and turn rate against the limits."""
+        p = self.profile
+        lim = self.limits or Limits()
+
+        def against(value: float, limit: float, unit: str) -> str:
+            text = f"{value:.2f} {unit}"
+            return text + (f" (limit {limit:g})" if math.isfinite(limit) else " (no limit)")
+
+        parts = [self.kind, f"frame {self.frame}"]
+        if p is not None:
+            parts += [f"{p.length:.1f} m", f"{self.duration:.1f} s",
+                      "peak speed " + against(p.peak_speed, lim.max_speed, "m/s"),
+                      "turn rate " + against(p.peak_turn_rate, lim.max_yaw_rate, "rad/s")]
+        else:
+            parts.append(f"{self.duration:.1f} s")
+        return ", ".join(parts)
+
+
+# --------------------------------------------------------------------------- entry points
+
+
+def paper_ellipse(f_r: float = 0.12, duration: float = 60.0) -> Mission:
+    """Section 5's reference p_ref = [6 cos - sin, 2 cos + 3 sin](2 pi f_r t): the demo's default."""
+    trajectory = Ellipse.paper(f_r, duration)
+    return Mission(
+        name=f"paper ellipse {f_r:g} Hz",
+        description="Lee et al. (2024), Section 5: p_ref = [6 cos - sin, 2 cos + 3 sin](2 pi f_r t)",
+        trajectory=trajectory, duration=float(duration), rate_hz=None, filter_gains=None,
+        pzc_gains=None, limits=None, vehicle=None, frame="start", source="<paper ellipse>",
+        kind="ellipse", period=1.0 / f_r,
+        profile=measure(trajectory, duration, period=1.0 / f_r))
+
+
+def load(path: str | Path, *, origin: tuple[float, float] | None = None,
+         speed: float | None = None) -> Mission:
+    """Read and check a mission file: ``.toml``, ``.plan`` or ``.waypoints`` (by suffix).
+
+    ``origin`` = (lat, lon) of the vehicle's EKF origin, for geodetic files (None: the plan's
+    home, or the TOML's own origin). ``speed`` overrides an imported plan's cruise speed.
+    """
+    path = Path(path)
+    suffix = path.suffix.lower()
+    if suffix not in SUFFIXES:
+        raise UserError(f"{path}: unknown mission file type {suffix or '(no suffix)'!r}: "
+                        "expected .toml, .plan or .waypoints")
+    if suffix == ".toml":
+        try:
+            text = path.read_text(encoding="utf-8")
+        except FileNotFoundError:
+            raise UserError(f"{path}: no such file") from None
+        except IsADirectoryError:
+            raise UserError(f"{path}: is a directory, not a mission file") from None
+        except (OSError, UnicodeDecodeError) as exc:
+            raise UserError(f"{path}: cannot read: {exc}") from None
+        return loads(text, str(path), origin=origin, base_dir=path.parent)
+    return _from_plan(path, origin=origin, speed=speed, corner_radius=None)
+
+
+def loads(text: str, source: str = "<mission>", *, origin: tuple[float, float] | None = None,
+          base_dir: str | Path | None = None) -> Mission:
+    """Check a TOML mission given as text (e.g. sent by a remote ``load-mission``).
+
+    Relative file names inside (``gains_file``, a plan's ``file``) are taken from ``base_dir``
+    (default: the current directory).
+    """
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise UserError(f"{source}: not valid TOML: {exc}") from None
+    return _from_table(Table(data, source), Path(base_dir) if base_dir else Path("."), origin)
+
+
+# --------------------------------------------------------------------------- TOML missions
+
+
+def _from_table(top: Table, base: Path, origin: tuple[float, float] | None) -> Mission:
+    src = top.source
+    name = top.string("name", default=Path(src).stem if src != "<mission>" else "mission")
+    description = top.string("description", default="")
+    frame = top.string("frame", default="start", choices=FRAMES)
+    geo_origin = None
+    if frame == "geodetic":
+        geo_origin = _latlon(top, "origin", required=True)
+    elif top.has("origin"):
+        raise top.error("origin", 'only belongs with frame = "geodetic"')
+    rate_hz = top.number("rate_hz", positive=True, maximum=1000.0)
+    duration = top.number("duration", positive=True, maximum=MAX_DURATION)
+    laps = top.number("laps", positive=True, maximum=1e6)
+    if duration is not None and laps is not None:
+        raise top.error("laps", f"give duration or laps, not both (duration = {duration:g})")
+    filter_gains, pzc_gains = _read_gains(top, base)
+    limits = _read_limits(top.table("limits"))
+    vehicle = _read_vehicle(top.table("vehicle"))
+    spec = top.table("trajectory", required=True)
+    traj, warnings = _build_trajectory(spec, base, laps, origin)
+    top.done()
+
+    kind = spec.data["kind"]
+    if kind == "plan":
+        if frame not in ("start", "local") or (top.has("frame") and frame != "local"):
+            raise top.error("frame", f'a plan is placed by lat/lon: leave frame out or use '
+                                     f'"local", not {short(frame)}')
+        frame = "local"
+    if frame == "geodetic":
+        from . import geo
+        shift = geo.ne_from_latlon(*geo_origin, origin) if origin is not None else (0.0, 0.0)
+        frame = "local"
+    else:
+        shift = None
+
+    period = _period(traj)
+    duration = _duration(top, traj, period, duration, laps)
+    traj = replace(traj, duration=duration)
+    profile = _profile(top, traj, duration, period, limits)
+    if shift is not None and shift != (0.0, 0.0):
+        traj = paths.Placed(traj, shift[0], shift[1], 0.0)
+    return Mission(name=name, description=description, trajectory=traj, duration=duration,
+                   rate_hz=rate_hz, filter_gains=filter_gains, pzc_gains=pzc_gains,
+                   limits=limits, vehicle=vehicle, frame=frame, source=src,
+                   kind=_kind_name(traj), period=period, profile=profile,
+                   warnings=tuple(warnings))
+
+
+def _latlon(table: Table, key: str, required: bool = False) -> tuple[float, float] | None:
+    from . import geo
+    value = table.point(key, required=required)
+    if value is None:
+        return None
+    problem = geo.check_latlon(*value)
+    if problem:
+        raise table.error(key, problem)
+    return value
+
+
+def _read_gains(top: Table, base: Path) -> tuple[FilterGains | None, PZCGains | None]:
+    gains_file = top.string("gains_file")
+    table = top.table("gains")
+    if gains_file is not None and table is not None:
+        raise top.error("gains_file", "give gains_file or a [gains] table, not both")
+    if gains_file is not None:
+        path = Path(gains_file)
+        tuned = _gains.load(path if path.is_absolute() else base / path)
+        return tuned.filter, tuned.pzc
+    if table is None:
+        return None, None
+    data = dict(table.data)
+    # companion.gains.parse wants both sections; a mission may give either one alone, so a
+    # missing one gets placeholder values that are then dropped.
+    have_filter, have_pzc = "filter" in data, "pzc" in data
+    data.setdefault("filter", {"k_df": 1.0, "lambda_f": 1.0})
+    data.setdefault("pzc", {"k_dc": 1.0, "lambda_c": 1.0})
+    tuned = _gains.parse(data, f"{top.source}: gains")
+    return (tuned.filter if have_filter else None), (tuned.pzc if have_pzc else None)
+
+
+def _read_limits(table: Table | None) -> Limits | None:
+    if table is None:
+        return None
+    limits = Limits(max_speed=table.number("max_speed", math.inf, positive=True),
+                    max_yaw_rate=table.number("max_yaw_rate", math.inf, positive=True))
+    table.done()
+    return limits
+
+
+def _read_vehicle(table: Table | None) -> RoverParams | None:
+    if table is None:
+        return None
+    params = RoverParams(
+        d_cen=table.number("d_cen", 0.0, minimum=0.0, maximum=100.0),
+        w_c=table.number("w_c", 20.0, positive=True, maximum=1e4),
+        w_c_yaw=table.number("w_c_yaw", None, positive=True, maximum=1e4),
+        max_speed=table.number("max_speed", math.inf, positive=True),
+        max_yaw_rate=table.number("max_yaw_rate", math.inf, positive=True),
+        max_accel=table.number("max_accel", math.inf, positive=True))
+    table.done()
+    return params
+
+
+def _build_trajectory(spec: Table, base: Path, laps: float | None,
+                      origin: tuple[float, float] | None):
+    kind = spec.string("kind", required=True, choices=KINDS)
+    dist = {"positive": True, "maximum": MAX_DISTANCE}
+    speed = {"positive": True, "maximum": MAX_SPEED}
+    warnings: tuple[str, ...] = ()
+    try:
+        if kind == "ellipse":
+            traj = Ellipse(
+                f_r=spec.number("f_r", required=True, positive=True, maximum=100.0),
+                **{k: spec.number(k, getattr(Ellipse, k), maximum=MAX_DISTANCE,
+                                  minimum=-MAX_DISTANCE) for k in ("ax", "bx", "ay", "by", "cx", "cy")})
+        elif kind == "circle":
+            radius = spec.number("radius", required=True, minimum=MIN_LENGTH, maximum=MAX_DISTANCE)
+            v = _speed_or_period(spec, radius)
+            traj = paths.Circle(
+                center=_point(spec, "center", (0.0, 0.0)), radius=radius, speed=v,
+                clockwise=spec.string("direction", "cw", choices=("cw", "ccw")) == "cw",
+                start_bearing=math.radians(spec.number("start_bearing_deg", 0.0)))
+        elif kind == "figure8":
+            traj = paths.FigureEight(
+                center=_point(spec, "center", (0.0, 0.0)),
+                length=spec.number("length", required=True, minimum=MIN_LENGTH, maximum=MAX_DISTANCE),
+                width=spec.number("width", required=True, minimum=MIN_LENGTH, maximum=MAX_DISTANCE),
+                period=spec.number("period", required=True, minimum=0.01, maximum=MAX_DURATION),
+                heading=math.radians(spec.number("heading_deg", 0.0)))
+        elif kind in ("line", "polyline"):
+            if kind == "line":
+                points = (_point(spec, "start", (0.0, 0.0)), _point(spec, "end", required=True))
+                closed = False
+            else:
+                rows = check_rows(spec.require("points"), 2, spec.source, spec.key("points"),
+                                  "[north, east]", 2, 1000)
+                points = tuple(_bounded(spec, f"points[{i}]", p) for i, p in enumerate(rows))
+                closed = spec.boolean("closed", False)
+            traj = paths.Polyline(
+                points=points, speed=spec.number("speed", required=True, **speed),
+                corner_radius=(spec.number("corner_radius", 1.0, minimum=MIN_LENGTH,
+                                           maximum=MAX_DISTANCE) if kind == "polyline" else 1.0),
+                accel=spec.number("accel", DEFAULT_ACCEL, positive=True, maximum=100.0),
+                closed=closed, laps=laps if closed else None)
+        elif kind == "waypoints":
+            rows = check_rows(spec.require("waypoints"), 3, spec.source, spec.key("waypoints"),
+                              "[t, north, east]", 2, paths.TimedWaypoints.MAX_POINTS)
+            for i, row in enumerate(rows):
+                if not 0.0 <= row[0] <= MAX_DURATION:
+                    raise spec.error(f"waypoints[{i}][0]", f"time must be in [0, {MAX_DURATION:g}] "
+                                                           f"s, not {row[0]!r}")
+                _bounded(spec, f"waypoints[{i}]", row[1:])
+            traj = paths.TimedWaypoints(tuple(rows), closed=spec.boolean("closed", False))
+        else:  # plan
+            name = spec.string("file", required=True)
+            path = Path(name) if Path(name).is_absolute() else base / name
+            if path.suffix.lower() not in (".plan", ".waypoints"):
+                raise spec.error("file", f"must be a .plan or .waypoints file, not {short(name)}")
+            imported = _from_plan(path, origin=origin,
+                                  speed=spec.number("speed", None, **speed),
+                                  corner_radius=spec.number("corner_radius", None,
+                                                            minimum=MIN_LENGTH, maximum=MAX_DISTANCE))
+            traj, warnings = imported.trajectory, imported.warnings
+    except paths.PathError as exc:
+        raise spec.error(exc.key, str(exc)) from None
+    spec.done()
+    return traj, warnings
+
+
+def _point(spec: Table, key: str, default=None, required: bool = False):
+    value = spec.point(key, default, required=required)
+    return value if value is None else _bounded(spec, key, value)
+
+
+def _bounded(spec: Table, key: str, point) -> tuple[float, float]:
+    if any(abs(v) > MAX_DISTANCE for v in point):
+        raise spec.error(key, f"{tuple(point)} is more than {MAX_DISTANCE:g} m away")
+    return (float(point[0]), float(point[1]))
+
+
+def _speed_or_period(spec: Table, radius: float) -> float:
+    if spec.has("speed") and spec.has("period"):
+        raise spec.error("period", "give speed or period, not both")
+    if spec.has("period"):
+        period = spec.number("period", minimum=0.01, maximum=MAX_DURATION)
+        return 2.0 * math.pi * radius / period
+    return spec.number("speed", required=True, positive=True, maximum=MAX_SPEED)
+
+
+def _period(traj) -> float | None:
+    if isinstance(traj, Ellipse):
+        return 1.0 / float(traj.f_r)
+    return getattr(traj, "period", None)
+
+
+def _kind_name(traj) -> str:
+    inner = getattr(traj, "inner", traj)
+    return "ellipse" if isinstance(inner, Ellipse) else inner.kind
+
+
+def _duration(top: Table, traj, period: float | None, duration: float | None,
+              laps: float | None) -> float:
+    start = 0.0
+    if isinstance(traj, paths.TimedWaypoints) and traj.closed:
+        start = traj.waypoints[0][0]           # the laps begin at the first waypoint's time
+    if laps is not None:
+        if isinstance(traj, paths.Polyline) and traj.closed:
+            result = traj.motion_end           # built for these laps, ramps included
+        elif period is None:
+            raise top.error("laps", f"needs a periodic trajectory; this {_kind_name(traj)} is "
+                                    "open: give duration instead")
+        else:
+            result = start + laps * period
+    elif duration is not None:
+        result = duration
+    else:
+        end = getattr(traj, "motion_end", None)
+        result = end if end is not None else start + (period or 0.0)
+    if not (math.isfinite(result) and 0.01 <= result <= MAX_DURATION):
+        raise top.error("laps" if laps is not None else "duration",
+                        f"the mission would last {result:.6g} s: it must be 0.01 s to "
+                        f"{MAX_DURATION:g} s")
+    return float(result)
+
+
+def _profile(top: Table, traj, duration: float, period: float | None,
+             limits: Limits | None) -> MotionProfile:
+    try:
+        profile = measure(traj, duration, period=period, motion_end=getattr(traj, "motion_end", None))
+    except (ArithmeticError, ValueError) as exc:
+        raise top.error("trajectory", str(exc)) from None
+    if limits is not None:
+        problem = limit_problem(profile, limits, getattr(traj, "where", None))
+        if problem is not None:
+            key, message = problem
+            advice = ("allow more time between them" if isinstance(traj, paths.TimedWaypoints)
+                      else "slow it down")
+            raise top.error("trajectory", f"{message}: {advice} or raise limits.{key}")
+    return profile
+
+
+# --------------------------------------------------------------------------- imported plans
+
+
+def _from_plan(path: Path, *, origin: tuple[float, float] | None, speed: float | None,
+               corner_radius: float | None) -> Mission:
+    from . import plan_import
+    plan = plan_import.read(path, origin=origin)
+    warnings = list(plan.warnings)
+    if speed is None:
+        speed = plan.speed
+        if speed is None:
+            speed = plan_import.DEFAULT_SPEED
+            warnings.append(f"{path}: the file gives no speed: using {speed:g} m/s")
+    try:
+        traj = paths.Polyline(plan.points, speed=speed,
+                              corner_radius=corner_radius or PLAN_CORNER_RADIUS,
+                              accel=DEFAULT_ACCEL, shrink_corners=True)
+    except paths.PathError as exc:
+        raise UserError(f"{path}: {exc}") from None
+    duration = traj.motion_end
+    traj = replace(traj, duration=duration)
+    try:
+        profile = measure(traj, duration, motion_end=duration)
+    except (ArithmeticError, ValueError) as exc:
+        raise UserError(f"{path}: {exc}") from None
+    where = "home" if plan.home is not None and plan.origin == plan.home else "the EKF origin"
+    return Mission(
+        name=path.stem,
+        description=(f"imported from {path.name}: {plan.waypoint_count} waypoints at {speed:g} "
+                     f"m/s, relative to {where} {plan.origin[0]:.7f}, {plan.origin[1]:.7f}"),
+        trajectory=traj, duration=duration, rate_hz=None, filter_gains=None, pzc_gains=None,
+        limits=None, vehicle=None, frame="local", source=str(path), kind="plan",
+        period=None, profile=profile, warnings=tuple(warnings))
