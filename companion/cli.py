@@ -20,6 +20,8 @@ COMMANDS = [
     "run",
     "paper_table",
     "tune",
+    "mission",
+    "simulate",
 ]
 
 
