@@ -229,8 +229,8 @@ def _read_gains(top: Table, base: Path) -> tuple[FilterGains | None, PZCGains | 
     if gains_file is not None and table is not None:
         raise top.error("gains_file", "give gains_file or a [gains] table, not both")
     if gains_file is not None:
-        path = Path(gains_file)
-        tuned = _gains.load(path if path.is_absolute() else base / path)
+        path = _file_key(top, "gains_file", gains_file, base)
+        tuned = _gains.load(path)
         return tuned.filter, tuned.pzc
     if table is None:
         return None, None
@@ -319,7 +319,7 @@ def _build_trajectory(spec: Table, base: Path, laps: float | None,
             traj = paths.TimedWaypoints(tuple(rows), closed=spec.boolean("closed", False))
         else:  # plan
             name = spec.string("file", required=True)
-            path = Path(name) if Path(name).is_absolute() else base / name
+            path = _file_key(spec, "file", name, base)
             if path.suffix.lower() not in (".plan", ".waypoints"):
                 raise spec.error("file", f"must be a .plan or .waypoints file, not {short(name)}")
             imported = _from_plan(path, origin=origin,
@@ -331,6 +331,14 @@ def _build_trajectory(spec: Table, base: Path, laps: float | None,
         raise spec.error(exc.key, str(exc)) from None
     spec.done()
     return traj, warnings
+
+
+def _file_key(table: Table, key: str, name: str, base: Path) -> Path:
+    """A file named in the mission, relative to the mission file's directory."""
+    if not name or "\x00" in name:
+        raise table.error(key, f"is not a file name: {short(name)}")
+    path = Path(name)
+    return path if path.is_absolute() else base / path
 
 
 def _point(spec: Table, key: str, default=None, required: bool = False):
