@@ -196,6 +196,7 @@ class PlantServer:
         elif kind in ("COMMAND_LONG", "COMMAND_INT"):
             if self._for_us(msg) and msg.target_component in (0, self.config.compid):
                 result = self._command(msg)
+                self._flush_texts()   # the reason first, then the ACK, as ArduPilot does
                 self.link.ack(msg.command, int(result), msg.get_srcSystem(),
                               msg.get_srcComponent())
         elif kind == "SET_MODE":
@@ -204,6 +205,7 @@ class PlantServer:
                     result = self.vehicle.set_mode(msg.custom_mode)
                 else:
                     result = Result.FAILED
+                self._flush_texts()
                 self.link.ack(MSG_ID_SET_MODE, int(result), msg.get_srcSystem(),
                               msg.get_srcComponent())
 

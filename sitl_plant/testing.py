@@ -120,6 +120,15 @@ class Pilot:
                 out.append(msg)
         return out
 
+    def stream(self, send: Callable[[], None], seconds: float, hz: float = 20.0,
+               kinds: tuple[str, ...] = ("LOCAL_POSITION_NED",)) -> list[Any]:
+        """Call ``send`` at ``hz`` (wall) for ``seconds``, collecting messages of ``kinds``."""
+        out, deadline = [], time.monotonic() + seconds
+        while time.monotonic() < deadline:
+            send()
+            out += self.collect(kinds, 1.0 / hz)
+        return out
+
     def drain(self) -> None:
         while (msg := self.conn.recv_match(blocking=False)) is not None:
             self._note(msg)
