@@ -230,7 +230,10 @@ def _read_gains(top: Table, base: Path) -> tuple[FilterGains | None, PZCGains | 
         raise top.error("gains_file", "give gains_file or a [gains] table, not both")
     if gains_file is not None:
         path = _file_key(top, "gains_file", gains_file, base)
-        tuned = _gains.load(path)
+        try:
+            tuned = _gains.load(path)
+        except UserError as err:   # name the mission file and key too, still on one line
+            raise top.error("gains_file", str(err)) from None
         return tuned.filter, tuned.pzc
     if table is None:
         return None, None
@@ -322,10 +325,12 @@ def _build_trajectory(spec: Table, base: Path, laps: float | None,
             path = _file_key(spec, "file", name, base)
             if path.suffix.lower() not in (".plan", ".waypoints"):
                 raise spec.error("file", f"must be a .plan or .waypoints file, not {short(name)}")
-            imported = _from_plan(path, origin=origin,
-                                  speed=spec.number("speed", None, **speed),
-                                  corner_radius=spec.number("corner_radius", None,
-                                                            minimum=MIN_LENGTH, maximum=MAX_DISTANCE))
+            plan_speed = spec.number("speed", None, **speed)
+            radius = spec.number("corner_radius", None, minimum=MIN_LENGTH, maximum=MAX_DISTANCE)
+            try:
+                imported = _from_plan(path, origin=origin, speed=plan_speed, corner_radius=radius)
+            except UserError as err:   # name the mission file and key, then the plan's problem
+                raise spec.error("file", str(err)) from None
             traj, warnings = imported.trajectory, imported.warnings
     except paths.PathError as exc:
         raise spec.error(exc.key, str(exc)) from None
