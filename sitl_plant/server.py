@@ -59,16 +59,22 @@ class PlantServer:
         self.pacer.anchor(self.wall(), 0)
         self._tick()
         while not self.stopping and not self.link.peer_closed:
-            lockstep = self.config.lockstep and self.gate.engaged(self.t_us)
-            if not lockstep:
+            if not self._lockstep():
                 self._catch_up()
             self._drain()
             if self.end_us is not None and self.t_us >= self.end_us:
                 return
-            if self.config.lockstep and self.gate.engaged(self.t_us):
+            if self._lockstep():
                 self._lockstep_step()
             else:
                 self._wait(self.pacer.wall_at(self._next_event_us()) - self.wall())
+
+    def _lockstep(self) -> bool:
+        """Lockstep holds the plant only while a companion streams setpoints and there is pose
+        telemetry for it to answer; otherwise time is paced."""
+        return (self.config.lockstep and self.gate.engaged(self.t_us)
+                and (self.streams.interval_us(streams.LOCAL_POSITION_NED) > 0
+                     or self.streams.interval_us(streams.ATTITUDE) > 0))
 
     def _catch_up(self) -> None:
         """Paced: run the physics up to the vehicle time that corresponds to now."""
@@ -151,7 +157,7 @@ class PlantServer:
         for mid, s in self.telemetry.release(t_us):
             (link.attitude if mid == streams.ATTITUDE else link.local_position)(s)
             sent = True
-        if sent and self.config.lockstep and self.gate.engaged(t_us):
+        if sent and self._lockstep():
             self.gate.telemetry_sent(self.wall())
 
     def _sample(self):
@@ -235,16 +241,15 @@ class PlantServer:
         return Result.UNSUPPORTED
 
     def _send_once(self, msg_id: float) -> Result:
-        """MAV_CMD_REQUEST_MESSAGE: one copy now, outside the streams (no noise-free shortcut)."""
+        """MAV_CMD_REQUEST_MESSAGE: one copy; a pose goes through the same noise, latency and
+        dropout as the streams (it leaves at the next physics step at the earliest)."""
         v, link = self.vehicle, self.link
         if msg_id == streams.HEARTBEAT:
             link.heartbeat(v.autopilot, v.base_mode, v.custom_mode, v.armed)
         elif msg_id == streams.SYS_STATUS:
             link.sys_status(link.bad_data, v.setpoints_ignored.get("non-finite", 0))
-        elif msg_id == streams.ATTITUDE:
-            link.attitude(self._sample())
-        elif msg_id == streams.LOCAL_POSITION_NED:
-            link.local_position(self._sample())
+        elif msg_id in (streams.ATTITUDE, streams.LOCAL_POSITION_NED):
+            self.telemetry.push(self.t_us, int(msg_id), self._sample())
         else:
             return Result.DENIED
         return Result.ACCEPTED

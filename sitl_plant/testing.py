@@ -79,12 +79,15 @@ def _mavutil():
 
 
 class Pilot:
-    """A ground station / companion on ``udpin:127.0.0.1:PORT`` talking to one plant."""
+    """A ground station / companion on ``udpin:127.0.0.1:PORT`` (or any ``url``) talking to one
+    plant."""
 
-    def __init__(self, port: int, target_system: int = 1, sysid: int = 255, compid: int = 190):
+    def __init__(self, port: int, target_system: int = 1, sysid: int = 255, compid: int = 190,
+                 url: str | None = None):
         mavutil = _mavutil()
-        self.conn = mavutil.mavlink_connection(f"udpin:127.0.0.1:{port}", source_system=sysid,
-                                               source_component=compid, dialect="ardupilotmega")
+        self.conn = mavutil.mavlink_connection(url or f"udpin:127.0.0.1:{port}",
+                                               source_system=sysid, source_component=compid,
+                                               dialect="ardupilotmega")
         self.mav = self.conn.mav
         self.target_system = target_system
         self.texts: list[str] = []
