@@ -48,6 +48,7 @@ _positive_or_inf = _number("limit", lambda v: v > 0, "> 0 (inf for no limit)", a
 _non_negative = _number("non-negative", lambda v: v >= 0, "a finite number >= 0")
 _probability = _number("probability", lambda v: 0 <= v <= 1, "between 0 and 1")
 _finite = _number("finite", lambda v: True, "a finite number")
+_step = _number("step", lambda v: 0 < v <= 0.05, "> 0 and <= 0.05 s")
 
 
 def _sysid(text: str) -> int:
@@ -82,7 +83,7 @@ def build_parser() -> argparse.ArgumentParser:
                        help="advance to the next telemetry tick only once a setpoint answered")
     clock.add_argument("--lockstep-timeout", type=_positive, default=0.25, metavar="S",
                        help="wall s to wait for that setpoint (default 0.25)")
-    clock.add_argument("--physics-dt", type=_positive, default=0.001, metavar="S",
+    clock.add_argument("--physics-dt", type=_step, default=0.001, metavar="S",
                        help="integration step, vehicle s (default 0.001)")
     clock.add_argument("--duration", type=_positive, default=None, metavar="S",
                        help="exit after S s of vehicle time (default: run until a signal)")

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import os
 import socket
+import struct
 from typing import Any
 
 from . import modes
@@ -86,7 +87,7 @@ class Link:
     def _send(self, fn, *args) -> None:
         try:
             fn(*args)
-        except OSError:
+        except (OSError, struct.error):
             pass  # like a radio link: the next message may get through
 
     def heartbeat(self, autopilot: modes.Autopilot, base_mode: int, custom_mode: int,

@@ -104,4 +104,6 @@ def requested_custom_mode(autopilot: Autopilot, param2: float, param3: float) ->
         return None
     if autopilot is Autopilot.ARDUPILOT:
         return main
+    if not (0 <= main <= 0xFF and 0 <= sub <= 0xFF):
+        return None                      # would alias another mode once packed
     return px4_custom_mode(main, sub)

@@ -180,7 +180,7 @@ class PlantServer:
             n += 1
             try:
                 self._handle(msg)
-            except (ValueError, TypeError, AttributeError, OverflowError):
+            except Exception:             # noqa: BLE001 - no input may stop the vehicle
                 self.link.bad_data += 1   # a well-formed frame with nonsense in it
             if self.vehicle.texts:
                 self._flush_texts()
@@ -232,7 +232,7 @@ class PlantServer:
                 self.link.statustext(SEVERITY_WARNING, reply.text)
             return Result(reply.result)
         if cmd == MAV_CMD_GET_MESSAGE_INTERVAL:
-            if not math.isfinite(p1):
+            if not (math.isfinite(p1) and 0 <= p1 <= 0xFFFF):
                 return Result.FAILED
             self.link.message_interval(int(p1), self.streams.interval_us(int(p1)))
             return Result.ACCEPTED

@@ -242,6 +242,21 @@ def test_garbage_and_non_finite_setpoints_do_not_crash_it():
     assert "Traceback" not in plant.stderr
 
 
+def test_nonsense_command_parameters_are_refused_not_fatal():
+    with PlantProcess("--speedup", "2") as plant, Pilot(plant.port) as pilot:
+        pilot.wait("HEARTBEAT")
+        assert pilot.command(510, 1e30) == 4                   # GET_MESSAGE_INTERVAL, no such id
+        assert pilot.command(511, LPN, math.nan) == 4
+        assert pilot.command(176, 1, math.nan) == 4            # DO_SET_MODE
+        assert pilot.command(176, 0, GUIDED) == 4              # custom-mode flag missing
+        assert pilot.command(400, math.nan) == 3               # ARM_DISARM
+        assert pilot.command(400, 0.5) == 3
+        assert pilot.command(512, 9999) == 2                   # REQUEST_MESSAGE, not ours
+        assert pilot.command(512, LPN) == 0
+        assert pilot.wait("LOCAL_POSITION_NED") is not None
+        assert pilot.set_mode(GUIDED) == 0 and plant.alive()
+
+
 @pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGINT])
 def test_signals_exit_cleanly(sig):
     with PlantProcess() as plant, Pilot(plant.port) as pilot:

@@ -189,6 +189,8 @@ def test_px4_offboard_needs_proof_of_life():
     stream(v, 1.05)
     assert v.set_mode(modes.PX4_OFFBOARD) is Result.ACCEPTED
     assert v.custom_mode == 6 << 16
+    assert modes.requested_custom_mode(Autopilot.PX4, 256 + 4, 3) is None   # no aliasing
+    assert modes.requested_custom_mode(Autopilot.PX4, 4, 3) == modes.PX4_HOLD
 
 
 def test_px4_follows_velocity_vector_ignores_yaw_rate_and_falls_back_to_hold():
