@@ -89,6 +89,6 @@ def limit_problem(profile: MotionProfile, limits: Limits, where=None) -> tuple[s
         if peak > limit * (1.0 + tol):
             place = f" {where(t)}" if where is not None else f" at t = {t:.3g} s"
             what = "speed" if key == "max_speed" else "turn rate"
-            return key, (f"the trajectory needs a {what} of {peak:.3g} {unit}{place}, more than "
+            return key, (f"needs a {what} of {peak:.3g} {unit}{place}, more than "
                          f"limits.{key} = {limit:g}")
     return None
