@@ -172,7 +172,8 @@ def main(argv: list[str] | None = None) -> int:
     print(f"sitl-plant: sysid {config.sysid} stopped at t={server.t_us / 1e6:.3f} s: "
           f"{link.received} messages in, {link.bad_data} bad, {v.setpoints_used} setpoints used, "
           f"{ignored} ignored {dict(sorted(v.setpoints_ignored.items()))}, "
-          f"{server.gate.timeouts} lockstep timeouts", file=sys.stderr, flush=True)
+          f"{server.foreign} for other systems, {server.gate.timeouts} lockstep timeouts",
+          file=sys.stderr, flush=True)
     if link.peer_closed:
         print("sitl-plant: the TCP peer closed the connection", file=sys.stderr)
     return 0

@@ -49,10 +49,14 @@ class PlantServer:
         self.gate = LockstepGate(config.lockstep_timeout)
         self.dt_us = max(1, int(round(config.physics_dt * 1e6)))
         self.end_us = None if config.duration is None else int(round(config.duration * 1e6))
-        self.t_us = 0
         self.stopping = False
         self.wake: socket.socket | None = None  # becomes readable when a signal arrives
         self.foreign = 0                  # messages addressed to another system
+
+    @property
+    def t_us(self) -> int:
+        """Vehicle time since boot, microseconds: the vehicle's own clock."""
+        return self.vehicle.t_us
 
     # --- the loop ---------------------------------------------------------------------------
     def run(self) -> None:
@@ -113,7 +117,6 @@ class PlantServer:
         nxt = self._next_send_us()
         while self.t_us < target_us:
             vehicle.step(dt)
-            self.t_us += self.dt_us
             if vehicle.texts:
                 self._flush_texts()
             if self.t_us >= nxt:
