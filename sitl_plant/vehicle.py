@@ -26,7 +26,7 @@ from .setpoint import (STOP, Pose, PositionTarget, Rejected, Setpoint, Target,
 
 GUIDED_TIMEOUT_TEXT = "target not received last 3secs, stopping"
 ARM_REFUSED_TEXT = "Arm: AHRS: not using configured AHRS type"
-OFFBOARD_REFUSED_TEXT = "Offboard: no setpoint stream (proof of life), mode change denied"
+OFFBOARD_REFUSED_TEXT = "Offboard denied: no setpoint stream"
 OFFBOARD_LOST_TEXT = "Offboard signal lost, switching to Hold"
 
 # MAVLink severities used in STATUSTEXT.
