@@ -404,6 +404,8 @@ def _duration(top: Table, traj, period: float | None, duration: float | None,
 
 def _profile(top: Table, traj, duration: float, period: float | None,
              limits: Limits | None) -> MotionProfile:
+    if isinstance(traj, paths.TimedWaypoints) and traj.waypoints[0][0] > 0:
+        period = None   # the laps start late: sample the whole mission, not [0, period]
     try:
         profile = measure(traj, duration, period=period, motion_end=getattr(traj, "motion_end", None))
     except (ArithmeticError, ValueError) as exc:

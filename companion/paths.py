@@ -414,13 +414,14 @@ class TimedWaypoints:
 
     def sample(self, t: float) -> Reference:
         ts = self._times
+        if t < ts[0]:
+            # Before the first waypoint's time the reference waits there (a closed path then
+            # starts moving at t_0 with its lap velocity).
+            return Reference(*map(float, self.waypoints[0][1:]))
         if self.closed:
-            if t > ts[0]:
-                t = ts[0] + (t - ts[0]) % (ts[-1] - ts[0])
+            t = ts[0] + (t - ts[0]) % (ts[-1] - ts[0])
         elif t >= ts[-1]:
             return Reference(*map(float, self.waypoints[-1][1:]))
-        if t <= ts[0] and not self.closed:
-            return Reference(*map(float, self.waypoints[0][1:]))
         i = min(max(bisect.bisect_right(ts, t) - 1, 0), len(ts) - 2)
         h = ts[i + 1] - ts[i]
         u = (t - ts[i]) / h
