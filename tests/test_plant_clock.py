@@ -7,8 +7,6 @@ from __future__ import annotations
 import math
 import time
 
-import pytest
-
 from sitl_plant.testing import PlantProcess, Pilot, speed_of
 
 LPN, ATT = 32, 30
@@ -85,4 +83,4 @@ def test_speedup_runs_vehicle_time_faster_than_wall_time():
         assert pilot.set_rate(LPN, 20) == 0
         msgs = pilot.collect(("LOCAL_POSITION_NED",), 1.0)
         span = (msgs[-1].time_boot_ms - msgs[0].time_boot_ms) / 1000.0
-        assert span == pytest.approx(5.0, rel=0.15)
+        assert 3.5 < span < 5.5                   # 5 s nominal; a loaded machine may lag

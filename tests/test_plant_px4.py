@@ -16,19 +16,20 @@ VELOCITY = 3559                # vx, vy used; position, acceleration, yaw, yaw r
 
 
 def test_px4_offboard_proof_of_life_velocity_following_and_loss():
-    with PlantProcess("--autopilot", "px4", "--speedup", "2") as plant, \
+    # real time: a stall of the test process longer than 0.5 s would (rightly) end OFFBOARD
+    with PlantProcess("--autopilot", "px4") as plant, \
             Pilot(plant.port) as pilot:
         hb = pilot.wait("HEARTBEAT")
         assert hb.autopilot == 12 and hb.type == 10 and hb.custom_mode == MANUAL
         assert pilot.set_rate(32, 20) == 0 and pilot.set_rate(30, 20) == 0
         assert pilot.set_mode(6) == 2                     # no setpoint stream yet: DENIED
         east = lambda: pilot.setpoint(VELOCITY, 1, vx=0.0, vy=1.0, yaw_rate=2.0)
-        pilot.stream(east, 0.7, hz=10)                    # 10 Hz wall = 5 Hz vehicle, 1.4 s
+        pilot.stream(east, 1.2, hz=10)                    # proof of life: 1.2 s at 10 Hz
         assert pilot.set_mode(6) == 0
         assert pilot.arm() == 0                           # keep streaming: gaps > 0.5 s end it
-        beats = pilot.stream(east, 0.7, hz=10, kinds=("HEARTBEAT",))
+        beats = pilot.stream(east, 1.1, hz=10, kinds=("HEARTBEAT",))
         assert beats and all(m.custom_mode == OFFBOARD and m.base_mode & 128 for m in beats)
-        msgs = pilot.stream(east, 1.0, hz=10, kinds=("LOCAL_POSITION_NED", "ATTITUDE"))
+        msgs = pilot.stream(east, 1.2, hz=10, kinds=("LOCAL_POSITION_NED", "ATTITUDE"))
         pos = [m for m in msgs if m.get_type() == "LOCAL_POSITION_NED"][-1]
         att = [m for m in msgs if m.get_type() == "ATTITUDE"][-1]
         assert att.yaw == pytest.approx(math.pi / 2, abs=0.02)   # heading follows the vector
