@@ -47,9 +47,11 @@ from .errors import UserError
 from .filter import FilterGains
 from .limits import Limits
 from .plant import RoverParams
+from .polyline import Polyline
 from .profile import MotionProfile, limit_problem, measure
 from .pzc import PZCGains
-from .schema import Table, check_number, check_row, check_rows, fail, short
+from .schema import Table, check_rows, short
+from .spline import TimedWaypoints
 from .trajectory import Ellipse, Trajectory
 
 FRAMES = ("start", "local", "geodetic")
@@ -305,7 +307,7 @@ def _build_trajectory(spec: Table, base: Path, laps: float | None,
                                   "[north, east]", 2, 1000)
                 points = tuple(_bounded(spec, f"points[{i}]", p) for i, p in enumerate(rows))
                 closed = spec.boolean("closed", False)
-            traj = paths.Polyline(
+            traj = Polyline(
                 points=points, speed=spec.number("speed", required=True, **speed),
                 corner_radius=(spec.number("corner_radius", 1.0, minimum=MIN_LENGTH,
                                            maximum=MAX_DISTANCE) if kind == "polyline" else 1.0),
@@ -313,13 +315,13 @@ def _build_trajectory(spec: Table, base: Path, laps: float | None,
                 closed=closed, laps=laps if closed else None)
         elif kind == "waypoints":
             rows = check_rows(spec.require("waypoints"), 3, spec.source, spec.key("waypoints"),
-                              "[t, north, east]", 2, paths.TimedWaypoints.MAX_POINTS)
+                              "[t, north, east]", 2, TimedWaypoints.MAX_POINTS)
             for i, row in enumerate(rows):
                 if not 0.0 <= row[0] <= MAX_DURATION:
                     raise spec.error(f"waypoints[{i}][0]", f"time must be in [0, {MAX_DURATION:g}] "
                                                            f"s, not {row[0]!r}")
                 _bounded(spec, f"waypoints[{i}]", row[1:])
-            traj = paths.TimedWaypoints(tuple(rows), closed=spec.boolean("closed", False))
+            traj = TimedWaypoints(tuple(rows), closed=spec.boolean("closed", False))
         else:  # plan
             name = spec.string("file", required=True)
             path = _file_key(spec, "file", name, base)
@@ -380,10 +382,10 @@ def _kind_name(traj) -> str:
 def _duration(top: Table, traj, period: float | None, duration: float | None,
               laps: float | None) -> float:
     start = 0.0
-    if isinstance(traj, paths.TimedWaypoints) and traj.closed:
+    if isinstance(traj, TimedWaypoints) and traj.closed:
         start = traj.waypoints[0][0]           # the laps begin at the first waypoint's time
     if laps is not None:
-        if isinstance(traj, paths.Polyline) and traj.closed:
+        if isinstance(traj, Polyline) and traj.closed:
             result = traj.motion_end           # built for these laps, ramps included
         elif period is None:
             raise top.error("laps", f"needs a periodic trajectory; this {_kind_name(traj)} is "
@@ -404,7 +406,7 @@ def _duration(top: Table, traj, period: float | None, duration: float | None,
 
 def _profile(top: Table, traj, duration: float, period: float | None,
              limits: Limits | None) -> MotionProfile:
-    if isinstance(traj, paths.TimedWaypoints) and traj.waypoints[0][0] > 0:
+    if isinstance(traj, TimedWaypoints) and traj.waypoints[0][0] > 0:
         period = None   # the laps start late: sample the whole mission, not [0, period]
     try:
         profile = measure(traj, duration, period=period, motion_end=getattr(traj, "motion_end", None))
@@ -414,7 +416,7 @@ def _profile(top: Table, traj, duration: float, period: float | None,
         problem = limit_problem(profile, limits, getattr(traj, "where", None))
         if problem is not None:
             key, message = problem
-            advice = ("allow more time between them" if isinstance(traj, paths.TimedWaypoints)
+            advice = ("allow more time between them" if isinstance(traj, TimedWaypoints)
                       else "slow it down")
             raise top.error("trajectory", f"{message}: {advice} or raise limits.{key}")
     return profile
@@ -434,7 +436,7 @@ def _from_plan(path: Path, *, origin: tuple[float, float] | None, speed: float |
             speed = plan_import.DEFAULT_SPEED
             warnings.append(f"{path}: the file gives no speed: using {speed:g} m/s")
     try:
-        traj = paths.Polyline(plan.points, speed=speed,
+        traj = Polyline(plan.points, speed=speed,
                               corner_radius=corner_radius or PLAN_CORNER_RADIUS,
                               accel=DEFAULT_ACCEL, shrink_corners=True)
     except paths.PathError as exc:
