@@ -32,7 +32,8 @@ def _nice_step(duration: float) -> float:
 
 
 def plot_mission(mission, out: str, every: float | None = None) -> None:
-    """Draw the mission's path (anchored at a rover at the origin facing north) to ``out``."""
+    """Draw the mission's path to ``out`` (a "start"-frame path for a rover at the origin facing
+    north)."""
     plt = _pyplot()
     trajectory = mission.anchored(0.0, 0.0, 0.0)
     ts, xs, ys = sample_path(trajectory, mission.duration)
@@ -46,7 +47,10 @@ def plot_mission(mission, out: str, every: float | None = None) -> None:
         ax.annotate(f"{t:g} s", (r.y, r.x), textcoords="offset points", xytext=(4, 4), fontsize=7)
     start = trajectory.sample(0.0)
     ax.plot(start.y, start.x, "s", color="tab:green", ms=8, label="reference start")
-    ax.plot(0.0, 0.0, "^", color="black", ms=8, label="rover start (facing north)")
+    if mission.frame == "start":
+        ax.plot(0.0, 0.0, "^", color="black", ms=8, label="rover start (facing north)")
+    else:
+        ax.plot(0.0, 0.0, "+", color="black", ms=10, label="local origin (EKF origin)")
     ax.set_xlabel("east (m)")
     ax.set_ylabel("north (m)")
     ax.set_aspect("equal", adjustable="datalim")
