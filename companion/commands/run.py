@@ -1,0 +1,195 @@
+"""``companion run``: track a mission on a live vehicle (or the bundled plant) over MAVLink."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+
+from ..errors import UserError
+
+EPILOG = """\
+precedence: flags > --gains FILE > the mission's gains > shipped tuned gains for the accepted
+rate > the paper's gains (k_df 1000, lambda_f 120, k_dc 5, lambda_c 12). Rate: --rate > the
+mission's rate_hz > the --gains file's > 40 Hz. Limits: flags > the mission's [limits] > 6 m/s,
+6 rad/s.
+
+exit codes: 0 mission done, or stopped on SIGTERM / Ctrl-C / abort after stopping the rover;
+2 a user error (bad flag or file, no vehicle, no telemetry); 3 stopped by a fault (telemetry
+lost for --lost-timeout, vehicle restarted, non-finite command, mode or arming refused, pilot
+took over). The rover is stopped (zero setpoint, then HOLD) whenever the companion stops it.
+"""
+
+
+def positive(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
+    if not (math.isfinite(value) and value > 0):
+        raise argparse.ArgumentTypeError(f"must be a finite number > 0, not {text}")
+    return value
+
+
+def non_negative(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
+    if not (math.isfinite(value) and value >= 0):
+        raise argparse.ArgumentTypeError(f"must be a finite number >= 0, not {text}")
+    return value
+
+
+def add_gain_arguments(p: argparse.ArgumentParser) -> None:
+    g = p.add_argument_group("gains and limits")
+    g.add_argument("--rate", type=positive, metavar="HZ",
+                   help="telemetry / control rate to ask for (default: the mission's, else 40)")
+    g.add_argument("--gains", metavar="FILE", help="tuned-gains TOML file (companion tune)")
+    g.add_argument("--k-df", type=positive, dest="k_df", metavar="K", help="filter k_{d,f}")
+    g.add_argument("--lambda-f", type=positive, dest="lambda_f", metavar="L", help="filter lambda_f")
+    g.add_argument("--k-dc", type=positive, dest="k_dc", metavar="K", help="PZC k_{d,c}")
+    g.add_argument("--lambda-c", type=positive, dest="lambda_c", metavar="L", help="PZC lambda_c")
+    g.add_argument("--max-speed", type=positive, dest="max_speed", metavar="M_S",
+                   help="speed limit of every setpoint (m/s)")
+    g.add_argument("--max-yaw-rate", type=positive, dest="max_yaw_rate", metavar="RAD_S",
+                   help="turn-rate limit of every setpoint (rad/s)")
+
+
+def register(subparsers) -> None:
+    p = subparsers.add_parser(
+        "run", help="track a mission on a live vehicle over MAVLink",
+        description="Connect to an ArduPilot or PX4 rover, stream LOCAL_POSITION_NED and "
+                    "ATTITUDE, and send speed / yaw-rate setpoints from the model-free filter and "
+                    "PZC law so the rover follows the mission.",
+        epilog=EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--connect", metavar="URL", default="udpin:0.0.0.0:14550",
+                   help="pymavlink connection string (default udpin:0.0.0.0:14550)")
+    p.add_argument("--mission", metavar="FILE", required=True,
+                   help="mission file (.toml, .plan, .waypoints)")
+    p.add_argument("--origin", metavar="LAT,LON",
+                   help="the vehicle's EKF origin, for missions placed by latitude / longitude")
+    p.add_argument("--sysid", type=int, metavar="N",
+                   help="system id of the vehicle to follow (default: the first heartbeat's)")
+    p.add_argument("--arm", action="store_true",
+                   help="arm the vehicle (retrying once a second); default: wait for it")
+    add_gain_arguments(p)
+    v = p.add_argument_group("vehicle (to pick shipped tuned gains)")
+    v.add_argument("--w-c", type=positive, dest="w_c", metavar="RAD_S",
+                   help="speed-loop bandwidth (default: the mission's [vehicle], else 20)")
+    v.add_argument("--d-cen", type=non_negative, dest="d_cen", metavar="M",
+                   help="axle to tracked point (default: the mission's [vehicle], else 0)")
+    t = p.add_argument_group("timeouts (wall seconds)")
+    t.add_argument("--stale-timeout", type=positive, default=0.5, metavar="S",
+                   help="stop the rover when no valid sample arrives for S (default 0.5)")
+    t.add_argument("--heartbeat-timeout", type=positive, default=10.0, metavar="S")
+    t.add_argument("--telemetry-timeout", type=positive, default=10.0, metavar="S")
+    t.add_argument("--arm-timeout", type=positive, default=60.0, metavar="S")
+    t.add_argument("--lost-timeout", type=positive, default=30.0, metavar="S",
+                   help="give up when telemetry stays lost for S (default 30)")
+    o = p.add_argument_group("output")
+    o.add_argument("--json", action="store_true", help="print one JSON result object at the end")
+    o.add_argument("--progress", action="store_true", help="progress bar on stderr")
+    o.add_argument("-q", "--quiet", action="store_true", help="no log lines on stderr")
+    p.set_defaults(func=run)
+
+
+def settings_from_args(args, mission, url: str):
+    from ..link import LinkConfig
+    from ..runner import RunnerConfig
+    from ..session import GainFlags, RunSettings
+    return RunSettings(
+        link=LinkConfig(url=url, sysid=getattr(args, "sysid", None),
+                        heartbeat_timeout=getattr(args, "heartbeat_timeout", 10.0)),
+        mission=mission,
+        runner=RunnerConfig(stale_timeout=getattr(args, "stale_timeout", 0.5),
+                            arm=getattr(args, "arm", True),
+                            telemetry_timeout=getattr(args, "telemetry_timeout", 10.0),
+                            arm_timeout=getattr(args, "arm_timeout", 60.0),
+                            lost_timeout=getattr(args, "lost_timeout", 30.0)),
+        rate=args.rate, gains_file=args.gains,
+        gain_flags=GainFlags(args.k_df, args.lambda_f, args.k_dc, args.lambda_c),
+        max_speed=args.max_speed, max_yaw_rate=args.max_yaw_rate,
+        w_c=getattr(args, "w_c", None), d_cen=getattr(args, "d_cen", None))
+
+
+def logger(prefix: str, quiet: bool):
+    if quiet:
+        return lambda text: None
+
+    def log(text: str) -> None:
+        print(f"{prefix}: {text}", file=sys.stderr, flush=True)
+    return log
+
+
+def install_signals(switch):
+    """SIGTERM and SIGINT stop the rover and end the run; returns a function that undoes it."""
+    import signal
+
+    def handler(signum, frame):
+        switch.trigger(signal.Signals(signum).name)
+
+    old = {sig: signal.signal(sig, handler) for sig in (signal.SIGTERM, signal.SIGINT)}
+    return lambda: [signal.signal(sig, h) for sig, h in old.items()]
+
+
+def print_result(result, as_json: bool, extra: dict | None = None) -> None:
+    d = result.as_dict()
+    if extra:
+        d.update(extra)
+    if as_json:
+        print(json.dumps(d), flush=True)
+        return
+    def ms(x):
+        return "n/a" if x is None else f"{x:.3f} ms"
+    rejected = {k: v for k, v in d["telemetry_rejected"].items() if v}
+    lines = [
+        f"result      {d['reason']} (exit {d['exit_code']})",
+        f"mission     {d['mission']}: {d['duration_s']:.2f} s tracked",
+        f"tracking    f_cost {d['f_cost']:.4f}, steady RMS "
+        + ("n/a" if d['steady_rms'] is None else f"{d['steady_rms']:.4f} m"),
+        f"loop        {d['cycles']} cycles at "
+        + ("n/a" if d['loop_rate_hz'] is None else f"{d['loop_rate_hz']:.1f} Hz")
+        + f" (asked {d['rate_requested_hz']:g} Hz, vehicle accepted "
+        + (f"{d['rate_accepted_hz']:g} Hz)" if d['rate_accepted_hz'] else "nothing)"),
+        f"latency     p50 {ms(d['latency_p50_ms'])}, p99 {ms(d['latency_p99_ms'])}, "
+        f"max {ms(d['latency_max_ms'])} (telemetry read to setpoint sent)",
+        f"telemetry   {d['telemetry_received']} received, "
+        f"{sum(rejected.values())} refused {rejected or ''}; {d['missed_cycles']} missed cycles",
+        f"setpoints   {d['setpoints_sent']} sent; failsafes {d['failsafes']}; "
+        f"HOLD {'confirmed' if d['hold_confirmed'] else 'not confirmed'}",
+        f"gains       {d['gains_source']}",
+    ]
+    for key in ("plot",):
+        if key in d:
+            lines.append(f"{key:<11} {d[key]}")
+    print("\n".join(lines), flush=True)
+
+
+def load_mission(path: str, origin_text: str | None):
+    from .. import mission as missions
+    from .mission import parse_origin, print_warnings
+    mission = missions.load(path, origin=parse_origin(origin_text))
+    print_warnings(mission, "companion run")
+    return mission
+
+
+def run(args) -> int:
+    from ..progress import ProgressSink
+    from ..session import StopSwitch, fly
+
+    mission = load_mission(args.mission, args.origin)
+    settings = settings_from_args(args, mission, args.connect)
+    sinks = [ProgressSink(mission.duration, mission.name)] if args.progress else []
+    switch = StopSwitch()
+    restore = install_signals(switch)
+    try:
+        result = fly(settings, sinks=sinks, log=logger("companion run", args.quiet),
+                     switch=switch)
+    finally:
+        restore()
+    print_result(result, args.json)
+    if result.exit_code == 2:
+        raise UserError(result.reason)
+    return result.exit_code

@@ -1,0 +1,240 @@
+"""The MAVLink connection to one vehicle: pymavlink underneath, the companion's vocabulary on top.
+
+Connect, wait for the vehicle's heartbeat, tell ArduPilot from PX4, ask for pose telemetry at a
+rate (reading the COMMAND_ACKs and falling back to a rate the vehicle accepts), change mode,
+arm, and encode the tracker's command as SET_POSITION_TARGET_LOCAL_NED:
+
+* ArduPilot: frame BODY_NED, type_mask 1511 (use vx, vy, yaw_rate), vx = v_ref, vy = 0,
+  yaw_rate = omega_ref: Rover's ``set_desired_turn_rate_and_speed``, the paper's two inputs;
+* PX4: frame LOCAL_NED, type_mask 3559 (use vx, vy), (vx, vy) = u_p; PX4 rovers ignore yaw and
+  yaw rate and steer along the velocity themselves.
+
+Each setpoint carries the ``time_boot_ms`` of the telemetry sample it answers (ArduPilot and PX4
+ignore the field), so a log or a test can pair every setpoint with its sample.
+
+Hooks for later: ``LinkConfig.signing_key`` turns on MAVLink 2 signing and ``LinkConfig.tlog``
+records a .tlog, both through pymavlink's own support.
+"""
+
+from __future__ import annotations
+
+import os
+import time
+from dataclasses import dataclass
+from typing import Any
+
+os.environ["MAVLINK20"] = "1"   # before pymavlink.mavutil is imported: MAVLink 2 frames
+from pymavlink import mavutil  # noqa: E402
+
+from .errors import UserError  # noqa: E402
+from .signals import Command  # noqa: E402
+
+mavlink = mavutil.mavlink
+
+ARDUPILOT, PX4 = "ardupilot", "px4"
+AUTOPILOTS = {mavlink.MAV_AUTOPILOT_ARDUPILOTMEGA: ARDUPILOT, mavlink.MAV_AUTOPILOT_PX4: PX4}
+# The mode that follows our setpoints, and the one we hand the vehicle back in (pymavlink's
+# names: PX4's "Hold" is AUTO_LOITER, which mavutil calls "LOITER").
+TRACK_MODE = {ARDUPILOT: "GUIDED", PX4: "OFFBOARD"}
+HOLD_MODE = {ARDUPILOT: "HOLD", PX4: "LOITER"}
+
+MASK_SPEED_YAW_RATE = 1511   # 0x05E7: ignore position, vz, acceleration, yaw
+MASK_VELOCITY = 3559         # 0x0DE7: ignore position, vz, acceleration, yaw, yaw rate
+ACCEPTED = mavlink.MAV_RESULT_ACCEPTED
+# Rates to fall back to, fastest first, when the vehicle refuses the one asked for.
+FALLBACK_RATES = (1000.0, 800.0, 500.0, 400.0, 250.0, 200.0, 100.0, 50.0, 40.0, 25.0, 20.0,
+                  10.0, 5.0, 2.0, 1.0)
+
+
+@dataclass(frozen=True)
+class LinkConfig:
+    url: str
+    sysid: int | None = None          # vehicle to follow; None: the first vehicle heartbeat's
+    source_system: int = 255
+    source_component: int = mavlink.MAV_COMP_ID_ONBOARD_COMPUTER
+    heartbeat_timeout: float = 10.0   # s to wait for the vehicle's first heartbeat
+    ack_timeout: float = 1.0          # s to wait for one COMMAND_ACK
+    signing_key: bytes | None = None  # 32 bytes: sign outgoing, refuse unsigned
+    tlog: str | None = None           # path of a .tlog to record (pymavlink's format)
+
+
+@dataclass(frozen=True)
+class VehicleInfo:
+    sysid: int
+    compid: int
+    autopilot: str       # ARDUPILOT or PX4
+    mav_type: int
+
+
+class Link:
+    """One pymavlink connection, following one vehicle."""
+
+    def __init__(self, config: LinkConfig):
+        self.config = config
+        try:
+            self.master = mavutil.mavlink_connection(
+                config.url, source_system=config.source_system,
+                source_component=config.source_component, dialect="ardupilotmega")
+        except Exception as exc:   # pymavlink raises anything from ValueError to OSError
+            raise UserError(f"cannot open {config.url!r}: {exc}") from None
+        self.mav = self.master.mav
+        if config.signing_key is not None:
+            self.master.setup_signing(config.signing_key, sign_outgoing=True)
+        if config.tlog is not None:
+            self.master.setup_logfile(config.tlog)
+        self.vehicle: VehicleInfo | None = None
+        self._mask = MASK_SPEED_YAW_RATE
+        self._frame = mavlink.MAV_FRAME_BODY_NED
+        self._speed_yaw_rate = True
+        self.setpoints_sent = 0
+        self.last_ack: dict[int, int] = {}        # command id -> last result
+
+    def close(self) -> None:
+        try:
+            self.master.close()
+        except OSError:
+            pass
+
+    # --- receiving ----------------------------------------------------------------------------
+    def recv(self) -> Any | None:
+        """One parsed message, or None when nothing is waiting. Never blocks, never raises."""
+        try:
+            return self.master.recv_msg()
+        except OSError:
+            return None
+
+    def wait(self, timeout: float) -> None:
+        """Sleep until data arrives or ``timeout`` seconds pass (pymavlink's select)."""
+        if timeout > 0:
+            self.master.select(timeout)
+
+    def is_vehicle(self, msg: Any) -> bool:
+        """True for a message from the vehicle we follow (its system and component)."""
+        v = self.vehicle
+        return v is not None and msg.get_srcSystem() == v.sysid and msg.get_srcComponent() == v.compid
+
+    @property
+    def mode(self) -> str:
+        """The vehicle's flight mode from its last heartbeat (pymavlink's name)."""
+        return self.master.flightmode
+
+    @property
+    def armed(self) -> bool:
+        return bool(self.master.motors_armed())
+
+    # --- connection set-up (blocking; before the control loop) ------------------------------
+    def wait_vehicle(self, should_stop=lambda: False) -> VehicleInfo:
+        """Wait for the first heartbeat of a vehicle (of ``config.sysid`` if given)."""
+        cfg = self.config
+        deadline = time.monotonic() + cfg.heartbeat_timeout
+        while time.monotonic() < deadline and not should_stop():
+            msg = self.recv()
+            if msg is None:
+                self.wait(0.05)
+                continue
+            if msg.get_type() != "HEARTBEAT" or not self.master.probably_vehicle_heartbeat(msg):
+                continue
+            if cfg.sysid is not None and msg.get_srcSystem() != cfg.sysid:
+                continue
+            autopilot = AUTOPILOTS.get(msg.autopilot)
+            if autopilot is None:
+                raise UserError(f"system {msg.get_srcSystem()} runs an autopilot this companion "
+                                f"does not drive (MAV_AUTOPILOT {msg.autopilot}); "
+                                "ArduPilot and PX4 are supported")
+            self.vehicle = VehicleInfo(msg.get_srcSystem(), msg.get_srcComponent(), autopilot,
+                                       msg.type)
+            self.master.target_system = self.vehicle.sysid
+            self.master.target_component = self.vehicle.compid
+            if autopilot == PX4:
+                self._mask, self._frame = MASK_VELOCITY, mavlink.MAV_FRAME_LOCAL_NED
+                self._speed_yaw_rate = False
+            return self.vehicle
+        if should_stop():
+            raise KeyboardInterrupt
+        which = f"system {cfg.sysid}" if cfg.sysid is not None else "any vehicle"
+        raise UserError(f"no heartbeat from {which} on {cfg.url} within "
+                        f"{cfg.heartbeat_timeout:g} s: is the vehicle running and sending there?")
+
+    def command(self, command: int, *params: float) -> None:
+        """Send a COMMAND_LONG to the vehicle (not waiting for its ACK)."""
+        p = list(params) + [0.0] * (7 - len(params))
+        self.mav.command_long_send(self.vehicle.sysid, self.vehicle.compid, command, 0, *p)
+
+    def command_wait(self, command: int, *params: float, tries: int = 2) -> int | None:
+        """COMMAND_LONG and its COMMAND_ACK result; None if no ACK came (after ``tries`` sends).
+
+        Other messages read meanwhile are dropped: only for set-up, before the control loop.
+        """
+        for _ in range(tries):
+            self.command(command, *params)
+            deadline = time.monotonic() + self.config.ack_timeout
+            while (left := deadline - time.monotonic()) > 0:
+                msg = self.recv()
+                if msg is None:
+                    self.wait(min(left, 0.05))
+                elif (msg.get_type() == "COMMAND_ACK" and msg.command == command
+                      and self.is_vehicle(msg)):
+                    self.last_ack[command] = msg.result
+                    return msg.result
+        return None
+
+    def set_message_rate(self, msg_id: int, hz: float) -> int | None:
+        """MAV_CMD_SET_MESSAGE_INTERVAL: the ACK's result, or None without an answer."""
+        return self.command_wait(mavlink.MAV_CMD_SET_MESSAGE_INTERVAL, msg_id, 1e6 / hz)
+
+    def negotiate_rate(self, hz: float) -> tuple[float | None, list[str]]:
+        """Ask for LOCAL_POSITION_NED and ATTITUDE at ``hz``, then at slower rates while refused.
+
+        Returns (accepted rate, notes). ``None`` means the vehicle never answered (an autopilot
+        without MAV_CMD_SET_MESSAGE_INTERVAL): the loop then runs at whatever rate arrives.
+        """
+        notes = []
+        candidates = [hz] + [r for r in FALLBACK_RATES if r < hz]
+        for rate in candidates:
+            results = [self.set_message_rate(mid, rate) for mid in
+                       (mavlink.MAVLINK_MSG_ID_LOCAL_POSITION_NED, mavlink.MAVLINK_MSG_ID_ATTITUDE)]
+            if results == [ACCEPTED, ACCEPTED]:
+                return rate, notes
+            if results == [None, None]:
+                notes.append(f"no COMMAND_ACK for SET_MESSAGE_INTERVAL at {rate:g} Hz: "
+                             "using the rate that arrives")
+                return None, notes
+            notes.append(f"vehicle refused {rate:g} Hz telemetry (COMMAND_ACK results "
+                         f"{results}); trying slower")
+        raise UserError(f"the vehicle refused pose telemetry at every rate from {hz:g} Hz down "
+                        f"to {candidates[-1]:g} Hz")
+
+    # --- commands used inside the control loop (never wait) ---------------------------------
+    def request_mode(self, name: str) -> None:
+        """MAV_CMD_DO_SET_MODE for a mode name (pymavlink's mode tables for either autopilot)."""
+        mapping = self.master.mode_mapping() or {}
+        if name not in mapping:
+            raise UserError(f"the vehicle has no mode {name!r}")
+        self.master.set_mode(name)
+
+    def request_arm(self) -> None:
+        self.master.arducopter_arm()   # MAV_CMD_COMPONENT_ARM_DISARM param1 = 1, any vehicle
+
+    def send_heartbeat(self) -> None:
+        self.mav.heartbeat_send(mavlink.MAV_TYPE_ONBOARD_CONTROLLER, mavlink.MAV_AUTOPILOT_INVALID,
+                                0, 0, mavlink.MAV_STATE_ACTIVE)
+
+    def send_command(self, cmd: Command, time_boot_ms: int) -> None:
+        """The tracker's command as SET_POSITION_TARGET_LOCAL_NED (see the module docstring)."""
+        v = self.vehicle
+        if self._speed_yaw_rate:
+            self.mav.set_position_target_local_ned_send(
+                time_boot_ms, v.sysid, v.compid, self._frame, self._mask,
+                0.0, 0.0, 0.0, cmd.speed, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, cmd.yaw_rate)
+        else:
+            self.mav.set_position_target_local_ned_send(
+                time_boot_ms, v.sysid, v.compid, self._frame, self._mask,
+                0.0, 0.0, 0.0, cmd.ux, cmd.uy, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+        self.setpoints_sent += 1
+
+    def send_stop(self, time_boot_ms: int = 0) -> None:
+        """Zero speed and zero turn rate (zero velocity for PX4)."""
+        self.send_command(STOP, time_boot_ms)
+
+
+STOP = Command(0.0, 0.0, 0.0, 0.0)

@@ -1,0 +1,510 @@
+"""The live control loop: a state machine driven by the vehicle's telemetry.
+
+One thread. Each LOCAL_POSITION_NED that passes :mod:`companion.telemetry` is one cycle: while
+TRACKING it goes through the tracker (filter + PZC law) against ``trajectory.sample(mission
+time)`` and one setpoint goes out; in every other active state the cycle answers with a zero
+setpoint (the rover stands still, PX4 keeps its offboard stream, a lockstep plant keeps
+stepping). Times come from the vehicle's ``time_boot_ms``: mission time 0 is the first tracking
+sample and the clock stands still while paused or in failsafe. The companion's wall clock only
+measures silence (stale telemetry), latency and retry intervals.
+
+    WAITING --first valid sample--> ENGAGING --mode (+ armed)--> TRACKING --mission end--> DONE
+                                          \\-> READY (no autostart) --start--> TRACKING
+    TRACKING <--pause/resume--> PAUSED
+    any active state --no valid sample for stale_timeout--> FAILSAFE (zero setpoint, HOLD)
+    FAILSAFE --valid sample--> ENGAGING (tracker.reset(), back to GUIDED) --> previous state
+
+It stops the rover itself (zero setpoint, then HOLD) at the mission's end, on a stop request
+(SIGTERM / Ctrl-C via :meth:`Runner.request_stop`), on ``abort``, and when it gives up. Every
+command is checked right before encoding: a non-finite or out-of-limit one stops the rover.
+Sinks get a LoopRecord per tracking cycle and a StatusEvent per life-cycle change; a
+ControlChannel, if given, is polled once per cycle.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import time
+from dataclasses import dataclass
+from enum import Enum
+from pathlib import Path
+from typing import Any, Callable, Sequence
+
+from . import events as ev
+from .errors import UserError
+from .events import ControlChannel, ControlRequest, LoopRecord, Sink, StatusEvent
+from .limits import Limits
+from .link import HOLD_MODE, PX4, TRACK_MODE, Link
+from .signals import Command, Measurement
+from .stats import TrackingStats
+from .telemetry import TelemetryCheck
+
+_finite = math.isfinite
+TIMER_EVERY = 0.02     # wall s: timers run at least this often even while messages pour in
+MAX_WAIT = 0.05        # wall s: the longest sleep (so stop requests are seen promptly)
+
+
+class State(str, Enum):
+    WAITING = "waiting"
+    ENGAGING = "engaging"
+    READY = "ready"
+    TRACKING = "tracking"
+    PAUSED = "paused"
+    FAILSAFE = "failsafe"
+    DONE = "done"
+
+
+ACTIVE = (State.ENGAGING, State.READY, State.TRACKING, State.PAUSED)
+
+
+@dataclass(frozen=True)
+class RunnerConfig:
+    stale_timeout: float = 0.5        # wall s without a valid sample -> failsafe
+    arm: bool = False                 # arm the vehicle ourselves (else wait for it)
+    autostart: bool = True            # track as soon as engaged (else wait for `start`)
+    telemetry_timeout: float = 10.0   # wall s for the first valid sample
+    mode_timeout: float = 10.0        # wall s to get into GUIDED / OFFBOARD
+    arm_timeout: float = 60.0         # wall s to see the vehicle armed
+    lost_timeout: float = 30.0        # wall s in failsafe before giving up
+    retry_interval: float = 1.0       # wall s between mode / arm / HOLD requests
+    offboard_warmup: float = 1.2      # vehicle s of setpoints before asking PX4 for OFFBOARD
+    hold_timeout: float = 2.0         # wall s to see HOLD confirmed when stopping
+    period: float | None = None       # nominal telemetry period, for missed-cycle counts
+
+
+@dataclass
+class Outcome:
+    reason: str
+    exit_code: int
+    hold_confirmed: bool
+    failsafes: int
+
+
+class Runner:
+    def __init__(self, link: Link, tracker: Any, mission: Any, config: RunnerConfig,
+                 limits: Limits, sinks: Sequence[Sink] = (), control: ControlChannel | None = None,
+                 log: Callable[[str], None] = lambda text: None):
+        self.link, self.tracker, self.mission = link, tracker, mission
+        self.config, self.limits, self.log = config, limits, log
+        self.sinks = list(sinks)
+        self.control = control
+        v = link.vehicle
+        self.telemetry = TelemetryCheck(v.sysid, v.compid, max_attitude_age=config.stale_timeout)
+        self.stats = TrackingStats(mission.duration, config.period)
+        self.track_mode, self.hold_mode = TRACK_MODE[v.autopilot], HOLD_MODE[v.autopilot]
+        self.px4 = v.autopilot == PX4
+        self.state = State.WAITING
+        self.trajectory = None            # anchored at the first tracking sample
+        self.mission_time = 0.0
+        self._mission_offset = 0.0
+        self._segment_t0: float | None = None
+        self._stop_reason: str | None = None
+        self._waited = True               # idle since the last position sample was handled
+        self._last_sample_wall = 0.0
+        self._last_vt = 0.0
+        self._after_engage = State.TRACKING if config.autostart else State.READY
+        self._mode_request: str | None = None
+        self._mode_acked = False
+        self._mode_seen = False           # heartbeat showed our mode since we engaged
+        self._next_try = self._next_arm_try = 0.0
+        self._engage_since = 0.0
+        self._warm_t0: float | None = None
+        self._said_arm_wait = False
+        self._failsafe_since = 0.0
+        self._hold_confirmed = False
+        self.failsafes = 0
+        self.sink_errors = 0
+        self.outcome: Outcome | None = None
+
+    # --- public -----------------------------------------------------------------------------
+    def request_stop(self, reason: str) -> None:
+        """Ask the loop to stop the rover and end (safe to call from a signal handler)."""
+        if self._stop_reason is None:
+            self._stop_reason = reason
+
+    def run(self) -> Outcome:
+        link, clock = self.link, time.perf_counter
+        now = clock()
+        self._started = self._last_sample_wall = now
+        self._next_timer = now
+        self._next_heartbeat = now
+        v = link.vehicle
+        self._emit(ev.CONNECTED, f"{v.autopilot} system {v.sysid}",
+                   {"autopilot": v.autopilot, "sysid": v.sysid, "compid": v.compid})
+        recv, on_position = link.recv, self._on_position
+        attitude = self.telemetry.attitude
+        while self.state is not State.DONE:
+            if self._stop_reason is not None:
+                self._finish(self._stop_reason, 0)
+                break
+            if self.control is not None:
+                for request in self.control.poll():
+                    self._on_request(request)
+            t_read = clock()
+            msg = recv()
+            if msg is None:
+                self._waited = True
+                self._timers(t_read)
+                link.wait(min(MAX_WAIT, max(0.0, self._next_timer - clock())))
+                continue
+            kind = msg.get_type()
+            if kind == "LOCAL_POSITION_NED":
+                on_position(msg, t_read)
+            elif kind == "ATTITUDE":
+                attitude(msg)
+            elif kind == "HEARTBEAT":
+                self._on_heartbeat(msg)
+            elif kind == "COMMAND_ACK":
+                self._on_ack(msg)
+            elif kind == "STATUSTEXT" and link.is_vehicle(msg):
+                self.log(f"vehicle says: {msg.text}")
+            if t_read >= self._next_timer:
+                self._timers(t_read)
+        self._wait_for_hold()
+        self._emit(ev.STOPPED, self.outcome.reason, {"exit_code": self.outcome.exit_code,
+                                                     "hold_confirmed": self._hold_confirmed})
+        self.outcome.hold_confirmed = self._hold_confirmed
+        for sink in self.sinks:
+            self._safely(sink.close)
+        return self.outcome
+
+    # --- per message ------------------------------------------------------------------------
+    def _on_position(self, msg: Any, t_read: float) -> None:
+        s = self.telemetry.position(msg)
+        if s is None:
+            return
+        self._last_sample_wall = t_read
+        self._last_vt = s.t
+        state = self.state
+        if state is State.TRACKING:
+            self._track(s, t_read)
+        else:
+            if state is State.FAILSAFE:
+                self._recover()
+            elif state is State.WAITING:
+                self.log(f"telemetry flowing; engaging {self.track_mode}")
+                self._enter_engaging(State.WAITING)
+            self.link.send_stop(s.time_boot_ms)
+            if self.state is State.ENGAGING:
+                if self._warm_t0 is None:
+                    self._warm_t0 = s.t
+                self._engage(t_read)
+        self._waited = False
+
+    def _track(self, s, t_read: float) -> None:
+        if self._segment_t0 is None:
+            if self.trajectory is None:
+                self.trajectory = self.mission.anchored(s.x, s.y, s.yaw)
+            self._segment_t0 = s.t
+            self._mission_offset = self.mission_time
+            self.stats.segment_start()
+        mt = self._mission_offset + (s.t - self._segment_t0)
+        if mt >= self.mission.duration - 1e-9:
+            self.mission_time = mt
+            self._emit(ev.MISSION_DONE, f"{self.mission.duration:g} s of mission tracked")
+            self._finish("mission_done", 0, s.time_boot_ms)
+            return
+        self.mission_time = mt
+        ref = self.trajectory.sample(mt)
+        cmd = self.tracker.step(s.t, Measurement(s.x, s.y, s.yaw, s.vx, s.vy, s.yaw_rate), ref)
+        problem = self._check(cmd)
+        if problem is not None:
+            self._emit(ev.FAILSAFE, problem)
+            self._finish(f"failsafe: {problem}", 3, s.time_boot_ms)
+            return
+        self.link.send_command(cmd, s.time_boot_ms)
+        latency = time.perf_counter() - t_read
+        ex, ey = ref.x - s.x, ref.y - s.y
+        e2 = ex * ex + ey * ey
+        self.stats.add(mt, s.t, e2, latency, not self._waited)
+        if self.sinks:
+            self._record(s, mt, ref, cmd, e2)
+
+    def _check(self, cmd: Command) -> str | None:
+        """Why this command must not be sent, or None. Right before encoding, every cycle."""
+        speed, rate, ux, uy = cmd.speed, cmd.yaw_rate, cmd.ux, cmd.uy
+        if not (_finite(speed) and _finite(rate) and _finite(ux) and _finite(uy)):
+            return (f"controller output not finite (speed {speed!r}, yaw rate {rate!r}, "
+                    f"u_p ({ux!r}, {uy!r})): stopping the rover")
+        lim = self.limits
+        if (abs(speed) > lim.max_speed * (1 + 1e-9) or abs(rate) > lim.max_yaw_rate * (1 + 1e-9)
+                or math.hypot(ux, uy) > lim.max_speed * (1 + 1e-9)):
+            return (f"controller output outside the limits (speed {speed:.3f} m/s, yaw rate "
+                    f"{rate:.3f} rad/s): stopping the rover")
+        return None
+
+    def _record(self, s, mt: float, ref, cmd: Command, e2: float) -> None:
+        est = self.tracker.estimate
+        yaw_ref = math.atan2(cmd.uy, cmd.ux)
+        err_yaw = math.remainder(yaw_ref - est.yaw, 2 * math.pi)
+        rec = LoopRecord(s.t, mt, s.x, s.y, s.yaw, est.x, est.y, est.yaw, ref.x, ref.y,
+                         math.sqrt(e2), err_yaw, cmd.ux, cmd.uy, cmd.speed, cmd.yaw_rate,
+                         self.link.mode, self.link.armed)
+        for sink in self.sinks:
+            self._safely(sink.record, rec)
+
+    def _on_heartbeat(self, msg: Any) -> None:
+        if not self.link.is_vehicle(msg):
+            return
+        mode, armed = self.link.mode, self.link.armed
+        state = self.state
+        if state in ACTIVE and mode == self.track_mode:
+            self._mode_seen = True
+        if state in (State.READY, State.TRACKING, State.PAUSED) and self._mode_seen:
+            if mode != self.track_mode:
+                self._override(f"mode changed to {mode} by someone else")
+            elif not armed:
+                self._override("vehicle disarmed by someone else")
+        elif state is State.FAILSAFE and mode == self.hold_mode:
+            self._hold_confirmed = True
+        if state is State.ENGAGING:
+            self._engage(time.perf_counter())
+
+    def _on_ack(self, msg: Any) -> None:
+        if not self.link.is_vehicle(msg):
+            return
+        if msg.command == 176 and self._mode_request is not None:   # MAV_CMD_DO_SET_MODE
+            if msg.result == 0:
+                self._mode_acked = True
+                if self._mode_request == self.hold_mode:
+                    self._hold_confirmed = True
+            else:
+                self.log(f"vehicle refused mode {self._mode_request} (COMMAND_ACK result "
+                         f"{msg.result})")
+        elif msg.command == 400 and msg.result != 0:               # MAV_CMD_COMPONENT_ARM_DISARM
+            self.log(f"vehicle refused to arm (COMMAND_ACK result {msg.result}); retrying")
+
+    # --- timers -----------------------------------------------------------------------------
+    def _timers(self, now: float) -> None:
+        self._next_timer = now + TIMER_EVERY
+        cfg, state = self.config, self.state
+        if now >= self._next_heartbeat:
+            self.link.send_heartbeat()
+            self._next_heartbeat = now + 1.0
+        if state is State.WAITING:
+            if now - self._started > cfg.telemetry_timeout:
+                t = self.telemetry
+                detail = (f" ({t.received} LOCAL_POSITION_NED refused: "
+                          f"{_nonzero(t.rejected)})" if t.received else "")
+                raise UserError(f"no valid pose telemetry within {cfg.telemetry_timeout:g} s"
+                                f"{detail}")
+        elif state is State.FAILSAFE:
+            if self.telemetry.backwards_streak >= 3:
+                self._finish("failsafe: the vehicle restarted (time_boot_ms went back); "
+                             "not resuming a mission on a rebooted vehicle", 3)
+            elif now - self._failsafe_since > cfg.lost_timeout:
+                self._finish(f"failsafe: telemetry lost for {cfg.lost_timeout:g} s", 3)
+            elif now >= self._next_try and not self._hold_confirmed:
+                self.link.send_stop()
+                self._request_mode(self.hold_mode, now)
+        elif state in ACTIVE:
+            if now - self._last_sample_wall > cfg.stale_timeout:
+                self._failsafe(now)
+            elif state is State.ENGAGING:
+                self._engage(now)
+
+    def _failsafe(self, now: float) -> None:
+        gap = now - self._last_sample_wall
+        reason = f"telemetry stale: no valid sample for {gap:.2f} s"
+        self.log(f"{reason}; stopping the rover (zero setpoint, {self.hold_mode})")
+        self.link.send_stop()
+        self._hold_confirmed = False
+        self._request_mode(self.hold_mode, now)
+        self._resume_to = self.state if self.state is not State.ENGAGING else self._after_engage
+        self.state = State.FAILSAFE
+        self._failsafe_since = now
+        self.failsafes += 1
+        self._emit(ev.FAILSAFE, reason, {"rejected": dict(self.telemetry.rejected)})
+
+    def _recover(self) -> None:
+        """Telemetry is back: forget the filter and integrators, re-engage, then carry on."""
+        self.tracker.reset()
+        self.log(f"telemetry back after {time.perf_counter() - self._failsafe_since:.2f} s; "
+                 f"re-engaging {self.track_mode} with the filter and integrators reset")
+        self._enter_engaging(self._resume_to)
+        self._emit(ev.RESUMED, "telemetry back")
+
+    # --- engaging: mode, then arming ---------------------------------------------------------
+    def _enter_engaging(self, resume_to: State) -> None:
+        self.state = State.ENGAGING
+        self._after_engage = (resume_to if resume_to in (State.TRACKING, State.PAUSED, State.READY)
+                              else self._after_engage)
+        self._engage_since = time.perf_counter()
+        self._mode_request, self._mode_acked, self._mode_seen = None, False, False
+        self._warm_t0 = None
+        self._next_try = self._next_arm_try = 0.0
+        self._segment_t0 = None
+
+    def _request_mode(self, name: str, now: float) -> None:
+        if self._mode_request != name:
+            self._mode_acked = False
+        self._mode_request = name
+        self.link.request_mode(name)
+        self._next_try = now + self.config.retry_interval
+
+    def _engage(self, now: float) -> None:
+        cfg, link = self.config, self.link
+        if self.px4 and (self._warm_t0 is None or self._last_vt - self._warm_t0 < cfg.offboard_warmup):
+            return   # PX4 refuses OFFBOARD until setpoints have streamed for a while
+        mode_ok = link.mode == self.track_mode or (
+            self._mode_acked and self._mode_request == self.track_mode)
+        if not mode_ok:
+            if now - self._engage_since > cfg.mode_timeout:
+                self._finish(f"failsafe: the vehicle did not enter {self.track_mode} within "
+                             f"{cfg.mode_timeout:g} s", 3)
+            elif now >= self._next_try:
+                self._request_mode(self.track_mode, now)
+            return
+        if not link.armed:
+            if now - self._engage_since > cfg.arm_timeout:
+                self._finish(f"failsafe: the vehicle was not armed within {cfg.arm_timeout:g} s"
+                             + ("" if cfg.arm else " (use --arm to arm it from here)"), 3)
+            elif cfg.arm and now >= self._next_arm_try:
+                link.request_arm()
+                self._next_arm_try = now + cfg.retry_interval
+            elif not cfg.arm and not self._said_arm_wait:
+                self._said_arm_wait = True
+                self.log("waiting for the vehicle to be armed (or pass --arm)")
+            return
+        target = self._after_engage
+        self.state = target
+        if target is State.TRACKING:
+            self.log(f"{self.track_mode} and armed: tracking '{self.mission.name}'")
+            self._emit(ev.TRACKING, self.mission.name)
+        elif target is State.READY:
+            self.log(f"{self.track_mode} and armed: ready, waiting for `start`")
+
+    # --- stopping -----------------------------------------------------------------------------
+    def _finish(self, reason: str, code: int, time_boot_ms: int = 0, hold: bool = True) -> None:
+        """Stop the rover (zero setpoint, then HOLD) and end the loop."""
+        self.link.send_stop(time_boot_ms)
+        if hold:
+            self._hold_confirmed = self._hold_confirmed and self.state is State.FAILSAFE
+            self._request_mode(self.hold_mode, time.perf_counter())
+        self.state = State.DONE
+        self.outcome = Outcome(reason, code, False, self.failsafes)
+        self._wants_hold = hold
+        self.log(f"stopped: {reason}")
+
+    def _override(self, why: str) -> None:
+        self._emit(ev.PILOT_OVERRIDE, why)
+        self._finish(f"pilot_override: {why}", 3, hold=False)
+
+    def _wait_for_hold(self) -> None:
+        """Until HOLD shows (ACK or heartbeat), answer telemetry with zero setpoints."""
+        if not getattr(self, "_wants_hold", False):
+            return
+        link, clock = self.link, time.perf_counter
+        deadline = clock() + self.config.hold_timeout
+        retry = clock() + 0.5
+        while not self._hold_confirmed and (now := clock()) < deadline:
+            msg = link.recv()
+            if msg is None:
+                if now >= retry:
+                    link.send_stop()
+                    self._request_mode(self.hold_mode, now)
+                    retry = now + 0.5
+                link.wait(min(0.05, deadline - now))
+                continue
+            kind = msg.get_type()
+            if not link.is_vehicle(msg):
+                continue
+            if kind == "LOCAL_POSITION_NED":
+                link.send_stop(msg.time_boot_ms)
+            elif kind == "HEARTBEAT" and link.mode == self.hold_mode:
+                self._hold_confirmed = True
+            elif kind == "COMMAND_ACK":
+                self._on_ack(msg)
+        if not self._hold_confirmed:
+            self.log(f"{self.hold_mode} not confirmed by the vehicle within "
+                     f"{self.config.hold_timeout:g} s")
+
+    # --- control channel ------------------------------------------------------------------------
+    def _on_request(self, req: ControlRequest) -> None:
+        verb, state = req.verb, self.state
+        if verb == "status":
+            req.reply(True, json.dumps(self.status()))
+        elif verb == "start":
+            if state is State.READY:
+                self.state = State.TRACKING
+                self._segment_t0 = None
+                self._emit(ev.TRACKING, self.mission.name)
+                req.reply(True, f"tracking '{self.mission.name}'")
+            else:
+                req.reply(False, f"cannot start while {state.value}")
+        elif verb == "pause":
+            if state is State.TRACKING:
+                self.state = State.PAUSED
+                self._emit(ev.PAUSED, "requested")
+                req.reply(True, f"paused at mission time {self.mission_time:.2f} s")
+            else:
+                req.reply(False, f"cannot pause while {state.value}")
+        elif verb == "resume":
+            if state is State.PAUSED:
+                self.tracker.reset()   # the rover stood still: start the filter afresh
+                self.state = State.TRACKING
+                self._segment_t0 = None
+                self._emit(ev.RESUMED, "requested")
+                req.reply(True, f"resumed at mission time {self.mission_time:.2f} s")
+            else:
+                req.reply(False, f"cannot resume while {state.value}")
+        elif verb == "abort":
+            self._finish("aborted", 0)
+            req.reply(True, "stopping the rover")
+        elif verb == "load-mission":
+            self._load_mission(req)
+        else:
+            req.reply(False, f"unknown verb {verb!r}")
+
+    def _load_mission(self, req: ControlRequest) -> None:
+        if self.state not in (State.WAITING, State.ENGAGING, State.READY, State.PAUSED):
+            req.reply(False, f"cannot load a mission while {self.state.value}: pause first")
+            return
+        from . import mission as missions
+        text = req.payload.strip()
+        try:
+            path = Path(text)
+            new = (missions.load(path) if "\n" not in text and path.suffix and path.exists()
+                   else missions.loads(text, "<load-mission>"))
+        except UserError as err:
+            req.reply(False, str(err))
+            return
+        self.mission, self.trajectory = new, None
+        self.mission_time, self._mission_offset, self._segment_t0 = 0.0, 0.0, None
+        self.stats = TrackingStats(new.duration, self.config.period)
+        if self.state is State.PAUSED:
+            self.state = State.READY
+            self.tracker.reset()
+        self._after_engage = State.READY
+        self._emit(ev.MISSION_LOADED, new.name, {"source": new.source, "duration": new.duration})
+        req.reply(True, f"loaded '{new.name}' ({new.duration:g} s); send `start`")
+
+    def status(self) -> dict[str, Any]:
+        t = self.telemetry
+        return {"state": self.state.value, "mission": self.mission.name,
+                "mission_time": self.mission_time, "duration": self.mission.duration,
+                "mode": self.link.mode, "armed": self.link.armed, "cycles": self.stats.cycles,
+                "telemetry_received": t.received, "telemetry_rejected": dict(t.rejected),
+                "failsafes": self.failsafes}
+
+    # --- sinks ------------------------------------------------------------------------------
+    def _emit(self, kind: str, reason: str = "", detail: dict | None = None) -> None:
+        if not self.sinks:
+            return
+        event = StatusEvent(kind, reason, self._last_vt or None, detail or {})
+        for sink in self.sinks:
+            self._safely(sink.status, event)
+
+    def _safely(self, fn, *args) -> None:
+        """A failing sink (a full disk, a dead network) must never stop the control loop."""
+        try:
+            fn(*args)
+        except Exception as exc:  # noqa: BLE001
+            self.sink_errors += 1
+            if self.sink_errors == 1:
+                self.log(f"a sink failed ({type(exc).__name__}: {exc}); carrying on")
+
+
+def _nonzero(counts: dict[str, int]) -> dict[str, int]:
+    return {k: v for k, v in counts.items() if v}
