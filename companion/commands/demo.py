@@ -1,0 +1,155 @@
+"""``companion demo``: the bundled plant and the companion, two processes over loopback UDP.
+
+Starts ``sitl-plant`` (the paper's rover behind an ArduPilot-like MAVLink autopilot) pushing to a
+free loopback port, and runs the companion's control loop in this process against it, exactly as
+``companion run`` would: heartbeat, rates, GUIDED, arm, track, zero setpoint and HOLD at the end.
+
+Defaults: the paper's ellipse at f_r = 0.12 Hz for 60 s (Section 5) on the paper's plant with
+d_cen = 0.3 m (Section 5.2; with d_cen = 0 the tracked point sits on the axle and cannot move
+sideways, which a 40 Hz loop tracks far less well), 40 Hz telemetry, and the plant in lockstep:
+it advances one telemetry tick per setpoint, so the run is deterministic and takes a few seconds
+(``--speedup N`` without ``--lockstep`` runs it paced, N x real time).
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import os
+import subprocess
+import sys
+import tempfile
+from dataclasses import replace
+from pathlib import Path
+
+from ..errors import UserError
+from .run import add_gain_arguments, install_signals, logger, non_negative, positive, print_result
+
+DEFAULT_D_CEN = 0.3
+
+
+def register(subparsers) -> None:
+    p = subparsers.add_parser(
+        "demo", help="fly the paper's ellipse: bundled plant + companion over loopback UDP",
+        description=__doc__.split("\n\n", 1)[1], formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--mission", metavar="FILE",
+                   help="mission file (default: the paper's ellipse, f_r 0.12 Hz, 60 s)")
+    p.add_argument("--duration", type=positive, metavar="S", help="track only S seconds")
+    p.add_argument("--preset", choices=("paper", "stock"), default="paper",
+                   help="plant: the paper's rover (default) or a stock ArduPilot skid-steer")
+    p.add_argument("--d-cen", type=non_negative, dest="d_cen", default=DEFAULT_D_CEN, metavar="M",
+                   help=f"plant's axle-to-tracked-point distance (default {DEFAULT_D_CEN:g})")
+    p.add_argument("--autopilot", choices=("ardupilot", "px4"), default="ardupilot")
+    p.add_argument("--lockstep", action=argparse.BooleanOptionalAction, default=None,
+                   help="plant waits for each setpoint (default on, off when --speedup is given)")
+    p.add_argument("--speedup", type=positive, metavar="N", help="plant runs N x real time")
+    add_gain_arguments(p)
+    p.add_argument("--out", metavar="DIR", default="out", help="where the plot goes (default out/)")
+    p.add_argument("--no-plot", dest="plot", action="store_false", help="skip the plot")
+    p.add_argument("--json", action="store_true", help="print one JSON result object")
+    p.add_argument("-q", "--quiet", action="store_true", help="no log lines on stderr")
+    p.set_defaults(func=run)
+
+
+def _free_port() -> int:
+    import socket
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def _mission(args):
+    from .. import mission as missions
+    from .run import load_mission
+    mission = load_mission(args.mission, None) if args.mission else missions.paper_ellipse(0.12, 60.0)
+    if args.duration is not None:
+        mission = replace(mission, duration=args.duration)
+    return mission
+
+
+def plant_argv(args, port: int, rate: float) -> list[str]:
+    lockstep = args.lockstep if args.lockstep is not None else args.speedup is None
+    # The plant refuses rates above 0.8 x its loop rate, like ArduPilot; give it a loop fast
+    # enough for the rate asked (a real vehicle may not be, and the companion then falls back).
+    loop_rate = max(50.0, math.ceil(rate / 0.8) + 1)
+    argv = [sys.executable, "-m", "sitl_plant", "--connect", f"udpout:127.0.0.1:{port}",
+            "--preset", args.preset, "--d-cen", repr(args.d_cen), "--autopilot", args.autopilot,
+            "--loop-rate", f"{loop_rate:g}"]
+    if lockstep:
+        argv.append("--lockstep")
+    if args.speedup is not None:
+        argv += ["--speedup", repr(args.speedup)]
+    return argv
+
+
+def _stop(proc: subprocess.Popen) -> int | None:
+    if proc.poll() is None:
+        proc.terminate()
+        try:
+            proc.wait(timeout=3.0)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait()
+    return proc.returncode
+
+
+def run(args) -> int:
+    from ..link import LinkConfig
+    from ..plant import RoverParams
+    from ..progress import ProgressSink, TraceSink
+    from ..runner import RunnerConfig
+    from ..session import DEFAULT_LIMITS, GainFlags, RunSettings, StopSwitch, fly, requested_rate
+
+    mission = _mission(args)
+    params = (RoverParams.paper if args.preset == "paper" else RoverParams.stock_rover)()
+    # The companion's limits: the flags, else the mission's, else the plant's own (so the
+    # anti-windup knows where the vehicle saturates), else the default ceiling.
+    base = mission.limits or DEFAULT_LIMITS
+    max_speed = args.max_speed or min(base.max_speed, params.max_speed)
+    max_yaw_rate = args.max_yaw_rate or min(base.max_yaw_rate, params.max_yaw_rate)
+    port = _free_port()
+    settings = RunSettings(
+        link=LinkConfig(url=f"udpin:127.0.0.1:{port}", heartbeat_timeout=15.0),
+        mission=mission, runner=RunnerConfig(arm=True), rate=args.rate, gains_file=args.gains,
+        gain_flags=GainFlags(args.k_df, args.lambda_f, args.k_dc, args.lambda_c),
+        max_speed=max_speed, max_yaw_rate=max_yaw_rate, w_c=params.w_c, d_cen=args.d_cen)
+    rate = requested_rate(settings)
+    argv = plant_argv(args, port, rate)
+    log = logger("companion demo", args.quiet)
+    trace = TraceSink()
+    sinks = [ProgressSink(mission.duration, mission.name), trace]
+
+    log(f"plant: {' '.join(argv[2:])}")
+    plant_log = tempfile.TemporaryFile(mode="w+")
+    plant = subprocess.Popen(argv, stdout=subprocess.DEVNULL, stderr=plant_log,
+                             env={**os.environ, "PYTHONUNBUFFERED": "1"})
+    switch = StopSwitch()
+    restore = install_signals(switch)
+    try:
+        try:
+            result = fly(settings, sinks=sinks, log=log, switch=switch)
+        except UserError as err:
+            if plant.poll() is not None:
+                plant_log.seek(0)
+                last = (plant_log.read().strip().splitlines() or ["(no output)"])[-1]
+                raise UserError(f"the plant exited ({plant.returncode}): {last}") from None
+            raise UserError(f"{err} (plant: {' '.join(argv[2:])})") from None
+    finally:
+        restore()
+        plant_code = _stop(plant)
+        plant_log.close()
+
+    extra = {"plant": " ".join(argv[2:]), "plant_exit": plant_code, "preset": args.preset,
+             "d_cen": args.d_cen}
+    if args.plot and trace.log["t"]:
+        from ..mission_plot import plot_run
+        out = Path(args.out)
+        out.mkdir(parents=True, exist_ok=True)
+        path = out / "demo.png"
+        steady = result.steady_rms
+        plot_run(mission, trace.log, str(path),
+                 f"{mission.name} over MAVLink, {result.loop_rate_hz:.0f} Hz: f_cost "
+                 f"{result.f_cost:.3f}, steady RMS {steady:.3f} m")
+        extra["plot"] = str(path)
+    print_result(result, args.json, extra)
+    return result.exit_code
