@@ -1,0 +1,256 @@
+"""Test helpers for ``companion run`` end to end: the companion as an OS process, a recording
+UDP proxy between plant and companion, a scripted fake vehicle, and short mission files.
+
+Everything binds loopback ports chosen by the OS (port 0) and is stopped in ``__exit__``.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import select
+import socket
+import subprocess
+import sys
+import threading
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+os.environ["MAVLINK20"] = "1"
+from pymavlink import mavutil  # noqa: E402
+from pymavlink.dialects.v20 import ardupilotmega as mavlink2  # noqa: E402
+
+from sitl_plant.testing import free_udp_port  # noqa: E402
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def ellipse_mission(path: Path, duration: float, f_r: float = 0.12) -> Path:
+    path.write_text(f'name = "ellipse {duration:g} s"\nframe = "start"\nduration = {duration}\n'
+                    f'[trajectory]\nkind = "ellipse"\nf_r = {f_r}\n')
+    return path
+
+
+class Companion:
+    """``python -m companion run --connect udpin:127.0.0.1:PORT ARGS`` for a ``with`` block."""
+
+    def __init__(self, port: int, *args: str, command: str = "run"):
+        self.argv = [sys.executable, "-m", "companion", command,
+                     "--connect", f"udpin:127.0.0.1:{port}", *args]
+        self.proc: subprocess.Popen | None = None
+        self.stdout = self.stderr = ""
+
+    def __enter__(self) -> "Companion":
+        self.proc = subprocess.Popen(self.argv, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                                     text=True, cwd=ROOT)
+        return self
+
+    def __exit__(self, *exc) -> None:
+        if self.proc is not None and self.proc.poll() is None:
+            self.proc.kill()
+            self.proc.communicate()
+
+    def wait(self, timeout: float) -> int:
+        try:
+            self.stdout, self.stderr = self.proc.communicate(timeout=timeout)
+        except subprocess.TimeoutExpired:
+            self.proc.kill()
+            self.stdout, self.stderr = self.proc.communicate()
+            raise AssertionError(f"companion still running after {timeout} s:\n{self.stderr}")
+        return self.proc.returncode
+
+    def result(self) -> dict[str, Any]:
+        lines = [line for line in self.stdout.splitlines() if line.startswith("{")]
+        assert lines, f"no JSON result; stdout:\n{self.stdout}\nstderr:\n{self.stderr}"
+        return json.loads(lines[-1])
+
+
+def _parser():
+    mav = mavlink2.MAVLink(None)
+    mav.robust_parsing = True
+    return mav
+
+
+@dataclass
+class Seen:
+    wall: float
+    msg: Any
+
+
+class Proxy:
+    """UDP relay: the plant sends to ``plant_port``, the companion listens on ``companion_port``.
+
+    Every message both ways is parsed and kept with the wall time it passed (``from_plant``,
+    ``from_companion``). Run in a thread; stopped in ``__exit__``.
+    """
+
+    def __init__(self) -> None:
+        self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self.sock.bind(("127.0.0.1", 0))
+        self.plant_port = self.sock.getsockname()[1]
+        self.companion_port = free_udp_port()
+        self.companion_addr = ("127.0.0.1", self.companion_port)
+        self.plant_addr: tuple[str, int] | None = None
+        self.from_plant: list[Seen] = []
+        self.from_companion: list[Seen] = []
+        self._parse_plant, self._parse_companion = _parser(), _parser()
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, daemon=True)
+        self.lock = threading.Lock()
+
+    def __enter__(self) -> "Proxy":
+        self._thread.start()
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self._stop.set()
+        self._thread.join(2.0)
+        self.sock.close()
+
+    def _run(self) -> None:
+        while not self._stop.is_set():
+            ready, _, _ = select.select([self.sock], [], [], 0.05)
+            if not ready:
+                continue
+            data, addr = self.sock.recvfrom(65536)
+            now = time.monotonic()
+            if addr == self.companion_addr:
+                if self.plant_addr is not None:
+                    self.sock.sendto(data, self.plant_addr)
+                msgs, out = self._parse_companion.parse_buffer(data) or [], self.from_companion
+            else:
+                self.plant_addr = addr
+                self.sock.sendto(data, self.companion_addr)
+                msgs, out = self._parse_plant.parse_buffer(data) or [], self.from_plant
+            with self.lock:
+                out.extend(Seen(now, m) for m in msgs if m.get_type() != "BAD_DATA")
+
+    def companion_sent(self, kind: str, after: float = 0.0) -> list[Seen]:
+        with self.lock:
+            return [s for s in self.from_companion if s.msg.get_type() == kind and s.wall >= after]
+
+    def plant_sent(self, kind: str, after: float = 0.0) -> list[Seen]:
+        with self.lock:
+            return [s for s in self.from_plant if s.msg.get_type() == kind and s.wall >= after]
+
+    def wait_for(self, predicate, timeout: float) -> None:
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            if predicate():
+                return
+            time.sleep(0.02)
+        raise AssertionError(f"condition not met within {timeout} s")
+
+
+def is_zero(sp: Any) -> bool:
+    return sp.vx == 0.0 and sp.vy == 0.0 and sp.yaw_rate == 0.0
+
+
+def is_mode_command(msg: Any, mode: int) -> bool:
+    return msg.command == 176 and int(msg.param2) == mode
+
+
+# --------------------------------------------------------------------------- fake vehicle
+
+@dataclass
+class FakeVehicle:
+    """A scripted ArduPilot-like rover for the companion, on pymavlink, in a thread.
+
+    Answers SET_MESSAGE_INTERVAL, DO_SET_MODE and ARM with ACCEPTED; streams ATTITUDE +
+    LOCAL_POSITION_NED one tick at a time, going on when a setpoint answered the tick or after
+    ``tick_timeout`` wall seconds. ``script(k, ms) -> dict`` can change tick k: keys ``x, vx``
+    (LOCAL_POSITION_NED), ``yaw`` (ATTITUDE), ``ms`` (time_boot_ms), ``sysid`` (sender), or
+    ``restart`` (reboot: back to MANUAL, disarmed). Records every setpoint and command.
+    """
+
+    port: int
+    script: Any = None
+    start_ms: int = 100_000
+    step_ms: int = 25
+    tick_timeout: float = 0.02
+    setpoints: list[Any] = field(default_factory=list)
+    commands: list[Any] = field(default_factory=list)
+    sent_ms: list[tuple[int, str]] = field(default_factory=list)   # (time_boot_ms, note)
+
+    def __post_init__(self):
+        self.conn = mavutil.mavlink_connection(f"udpout:127.0.0.1:{self.port}", source_system=1,
+                                               source_component=1, dialect="ardupilotmega")
+        self.mode, self.armed, self.streaming = 0, False, False
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, daemon=True)
+
+    def __enter__(self) -> "FakeVehicle":
+        self._thread.start()
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self._stop.set()
+        self._thread.join(2.0)
+        self.conn.close()
+
+    def _heartbeat(self) -> None:
+        base = 1 | (128 if self.armed else 0) | (8 if self.mode == 15 else 0)
+        self.conn.mav.heartbeat_send(10, 3, base, self.mode, 4)
+
+    def _handle(self, msg: Any) -> bool:
+        """True when the message is a setpoint (it answers the tick)."""
+        kind = msg.get_type()
+        if kind == "SET_POSITION_TARGET_LOCAL_NED":
+            self.setpoints.append(msg)
+            return True
+        if kind == "COMMAND_LONG":
+            self.commands.append(msg)
+            if msg.command == 511:
+                self.streaming = True
+            elif msg.command == 176:
+                self.mode = int(msg.param2)
+            elif msg.command == 400:
+                self.armed = msg.param1 == 1.0
+            self.conn.mav.command_ack_send(msg.command, 0)
+            self._heartbeat()
+        return False
+
+    def _pump(self, timeout: float) -> bool:
+        deadline, answered = time.monotonic() + timeout, False
+        while not answered and (left := deadline - time.monotonic()) > 0:
+            msg = self.conn.recv_match(blocking=True, timeout=min(left, 0.005))
+            if msg is not None:
+                answered = self._handle(msg) or answered
+        return answered
+
+    def _run(self) -> None:
+        ms, k, next_hb = self.start_ms, 0, 0.0
+        while not self._stop.is_set():
+            if time.monotonic() >= next_hb:
+                self._heartbeat()
+                next_hb = time.monotonic() + 0.1
+            if not self.streaming:
+                self._pump(0.02)
+                continue
+            tick = {"x": 0.0, "y": 0.0, "vx": 0.0, "yaw": 0.0, "ms": ms, "sysid": 1}
+            if self.script is not None:
+                tick.update(self.script(k, ms) or {})
+            if tick.get("restart"):
+                ms = tick["ms"]
+                tick["ms"] = ms
+                self.mode, self.armed = 0, False
+            mav = self.conn.mav
+            mav.srcSystem = tick["sysid"]
+            mav.attitude_send(tick["ms"], 0.0, 0.0, tick["yaw"], 0.0, 0.0, 0.0)
+            mav.local_position_ned_send(tick["ms"], tick["x"], tick["y"], 0.0, tick["vx"],
+                                        0.0, 0.0)
+            mav.srcSystem = 1
+            self.sent_ms.append((tick["ms"], tick.get("note", "")))
+            self._pump(self.tick_timeout)
+            ms += self.step_ms
+            k += 1
+
+    def answered(self, ms: int) -> int:
+        return sum(1 for sp in self.setpoints if sp.time_boot_ms == ms)
+
+
+def finite_setpoint(sp: Any) -> bool:
+    return all(math.isfinite(v) for v in (sp.vx, sp.vy, sp.yaw_rate))
