@@ -347,9 +347,9 @@ class Runner:
         cfg, link = self.config, self.link
         if self.px4 and (self._warm_t0 is None or self._last_vt - self._warm_t0 < cfg.offboard_warmup):
             return   # PX4 refuses OFFBOARD until setpoints have streamed for a while
-        mode_ok = link.mode == self.track_mode or (
-            self._mode_acked and self._mode_request == self.track_mode)
-        if not mode_ok:
+        # Only a heartbeat that arrived since engaging began counts: after an outage the last
+        # one still says GUIDED while the vehicle sits in the HOLD we sent it.
+        if not self._mode_seen:
             if now - self._engage_since > cfg.mode_timeout:
                 self._finish(f"failsafe: the vehicle did not enter {self.track_mode} within "
                              f"{cfg.mode_timeout:g} s", 3)
@@ -388,6 +388,11 @@ class Runner:
         self.log(f"stopped: {reason}")
 
     def _override(self, why: str) -> None:
+        if self.telemetry.backwards_streak:
+            # Its clock went back too: not a pilot but a reboot (back in its boot mode).
+            self._finish("failsafe: the vehicle restarted (time_boot_ms went back); not "
+                         "resuming a mission on a rebooted vehicle", 3)
+            return
         self._emit(ev.PILOT_OVERRIDE, why)
         self._finish(f"pilot_override: {why}", 3, hold=False)
 
@@ -408,10 +413,14 @@ class Runner:
                 link.wait(min(0.05, deadline - now))
                 continue
             kind = msg.get_type()
+            if kind == "ATTITUDE":
+                self.telemetry.attitude(msg)
             if not link.is_vehicle(msg):
                 continue
             if kind == "LOCAL_POSITION_NED":
-                link.send_stop(msg.time_boot_ms)
+                sample = self.telemetry.position(msg)   # bad ones get no answer, even now
+                if sample is not None:
+                    link.send_stop(sample.time_boot_ms)
             elif kind == "HEARTBEAT" and link.mode == self.hold_mode:
                 self._hold_confirmed = True
             elif kind == "COMMAND_ACK":

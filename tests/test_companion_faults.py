@@ -1,0 +1,151 @@
+"""The companion stops the rover itself: stale telemetry, SIGTERM, bad telemetry, a rebooted
+vehicle, a controller output that is not finite. Real processes, real UDP on loopback."""
+
+from __future__ import annotations
+
+import math
+import os
+import signal
+import time
+
+from companion_harness import (Companion, FakeVehicle, Proxy, ellipse_mission, finite_setpoint,
+                               is_mode_command, is_zero)
+from sitl_plant.testing import PlantProcess, free_udp_port
+
+HOLD, GUIDED = 4, 15
+
+
+def _tracking(proxy: Proxy) -> bool:
+    return sum(1 for s in proxy.companion_sent("SET_POSITION_TARGET_LOCAL_NED")
+               if not is_zero(s.msg)) >= 20
+
+
+def test_stale_telemetry_stops_the_rover_then_resumes(tmp_path):
+    """SIGSTOP the plant mid-mission: within 0.6 s of the last telemetry the companion sends a
+    zero setpoint and HOLD; after SIGCONT it re-engages GUIDED and finishes the mission."""
+    mission = ellipse_mission(tmp_path / "m.toml", 8.0)
+    with Proxy() as proxy, \
+            PlantProcess("--speedup", "2", "--d-cen", "0.3", port=proxy.plant_port) as plant, \
+            Companion(proxy.companion_port, "--arm", "--json", "--mission", str(mission)) as comp:
+        proxy.wait_for(lambda: _tracking(proxy), 20.0)
+        os.kill(plant.proc.pid, signal.SIGSTOP)
+        try:
+            time.sleep(1.5)
+            last = proxy.plant_sent("LOCAL_POSITION_NED")[-1]
+            last_tel = last.wall
+            # what went out after the last sample, except the answer to that sample itself
+            after = [s for s in proxy.companion_sent("SET_POSITION_TARGET_LOCAL_NED",
+                                                     after=last_tel)
+                     if s.msg.time_boot_ms != last.msg.time_boot_ms]
+            assert after, "no setpoint after telemetry stopped"
+            first = after[0]
+            assert is_zero(first.msg), "the first setpoint after the silence must be zero"
+            assert first.wall - last_tel <= 0.6, first.wall - last_tel
+            assert all(is_zero(s.msg) for s in after)
+            holds = [s for s in proxy.companion_sent("COMMAND_LONG", after=last_tel)
+                     if is_mode_command(s.msg, HOLD)]
+            assert holds and holds[0].wall >= first.wall
+        finally:
+            os.kill(plant.proc.pid, signal.SIGCONT)
+        resumed_at = time.monotonic()
+        assert comp.wait(60.0) == 0, comp.stderr
+        r = comp.result()
+    assert r["reason"] == "mission_done" and r["failsafes"] == 1
+    assert r["duration_s"] >= 8.0 - 1e-6
+    guided = [s for s in proxy.companion_sent("COMMAND_LONG", after=resumed_at)
+              if is_mode_command(s.msg, GUIDED)]
+    assert guided, "did not ask for GUIDED again"
+    moving = [s for s in proxy.companion_sent("SET_POSITION_TARGET_LOCAL_NED", after=resumed_at)
+              if not is_zero(s.msg)]
+    assert len(moving) > 20 and moving[0].wall >= guided[0].wall
+    assert "filter and integrators reset" in comp.stderr
+
+
+def test_sigterm_stops_the_rover_holds_and_exits_0(tmp_path):
+    with Proxy() as proxy, \
+            PlantProcess("--speedup", "2", "--d-cen", "0.3", port=proxy.plant_port) as plant, \
+            Companion(proxy.companion_port, "--arm", "--json", "--mission",
+                      "missions/paper_ellipse_012.toml") as comp:
+        proxy.wait_for(lambda: _tracking(proxy), 20.0)
+        t_term = time.monotonic()
+        comp.proc.send_signal(signal.SIGTERM)
+        assert comp.wait(10.0) == 0, comp.stderr
+        r = comp.result()
+        time.sleep(1.2)    # a plant heartbeat (1 Hz) after the companion left
+        heartbeats = proxy.plant_sent("HEARTBEAT", after=time.monotonic() - 1.1)
+    assert r["reason"] == "SIGTERM" and r["exit_code"] == 0 and r["hold_confirmed"]
+    sps = proxy.companion_sent("SET_POSITION_TARGET_LOCAL_NED")
+    last_moving = max(i for i, s in enumerate(sps) if not is_zero(s.msg))
+    assert last_moving < len(sps) - 1 and is_zero(sps[-1].msg)
+    holds = [s for s in proxy.companion_sent("COMMAND_LONG", after=t_term)
+             if is_mode_command(s.msg, HOLD)]
+    assert holds and holds[0].wall >= sps[last_moving + 1].wall
+    assert heartbeats and heartbeats[-1].msg.custom_mode == HOLD
+
+
+def _bad_telemetry(k: int, ms: int):
+    """Tick script for the fake vehicle: bad samples once tracking has started (tick 60+)."""
+    script = {
+        60: {"x": math.nan, "note": "nan x"},
+        64: {"vx": math.inf, "note": "inf vx"},
+        68: {"yaw": math.nan, "note": "nan yaw"},
+        72: {"sysid": 2, "ms": ms + 1, "note": "other system"},
+        76: {"ms": ms - 40, "note": "backwards"},      # before the previous tick, off its grid
+        80: {"ms": ms - 25, "note": "duplicate"},
+    }
+    return script.get(k)
+
+
+def test_bad_telemetry_never_produces_a_setpoint(tmp_path):
+    mission = ellipse_mission(tmp_path / "m.toml", 4.0)
+    port = free_udp_port()
+    with Companion(port, "--arm", "--json", "--mission", str(mission)) as comp, \
+            FakeVehicle(port, script=_bad_telemetry) as fake:
+        assert comp.wait(30.0) == 0, comp.stderr
+        r = comp.result()
+    bad = {ms: note for ms, note in fake.sent_ms if note and note != "duplicate"}
+    assert len(bad) == 5
+    for ms, note in bad.items():
+        assert fake.answered(ms) == 0, f"a setpoint answered the {note} sample"
+    dup = next(ms for ms, note in fake.sent_ms if note == "duplicate")
+    assert fake.answered(dup) == 1    # the original sample only
+    assert all(finite_setpoint(sp) for sp in fake.setpoints)
+    rej = r["telemetry_rejected"]
+    assert rej["not_finite"] == 3 and rej["no_attitude"] == 1   # NaN yaw: its position too
+    assert rej["other_source"] == 2                              # its ATTITUDE and position
+    assert rej["time_backwards"] == 1 and rej["duplicate"] == 1
+    assert r["reason"] == "mission_done" and r["failsafes"] == 0
+
+
+def test_a_rebooted_vehicle_is_stopped_not_resumed(tmp_path):
+    mission = ellipse_mission(tmp_path / "m.toml", 30.0)
+
+    def reboot(k, ms):
+        return {"restart": True, "ms": 40} if k == 80 else None
+
+    port = free_udp_port()
+    with Companion(port, "--arm", "--json", "--mission", str(mission)) as comp, \
+            FakeVehicle(port, script=reboot) as fake:
+        assert comp.wait(30.0) == 3, comp.stderr
+        r = comp.result()
+    assert "restarted" in r["reason"]
+    assert not any(0 < sp.time_boot_ms < 100_000 for sp in fake.setpoints)
+    assert is_zero(fake.setpoints[-1])
+    assert any(is_mode_command(c, HOLD) for c in fake.commands)
+    assert r["telemetry_rejected"]["time_backwards"] >= 3
+
+
+def test_a_non_finite_command_is_never_sent(tmp_path):
+    """Absurd (but finite) gains make the law's output NaN on the first tracking cycle
+    (K_I = k_dc lambda_c overflows to inf, inf * 0 = NaN): the rover is stopped instead."""
+    mission = ellipse_mission(tmp_path / "m.toml", 30.0)
+    port = free_udp_port()
+    with Companion(port, "--arm", "--json", "--mission", str(mission),
+                   "--k-dc", "1e200", "--lambda-c", "1e200") as comp, \
+            FakeVehicle(port) as fake:
+        assert comp.wait(30.0) == 3, comp.stderr
+        r = comp.result()
+    assert "not finite" in r["reason"] and r["cycles"] == 0
+    assert fake.setpoints and all(finite_setpoint(sp) for sp in fake.setpoints)
+    assert all(is_zero(sp) for sp in fake.setpoints)
+    assert any(is_mode_command(c, HOLD) for c in fake.commands)
