@@ -155,6 +155,8 @@ def fly(s: RunSettings, sinks: Sequence[Sink] = (), control: ControlChannel | No
     from .pzc import PZCTracker
 
     wall0 = time.perf_counter()
+    if s.gains_file is not None:
+        gains_mod.load(s.gains_file)     # a bad file is a user error before anything connects
     rate = requested_rate(s)
     limits = choose_limits(s)
     link = Link(s.link)

@@ -51,7 +51,7 @@ class LatencyHistogram:
         for i, c in enumerate(self.counts):
             seen += c
             if seen >= rank:
-                return min((i + 1) * 1e-6, self.max_s)
+                return self.max_s if i == _BINS else min((i + 1) * 1e-6, self.max_s)
         return self.max_s
 
 
