@@ -202,6 +202,6 @@ def fly(s: RunSettings, sinks: Sequence[Sink] = (), control: ControlChannel | No
         limits={"max_speed": _finite_or_none(limits.max_speed),
                 "max_yaw_rate": _finite_or_none(limits.max_yaw_rate)},
         failsafes=outcome.failsafes, hold_confirmed=outcome.hold_confirmed,
-        mission=s.mission.name,
+        mission=runner.mission.name,
         extra={"missed_gaps": st.gaps, "backlog": st.backlog,
                "sink_errors": runner.sink_errors})
