@@ -116,6 +116,8 @@ class Runner:
         self._hold_confirmed = False
         self.failsafes = 0
         self.sink_errors = 0
+        self._next_refusal_log = 0.0
+        self._refusals_logged: dict[str, int] = {}
         self.outcome: Outcome | None = None
 
     # --- public -----------------------------------------------------------------------------
@@ -179,6 +181,8 @@ class Runner:
     def _on_position(self, msg: Any, t_read: float) -> None:
         s = self.telemetry.position(msg)
         if s is None:
+            if t_read >= self._next_refusal_log:
+                self._log_refusals(t_read)
             return
         self._last_sample_wall = t_read
         self._last_vt = s.t
@@ -197,6 +201,14 @@ class Runner:
                     self._warm_t0 = s.t
                 self._engage(t_read)
         self._waited = False
+
+    def _log_refusals(self, now: float) -> None:
+        """At most one line a second: how many samples were refused, and why."""
+        self._next_refusal_log = now + 1.0
+        counts = _nonzero(self.telemetry.rejected)
+        if counts != self._refusals_logged:
+            self._refusals_logged = counts
+            self.log(f"refused telemetry so far (never used): {counts}")
 
     def _track(self, s, t_read: float) -> None:
         if self._segment_t0 is None:
@@ -293,8 +305,9 @@ class Runner:
                 t = self.telemetry
                 detail = (f" ({t.received} LOCAL_POSITION_NED refused: "
                           f"{_nonzero(t.rejected)})" if t.received else "")
-                raise UserError(f"no valid pose telemetry within {cfg.telemetry_timeout:g} s"
-                                f"{detail}")
+                # Nothing moved yet: a user's problem (wrong port, sysid, stream), exit 2.
+                self._finish(f"no valid pose telemetry within {cfg.telemetry_timeout:g} s"
+                             f"{detail}", 2, hold=False)
         elif state is State.FAILSAFE:
             if self.telemetry.backwards_streak >= 3:
                 self._finish("failsafe: the vehicle restarted (time_boot_ms went back); "

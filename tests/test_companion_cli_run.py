@@ -79,3 +79,12 @@ def test_sigterm_while_waiting_for_a_vehicle_exits_at_once():
         if proc.poll() is None:
             proc.kill()
             proc.communicate()
+
+
+def test_no_pose_telemetry_is_a_clear_error():
+    """A vehicle whose pose messages never arrive (dropout 1): exit 2, one line."""
+    from sitl_plant.testing import PlantProcess
+    with PlantProcess("--dropout", "1") as plant:
+        p = companion("run", "--connect", f"udpin:127.0.0.1:{plant.port}", "--mission",
+                      "missions/circle.toml", "--telemetry-timeout", "1")
+    one_line_error(p, "run", "no valid pose telemetry within 1 s")

@@ -139,6 +139,8 @@ def run(args) -> int:
         plant_code = _stop(plant)
         plant_log.close()
 
+    if result.exit_code == 2:
+        raise UserError(result.reason)
     extra = {"plant": " ".join(argv[2:]), "plant_exit": plant_code, "preset": args.preset,
              "d_cen": args.d_cen}
     if args.plot and trace.log["t"]:

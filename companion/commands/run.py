@@ -189,7 +189,7 @@ def run(args) -> int:
                      switch=switch)
     finally:
         restore()
-    print_result(result, args.json)
     if result.exit_code == 2:
         raise UserError(result.reason)
+    print_result(result, args.json)
     return result.exit_code
