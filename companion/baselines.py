@@ -65,8 +65,9 @@ class PIDTracker:
         int_yaw = self.int_yaw + eyaw * dt
         yaw_rate = g.kp * eyaw + g.ki * int_yaw + g.kd * (yaw_ref_rate - meas.yaw_rate)
 
-        speed = speed_from_up(m, g.speed_law, ux, uy, meas.yaw)
-        cmd, speed_free, rate_free = clamp(m, self.limits, speed, yaw_rate, ux, uy)
+        norm_up = m.hypot(ux, uy)
+        speed = speed_from_up(m, g.speed_law, norm_up, eyaw)
+        cmd, speed_free, rate_free = clamp(m, self.limits, speed, yaw_rate, ux, uy, norm_up)
         self.int_x = m.where(speed_free, int_x, self.int_x)
         self.int_y = m.where(speed_free, int_y, self.int_y)
         self.int_yaw = m.where(rate_free, int_yaw, self.int_yaw)
@@ -104,5 +105,5 @@ class KanayamaTracker:
         speed = v_r * m.cos(eth) + g.kx * ex
         yaw_rate = reference_heading_rate(ref, m) + v_r * (g.ky * ey + g.kth * m.sin(eth))
         # u_p: the commanded velocity vector, for a velocity-vector autopilot.
-        cmd, _, _ = clamp(m, self.limits, speed, yaw_rate, speed * c, speed * s)
+        cmd, _, _ = clamp(m, self.limits, speed, yaw_rate, speed * c, speed * s, abs(speed))
         return cmd

@@ -28,17 +28,19 @@ class Limits:
                 raise ValueError(f"{name} must be > 0, not {value!r}")
 
 
-def speed_from_up(m, speed_law: str, ux: Num, uy: Num, yaw: Num) -> Num:
+def speed_from_up(m, speed_law: str, norm_up: Num, heading_error: Num) -> Num:
     """v_ref from u_p: the paper's |u_p| (eq. 20) or its projection on the heading (default).
 
-    See :mod:`companion.pzc` for why the projection is the default.
+    ``norm_up`` is |u_p| and ``heading_error`` is phi_ref - phi with phi_ref = atan2(u_y, u_x), so
+    the projection u_x cos(phi) + u_y sin(phi) equals |u_p| cos(heading_error): one cosine instead
+    of two trig calls. See :mod:`companion.pzc` for why the projection is the default.
     """
     if speed_law == "paper":
-        return m.hypot(ux, uy)
-    return ux * m.cos(yaw) + uy * m.sin(yaw)
+        return norm_up
+    return norm_up * m.cos(heading_error)
 
 
-def clamp(m, lim: Limits, speed: Num, yaw_rate: Num, ux: Num, uy: Num):
+def clamp(m, lim: Limits, speed: Num, yaw_rate: Num, ux: Num, uy: Num, norm_up: Num):
     """Clamp a raw command to the limits.
 
     Returns ``(command, speed_free, rate_free)``; the two flags are False where a clamp bit, and
@@ -49,5 +51,5 @@ def clamp(m, lim: Limits, speed: Num, yaw_rate: Num, ux: Num, uy: Num):
     speed = m.clip(speed, -lim.max_speed, lim.max_speed)
     yaw_rate = m.clip(yaw_rate, -lim.max_yaw_rate, lim.max_yaw_rate)
     # u_p for a velocity-vector autopilot (PX4) obeys the same speed limit.
-    scale = m.minimum(1.0, lim.max_speed / m.maximum(m.hypot(ux, uy), 1e-12))
+    scale = m.minimum(1.0, lim.max_speed / m.maximum(norm_up, 1e-12))
     return Command(speed, yaw_rate, ux * scale, uy * scale), speed_free, rate_free

@@ -8,8 +8,15 @@
 
 ``d_cen`` is the paper's distance between the centre of mass (the tracked point p) and the wheel
 axle; ``w_c`` the paper's actuator bandwidth omega_c (k_c). The commands are clamped to the
-vehicle's top speed and turn rate. Integration is classic RK4 with the commands held over the
-step. Works on floats (one rover, e.g. the bundled MAVLink plant) or arrays (batch simulation).
+vehicle's top speed and turn rate and held over each step. Works on floats (one rover, e.g. the
+bundled MAVLink plant) or arrays (batch simulation).
+
+Integration. Without an acceleration limit the actuators are linear first-order systems with a
+held input, so v, omega and phi have exact closed forms over a step, and x, y are the integrals of
+known functions of time, taken with Simpson's rule: this *is* RK4 for a right-hand side that
+depends on time only, with v, omega, phi exact instead of approximated, and it needs the heading's
+sine and cosine at two points per step (mid and end; the start is the previous end) instead of
+four. With an acceleration limit (a non-smooth clip) classic RK4 on all five states is used.
 """
 
 from __future__ import annotations
@@ -71,11 +78,23 @@ class RoverModel:
         self.n = n
         self._m = _ops.for_size(n)
         self._accel_limited = math.isfinite(params.max_accel)
+        self._trig_yaw = None
+        self._trig_cs = None
+        self._decay_h = None
+
+    def _trig(self, yaw):
+        """cos and sin of a heading; the last step's end heading is remembered, so the next step and
+        ``measure`` reuse it (trig dominates the cost of a batch step)."""
+        if yaw is self._trig_yaw:
+            return self._trig_cs
+        cs = (self._m.cos(yaw), self._m.sin(yaw))
+        self._trig_yaw, self._trig_cs = yaw, cs
+        return cs
 
     def velocity(self, s: RoverState) -> tuple[Num, Num]:
         """Eq. (1): the tracked point's velocity (what LOCAL_POSITION_NED reports as vx, vy)."""
-        m, d = self._m, self.params.d_cen
-        c, sn = m.cos(s.yaw), m.sin(s.yaw)
+        d = self.params.d_cen
+        c, sn = self._trig(s.yaw)
         return s.v * c - d * s.omega * sn, s.v * sn + d * s.omega * c
 
     def measure(self, s: RoverState) -> Measurement:
@@ -97,8 +116,41 @@ class RoverModel:
                 m.clip(yaw_rate, -p.max_yaw_rate, p.max_yaw_rate))
 
     def step(self, s: RoverState, speed_cmd: Num, yaw_rate_cmd: Num, dt: float) -> RoverState:
-        """Advance ``dt`` seconds with the commands (v_ref, omega_ref) held (RK4)."""
+        """Advance ``dt`` seconds with the commands (v_ref, omega_ref) held."""
         u, w = self.clamp_command(speed_cmd, yaw_rate_cmd)
+        if self._accel_limited:
+            return self._step_rk4(s, u, w, dt)
+        return self._step_exact(s, u, w, dt)
+
+    def _decays(self, h: float):
+        """e^{-w_c h/2}, e^{-w_c h} and the yaw-loop equivalents, cached for the step size."""
+        if self._decay_h != h:
+            m, a, b = self._m, self.params.w_c, self.params.yaw_bandwidth
+            self._decay = (m.exp(-a * 0.5 * h), m.exp(-a * h), m.exp(-b * 0.5 * h), m.exp(-b * h))
+            self._decay_h = h
+        return self._decay
+
+    def _step_exact(self, s: RoverState, u: Num, w: Num, h: float) -> RoverState:
+        p = self.params
+        ea_half, ea, eb_half, eb = self._decays(h)
+        b = p.yaw_bandwidth
+        dv, dw = s.v - u, s.omega - w               # actuator errors decay as e^{-w_c t}
+        v_mid, v_end = u + dv * ea_half, u + dv * ea
+        w_mid, w_end = w + dw * eb_half, w + dw * eb
+        # phi(t) = phi0 + w t + (omega0 - w)(1 - e^{-b t}) / b
+        yaw_mid = s.yaw + w * (0.5 * h) + dw * ((1.0 - eb_half) / b)
+        yaw_end = s.yaw + w * h + dw * ((1.0 - eb) / b)
+        c0, s0 = self._trig(s.yaw)
+        c1, s1 = self._m.cos(yaw_mid), self._m.sin(yaw_mid)
+        c2, s2 = self._trig(yaw_end)
+        d = p.d_cen
+        lat0, lat1, lat2 = d * s.omega, d * w_mid, d * w_end
+        h6 = h / 6.0
+        x = s.x + h6 * ((s.v * c0 - lat0 * s0) + 4.0 * (v_mid * c1 - lat1 * s1) + (v_end * c2 - lat2 * s2))
+        y = s.y + h6 * ((s.v * s0 + lat0 * c0) + 4.0 * (v_mid * s1 + lat1 * c1) + (v_end * s2 + lat2 * c2))
+        return RoverState(x, y, yaw_end, v_end, w_end)
+
+    def _step_rk4(self, s: RoverState, u: Num, w: Num, dt: float) -> RoverState:
         h2, h6 = 0.5 * dt, dt / 6.0
         d = self._deriv
         k1 = d(s.yaw, s.v, s.omega, u, w)

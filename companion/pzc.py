@@ -132,8 +132,9 @@ class PZCLaw:
         if g.heading_rate_ff is not False:
             yaw_rate = yaw_rate + g.heading_rate_ff * reference_heading_rate(ref, m)
 
-        speed = speed_from_up(m, g.speed_law, ux, uy, est.yaw)
-        cmd, speed_free, rate_free = clamp(m, lim, speed, yaw_rate, ux, uy)
+        norm_up = m.hypot(ux, uy)
+        speed = speed_from_up(m, g.speed_law, norm_up, eyaw)
+        cmd, speed_free, rate_free = clamp(m, lim, speed, yaw_rate, ux, uy, norm_up)
         # Conditional integration: keep the new integrator state only while unsaturated.
         self.int_x = m.where(speed_free, int_x, self.int_x)
         self.int_y = m.where(speed_free, int_y, self.int_y)

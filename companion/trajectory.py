@@ -47,10 +47,24 @@ class Ellipse:
     def paper(cls, f_r: Num = 0.12, duration: float | None = None) -> "Ellipse":
         return cls(f_r=f_r, duration=duration)
 
+    def __post_init__(self):
+        # Many vehicles usually share a few frequencies: take cos/sin once per distinct one.
+        if isinstance(self.f_r, np.ndarray):
+            freqs, index = np.unique(self.f_r, return_inverse=True)
+            object.__setattr__(self, "_unique", (2.0 * math.pi * freqs, index))
+
+    def _cos_sin(self, t: float):
+        unique = getattr(self, "_unique", None)
+        if unique is not None:
+            w, index = unique
+            return np.cos(w * t)[index], np.sin(w * t)[index]
+        m = _ops_for(self.ax, self.bx, self.ay, self.by)
+        wt = 2.0 * math.pi * self.f_r * t
+        return m.cos(wt), m.sin(wt)
+
     def sample(self, t: float) -> Reference:
-        m = _ops_for(self.f_r, self.ax, self.bx, self.ay, self.by)
         w = 2.0 * math.pi * self.f_r
-        c, s = m.cos(w * t), m.sin(w * t)
+        c, s = self._cos_sin(t)
         xc, xs = self.ax * c, self.bx * s   # x = xc + xs
         yc, ys = self.ay * c, self.by * s
         w2 = w * w
