@@ -12,8 +12,11 @@ arm, and encode the tracker's command as SET_POSITION_TARGET_LOCAL_NED:
 Each setpoint carries the ``time_boot_ms`` of the telemetry sample it answers (ArduPilot and PX4
 ignore the field), so a log or a test can pair every setpoint with its sample.
 
-Hooks for later: ``LinkConfig.signing_key`` turns on MAVLink 2 signing and ``LinkConfig.tlog``
-records a .tlog, both through pymavlink's own support.
+``LinkConfig.signing_key`` turns on MAVLink 2 signing (:mod:`companion.signing`: outgoing
+signed, unsigned / wrong-key / replayed input refused and counted) and ``LinkConfig.tlog``
+records a .tlog of both directions (:mod:`companion.flightlog`), both through pymavlink's own
+support. A UDP socket gets a receive buffer of ``RECV_BUFFER`` bytes (the kernel's default holds
+about 256 small datagrams, and a burst beyond it is dropped silently).
 """
 
 from __future__ import annotations
@@ -21,11 +24,12 @@ from __future__ import annotations
 import os
 import time
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, Callable
 
 os.environ["MAVLINK20"] = "1"   # before pymavlink.mavutil is imported: MAVLink 2 frames
 from pymavlink import mavutil  # noqa: E402
 
+from . import signing  # noqa: E402
 from .errors import UserError  # noqa: E402
 from .signals import Command  # noqa: E402
 
@@ -42,6 +46,7 @@ MASK_SPEED_YAW_RATE = 1511   # 0x05E7: ignore position, vz, acceleration, yaw
 MASK_VELOCITY = 3559         # 0x0DE7: ignore position, vz, acceleration, yaw, yaw rate
 ACCEPTED = mavlink.MAV_RESULT_ACCEPTED
 # Rates to fall back to, fastest first, when the vehicle refuses the one asked for.
+RECV_BUFFER = 4 << 20   # bytes asked for (Linux caps it at net.core.rmem_max, then doubles it)
 FALLBACK_RATES = (1000.0, 800.0, 500.0, 400.0, 250.0, 200.0, 100.0, 50.0, 40.0, 25.0, 20.0,
                   10.0, 5.0, 2.0, 1.0)
 
@@ -78,10 +83,17 @@ class Link:
         except Exception as exc:   # pymavlink raises anything from ValueError to OSError
             raise UserError(f"cannot open {config.url!r}: {exc}") from None
         self.mav = self.master.mav
+        self.recv_buffer = size_receive_buffer(self.master)
         if config.signing_key is not None:
-            self.master.setup_signing(config.signing_key, sign_outgoing=True)
+            signing.enable(self.master, config.signing_key)
+        self.tlog = None
+        # Called before every sleep of the loop: the flight logs flush there (crash safety).
+        self.on_idle: list[Callable[[], None]] = []
         if config.tlog is not None:
-            self.master.setup_logfile(config.tlog)
+            from .flightlog import open_tlog
+            self.tlog = open_tlog(config.tlog)
+            self.tlog.attach(self.master)
+            self.on_idle.append(self.tlog.idle)
         self.vehicle: VehicleInfo | None = None
         self._mask = MASK_SPEED_YAW_RATE
         self._frame = mavlink.MAV_FRAME_BODY_NED
@@ -94,6 +106,13 @@ class Link:
             self.master.close()
         except OSError:
             pass
+        if self.tlog is not None:
+            self.tlog.close()
+
+    @property
+    def signing_rejected(self) -> int:
+        """Incoming frames refused for their signature (0 without signing)."""
+        return signing.rejected(self.master) if self.config.signing_key is not None else 0
 
     # --- receiving ----------------------------------------------------------------------------
     def recv(self) -> Any | None:
@@ -105,6 +124,8 @@ class Link:
 
     def wait(self, timeout: float) -> None:
         """Sleep until data arrives or ``timeout`` seconds pass (pymavlink's select)."""
+        for hook in self.on_idle:
+            hook()
         if timeout > 0:
             self.master.select(timeout)
 
@@ -238,3 +259,16 @@ class Link:
 
 
 STOP = Command(0.0, 0.0, 0.0, 0.0)
+
+
+def size_receive_buffer(conn: Any, size: int = RECV_BUFFER) -> int | None:
+    """Ask for a ``size``-byte receive buffer on a UDP connection; the size granted, or None."""
+    import socket
+    sock = getattr(conn, "port", None)
+    if not isinstance(sock, socket.socket) or sock.type != socket.SOCK_DGRAM:
+        return None
+    try:
+        sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, size)
+        return sock.getsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF)
+    except OSError:
+        return None

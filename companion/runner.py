@@ -12,11 +12,18 @@ measures silence (stale telemetry), latency and retry intervals.
                                           \\-> READY (no autostart) --start--> TRACKING
     TRACKING <--pause/resume--> PAUSED
     any active state --no valid sample for stale_timeout--> FAILSAFE (zero setpoint, HOLD)
-    FAILSAFE --valid sample--> ENGAGING (tracker.reset(), back to GUIDED) --> previous state
+    any active state --no vehicle heartbeat for heartbeat_lost--> FAILSAFE (same)
+    FAILSAFE --valid sample and a fresh heartbeat--> ENGAGING (tracker.reset(), back to GUIDED)
+             --> previous state
+    READY / TRACKING / PAUSED --the vehicle leaves GUIDED / OFFBOARD (a pilot)--> DONE at once:
+             no further setpoint, no mode request (never fight the pilot), PILOT_OVERRIDE event
 
 It stops the rover itself (zero setpoint, then HOLD) at the mission's end, on a stop request
 (SIGTERM / Ctrl-C via :meth:`Runner.request_stop`), on ``abort``, and when it gives up. Every
 command is checked right before encoding: a non-finite or out-of-limit one stops the rover.
+A gap of more than ``max_gap`` vehicle seconds between two tracked samples (a long dropout, a
+burst after a stall) starts a new segment with the filter and integrators reset, so no step
+integrates a huge dt; time going back never reaches the tracker (:mod:`companion.telemetry`).
 Sinks get a LoopRecord per tracking cycle and a StatusEvent per life-cycle change; a
 ControlChannel, if given, is polled once per cycle.
 """
@@ -72,6 +79,8 @@ class RunnerConfig:
     offboard_warmup: float = 1.2      # vehicle s of setpoints before asking PX4 for OFFBOARD
     hold_timeout: float = 2.0         # wall s to see HOLD confirmed when stopping
     period: float | None = None       # nominal telemetry period, for missed-cycle counts
+    heartbeat_lost: float = 3.0       # wall s without a vehicle heartbeat -> failsafe
+    max_gap: float = 0.5              # vehicle s between tracked samples -> reset the tracker
 
 
 @dataclass
@@ -103,7 +112,12 @@ class Runner:
         self._stop_reason: str | None = None
         self._waited = True               # idle since the last position sample was handled
         self._last_sample_wall = 0.0
+        self._last_heartbeat_wall = 0.0
+        self._heartbeat_lost_said = False
         self._last_vt = 0.0
+        # A gap this long between tracked samples resets the tracker (at least 5 periods).
+        self._max_gap = max(config.max_gap, 5.0 * (config.period or 0.0))
+        self.tracker_resets = 0
         self._after_engage = State.TRACKING if config.autostart else State.READY
         self._mode_request: str | None = None
         self._mode_acked = False
@@ -129,7 +143,7 @@ class Runner:
     def run(self) -> Outcome:
         link, clock = self.link, time.perf_counter
         now = clock()
-        self._started = self._last_sample_wall = now
+        self._started = self._last_sample_wall = self._last_heartbeat_wall = now
         self._next_timer = now
         self._next_heartbeat = now
         v = link.vehicle
@@ -198,12 +212,14 @@ class Runner:
                 self._log_refusals(t_read)
             return
         self._last_sample_wall = t_read
-        self._last_vt = s.t
+        prev_vt, self._last_vt = self._last_vt, s.t
         state = self.state
         if state is State.TRACKING:
+            if self._segment_t0 is not None and s.t - prev_vt > self._max_gap:
+                self._new_segment(s.t - prev_vt)
             self._track(s, t_read)
         else:
-            if state is State.FAILSAFE:
+            if state is State.FAILSAFE and self._heartbeat_fresh(t_read):
                 self._recover()
             elif state is State.WAITING:
                 self.log(f"telemetry flowing; engaging {self.track_mode}")
@@ -214,6 +230,16 @@ class Runner:
                     self._warm_t0 = s.t
                 self._engage(t_read)
         self._waited = False
+
+    def _heartbeat_fresh(self, now: float) -> bool:
+        return now - self._last_heartbeat_wall <= self.config.heartbeat_lost
+
+    def _new_segment(self, gap: float) -> None:
+        """Samples resume after a gap: forget the filter and integrators (no huge-dt step)."""
+        self.tracker.reset()
+        self.tracker_resets += 1
+        self._segment_t0 = None
+        self.log(f"{gap:.3f} s of vehicle time without a sample: filter and integrators reset")
 
     def _log_refusals(self, now: float) -> None:
         """At most one line a second: how many samples were refused, and why."""
@@ -278,6 +304,10 @@ class Runner:
     def _on_heartbeat(self, msg: Any) -> None:
         if not self.link.is_vehicle(msg):
             return
+        self._last_heartbeat_wall = time.perf_counter()
+        if self._heartbeat_lost_said:
+            self._heartbeat_lost_said = False
+            self.log("vehicle heartbeat back")
         mode, armed = self.link.mode, self.link.armed
         state = self.state
         if state in ACTIVE and mode == self.track_mode:
@@ -322,6 +352,9 @@ class Runner:
                 self._finish(f"no valid pose telemetry within {cfg.telemetry_timeout:g} s"
                              f"{detail}", 2, hold=False)
         elif state is State.FAILSAFE:
+            if not self._heartbeat_fresh(now) and not self._heartbeat_lost_said:
+                self._heartbeat_lost_said = True
+                self.log(f"no vehicle heartbeat for {cfg.heartbeat_lost:g} s")
             if self.telemetry.backwards_streak >= 3:
                 self._finish("failsafe: the vehicle restarted (time_boot_ms went back); "
                              "not resuming a mission on a rebooted vehicle", 3)
@@ -333,12 +366,17 @@ class Runner:
         elif state in ACTIVE:
             if now - self._last_sample_wall > cfg.stale_timeout:
                 self._failsafe(now)
+            elif not self._heartbeat_fresh(now):
+                self._heartbeat_lost_said = True
+                self._failsafe(now, f"heartbeat lost: none from the vehicle for "
+                                    f"{now - self._last_heartbeat_wall:.2f} s")
             elif state is State.ENGAGING:
                 self._engage(now)
 
-    def _failsafe(self, now: float) -> None:
-        gap = now - self._last_sample_wall
-        reason = f"telemetry stale: no valid sample for {gap:.2f} s"
+    def _failsafe(self, now: float, reason: str | None = None) -> None:
+        if reason is None:
+            gap = now - self._last_sample_wall
+            reason = f"telemetry stale: no valid sample for {gap:.2f} s"
         self.log(f"{reason}; stopping the rover (zero setpoint, {self.hold_mode})")
         self.link.send_stop()
         self._hold_confirmed = False
@@ -408,9 +446,11 @@ class Runner:
             self.log(f"{self.track_mode} and armed: ready, waiting for `start`")
 
     # --- stopping -----------------------------------------------------------------------------
-    def _finish(self, reason: str, code: int, time_boot_ms: int = 0, hold: bool = True) -> None:
+    def _finish(self, reason: str, code: int, time_boot_ms: int = 0, hold: bool = True,
+                stop: bool = True) -> None:
         """Stop the rover (zero setpoint, then HOLD) and end the loop."""
-        self.link.send_stop(time_boot_ms)
+        if stop:
+            self.link.send_stop(time_boot_ms)
         if hold:
             self._hold_confirmed = self._hold_confirmed and self.state is State.FAILSAFE
             self._request_mode(self.hold_mode, time.perf_counter())
@@ -425,8 +465,12 @@ class Runner:
             self._finish("failsafe: the vehicle restarted (time_boot_ms went back); not "
                          "resuming a mission on a rebooted vehicle", 3)
             return
+        # The pilot has the vehicle: not one more setpoint (not even a zero one), no mode
+        # request. Setpoints outside GUIDED / OFFBOARD are ignored anyway, but a companion
+        # that keeps talking to a vehicle someone else drives is one bug away from fighting.
+        self.log(f"pilot took over ({why}): no more setpoints")
         self._emit(ev.PILOT_OVERRIDE, why)
-        self._finish(f"pilot_override: {why}", 3, hold=False)
+        self._finish(f"pilot_override: {why}", 3, hold=False, stop=False)
 
     def _wait_for_hold(self) -> None:
         """Until HOLD shows (ACK or heartbeat), answer telemetry with zero setpoints."""
@@ -527,7 +571,7 @@ class Runner:
                 "mission_time": self.mission_time, "duration": self.mission.duration,
                 "mode": self.link.mode, "armed": self.link.armed, "cycles": self.stats.cycles,
                 "telemetry_received": t.received, "telemetry_rejected": dict(t.rejected),
-                "failsafes": self.failsafes}
+                "failsafes": self.failsafes, "signing_rejected": getattr(self.link, "signing_rejected", 0)}
 
     # --- sinks ------------------------------------------------------------------------------
     def _emit(self, kind: str, reason: str = "", detail: dict | None = None) -> None:

@@ -178,6 +178,8 @@ def fly(s: RunSettings, sinks: Sequence[Sink] = (), control: ControlChannel | No
         tracker = PZCTracker(choice.filter, choice.pzc, limits)
         config = replace(s.runner, period=1.0 / accepted if accepted else None)
         runner = Runner(link, tracker, s.mission, config, limits, sinks, control, log)
+        # Sinks that write files (the flight-log CSV) flush when the loop is about to sleep.
+        link.on_idle.extend(idle for sink in sinks if (idle := getattr(sink, "idle", None)))
         if switch is not None:
             switch.runner = runner
             if switch.reason is not None:
@@ -204,4 +206,5 @@ def fly(s: RunSettings, sinks: Sequence[Sink] = (), control: ControlChannel | No
         failsafes=outcome.failsafes, hold_confirmed=outcome.hold_confirmed,
         mission=runner.mission.name,
         extra={"missed_gaps": st.gaps, "backlog": st.backlog,
-               "sink_errors": runner.sink_errors})
+               "sink_errors": runner.sink_errors, "signing_rejected": link.signing_rejected,
+               "tracker_resets": runner.tracker_resets, "udp_recv_buffer": link.recv_buffer})

@@ -6,6 +6,12 @@ reason, and never reaches the filter when:
 
 * ``other_source``: it is not from the vehicle we follow (another system or component id);
 * ``not_finite``: a field used is NaN or infinite;
+* ``out_of_range``: a field is finite but no rover can have it (a position beyond
+  ``MAX_POSITION`` from the EKF origin, a speed beyond ``MAX_SPEED``, a yaw outside
+  [-2 pi, 2 pi], a turn rate beyond ``MAX_YAW_RATE``): corrupted or forged, never fed on;
+* ``time_jump``: its time_boot_ms is more than ``RESTART_JUMP_MS`` after the last sample's. One
+  such sample may be a corrupted or forged clock; the jump is believed (and the sample taken)
+  only when the next sample continues from it. A real outage costs one sample this way;
 * ``time_backwards`` / ``duplicate``: its time_boot_ms is before / equal to the last sample's
   (out-of-order delivery, a repeated frame, or a vehicle that restarted);
 * ``no_attitude``: no valid ATTITUDE within ``max_attitude_age`` of the position.
@@ -20,8 +26,13 @@ from dataclasses import dataclass, field
 from typing import Any
 
 _finite = math.isfinite
-REASONS = ("other_source", "not_finite", "time_backwards", "duplicate", "no_attitude")
+REASONS = ("other_source", "not_finite", "out_of_range", "time_jump", "time_backwards",
+           "duplicate", "no_attitude")
 RESTART_JUMP_MS = 1000   # a step back this large looks like a vehicle reboot, not reordering
+MAX_POSITION = 1.0e6     # m from the EKF origin (a local frame is a few km across)
+MAX_SPEED = 1.0e3        # m/s
+MAX_YAW = 2.0 * math.pi  # rad (ATTITUDE says [-pi, pi]; some autopilots say [0, 2 pi])
+MAX_YAW_RATE = 1.0e3     # rad/s
 
 
 @dataclass(slots=True)
@@ -51,6 +62,7 @@ class TelemetryCheck:
     _att_ms: int | None = None
     _yaw: float = 0.0
     _yaw_rate: float = 0.0
+    _jump_ms: int | None = None            # a sample that jumped ahead, waiting for a second
 
     def _ours(self, msg: Any) -> bool:
         if msg.get_srcSystem() == self.sysid and msg.get_srcComponent() == self.compid:
@@ -68,9 +80,15 @@ class TelemetryCheck:
             self.rejected["not_finite"] += 1
             self._att_ms = None
             return
+        if abs(msg.yaw) > MAX_YAW or abs(msg.yawspeed) > MAX_YAW_RATE:
+            self.rejected["out_of_range"] += 1
+            return
         ms = msg.time_boot_ms
-        if self._att_ms is not None and ms < self._att_ms:
+        held = self._att_ms
+        if held is not None and held - RESTART_JUMP_MS <= ms < held:
             return   # an older attitude than the one held: keep the newer
+        # (one far behind the held one replaces it: the held one was from the future, a
+        # corrupted clock, or the vehicle rebooted)
         self._att_ms, self._yaw, self._yaw_rate = ms, msg.yaw, msg.yawspeed
 
     def position(self, msg: Any) -> Sample | None:
@@ -83,6 +101,10 @@ class TelemetryCheck:
         if not (_finite(x) and _finite(y) and _finite(vx) and _finite(vy)):
             self.rejected["not_finite"] += 1
             return None
+        if (abs(x) > MAX_POSITION or abs(y) > MAX_POSITION or abs(vx) > MAX_SPEED
+                or abs(vy) > MAX_SPEED):
+            self.rejected["out_of_range"] += 1
+            return None
         last = self._last_ms
         if last is not None and ms <= last:
             if ms == last:
@@ -92,10 +114,17 @@ class TelemetryCheck:
                 if last - ms >= RESTART_JUMP_MS:
                     self.backwards_streak += 1
             return None
+        if last is not None and ms - last > RESTART_JUMP_MS:
+            jump = self._jump_ms
+            if jump is None or not 0 < ms - jump <= RESTART_JUMP_MS:
+                self._jump_ms = ms
+                self.rejected["time_jump"] += 1
+                return None
         att = self._att_ms
         if att is None or abs(ms - att) > self.max_attitude_age * 1000.0:
             self.rejected["no_attitude"] += 1
             return None
+        self._jump_ms = None
         self._last_ms = ms
         self.backwards_streak = 0
         self.accepted += 1
@@ -103,7 +132,7 @@ class TelemetryCheck:
 
     def restart_timeline(self) -> None:
         """Accept the next sample whatever its time (after the vehicle rebooted on purpose)."""
-        self._last_ms = self._att_ms = None
+        self._last_ms = self._att_ms = self._jump_ms = None
         self.backwards_streak = 0
 
     @property

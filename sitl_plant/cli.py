@@ -106,6 +106,19 @@ def build_parser() -> argparse.ArgumentParser:
                      help="telemetry sent S s of vehicle time after sampling")
     tel.add_argument("--dropout", type=_probability, default=0.0, metavar="P",
                      help="each pose message lost with probability P")
+    tel.add_argument("--duplicate", type=_probability, default=0.0, metavar="P",
+                     help="each pose message sent twice with probability P")
+    tel.add_argument("--reorder", type=_probability, default=0.0, metavar="P",
+                     help="each pose message held back 60 ms (overtaken) with probability P")
+    tel.add_argument("--burst", type=_probability, default=0.0, metavar="P",
+                     help="with probability P per pose message the link stalls 100 ms, "
+                          "then delivers everything at once")
+    flt = p.add_argument_group("faults and security")
+    flt.add_argument("--takeover-at", type=_positive, metavar="S", dest="takeover_at",
+                     help="a pilot switches to HOLD at S s of vehicle time (SIGUSR1: now)")
+    flt.add_argument("--signing-key", metavar="FILE", dest="signing_key",
+                     help="MAVLink 2 signing: 32-byte secret (raw or 64 hex digits, mode 600); "
+                          "unsigned commands and setpoints are ignored")
     return p
 
 
@@ -119,12 +132,17 @@ def config_from_args(args: argparse.Namespace) -> PlantConfig:
                             arm_delay=args.arm_delay, start=tuple(args.start))
     telemetry = TelemetryConfig(noise_pos=args.noise_pos, noise_yaw=args.noise_yaw,
                                 latency=args.latency, dropout=args.dropout,
-                                seed=args.sysid if args.seed is None else args.seed)
+                                seed=args.sysid if args.seed is None else args.seed,
+                                duplicate=args.duplicate, reorder=args.reorder, burst=args.burst)
+    key = None
+    if args.signing_key is not None:
+        from companion.signing import load_key
+        key = load_key(args.signing_key)
     return PlantConfig(connect=args.connect, sysid=args.sysid, loop_rate=args.loop_rate,
                        speedup=args.speedup, lockstep=args.lockstep,
                        lockstep_timeout=args.lockstep_timeout, physics_dt=args.physics_dt,
                        duration=args.duration, preset=args.preset, vehicle=vehicle,
-                       telemetry=telemetry)
+                       telemetry=telemetry, takeover_at=args.takeover_at, signing_key=key)
 
 
 def _install_signals(server) -> tuple[socket.socket, socket.socket]:
@@ -138,19 +156,28 @@ def _install_signals(server) -> tuple[socket.socket, socket.socket]:
     def stop(signum, frame):
         server.stopping = True
 
+    def takeover(signum, frame):
+        server.takeover_requested = True
+
     signal.signal(signal.SIGTERM, stop)
     signal.signal(signal.SIGINT, stop)
+    signal.signal(signal.SIGUSR1, takeover)
     server.wake = wake_r
     return wake_r, wake_w
 
 
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
-    config = config_from_args(args)
+    from companion.errors import UserError
+    try:
+        config = config_from_args(args)
+    except UserError as err:
+        print(f"sitl-plant: error: {err}", file=sys.stderr)
+        return 2
     from .link import Link, LinkError
     from .server import PlantServer
     try:
-        link = Link(config.connect, config.sysid, config.compid)
+        link = Link(config.connect, config.sysid, config.compid, config.signing_key)
     except LinkError as err:
         print(f"sitl-plant: error: {err}", file=sys.stderr)
         return 2
@@ -172,7 +199,9 @@ def main(argv: list[str] | None = None) -> int:
     print(f"sitl-plant: sysid {config.sysid} stopped at t={server.t_us / 1e6:.3f} s: "
           f"{link.received} messages in, {link.bad_data} bad, {v.setpoints_used} setpoints used, "
           f"{ignored} ignored {dict(sorted(v.setpoints_ignored.items()))}, "
-          f"{server.foreign} for other systems, {server.gate.timeouts} lockstep timeouts",
+          f"{server.foreign} for other systems, {server.gate.timeouts} lockstep timeouts, "
+          f"{link.signing_rejected} refused for their signature, "
+          f"{server.handler_errors} handler errors",
           file=sys.stderr, flush=True)
     if link.peer_closed:
         print("sitl-plant: the TCP peer closed the connection", file=sys.stderr)

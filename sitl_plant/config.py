@@ -24,3 +24,5 @@ class PlantConfig:
     preset: str = "paper"
     vehicle: VehicleConfig = field(default_factory=VehicleConfig)
     telemetry: TelemetryConfig = field(default_factory=TelemetryConfig)
+    takeover_at: float | None = None  # vehicle s at which a "pilot" switches to HOLD
+    signing_key: bytes | None = None  # MAVLink 2 signing: 32-byte secret

@@ -31,7 +31,7 @@ def _mavutil():
 
 
 class Link:
-    def __init__(self, url: str, sysid: int, compid: int):
+    def __init__(self, url: str, sysid: int, compid: int, signing_key: bytes | None = None):
         mavutil = _mavutil()
         try:
             self.conn = mavutil.mavlink_connection(
@@ -39,9 +39,21 @@ class Link:
         except Exception as exc:  # pymavlink raises anything from ValueError to SerialException
             raise LinkError(f"cannot open {url!r}: {exc}") from None
         self.mav = self.conn.mav
+        from companion import signing
+        from companion.link import size_receive_buffer
+        self.recv_buffer = size_receive_buffer(self.conn)   # bursts of setpoints / commands
+        self.signing = signing_key is not None
+        if signing_key is not None:
+            # Signed out; unsigned, wrong-key and replayed commands and setpoints are refused
+            # by pymavlink (BAD_DATA, counted in bad_data and signing_rejected).
+            signing.enable(self.conn, signing_key)
         self.bad_data = 0
         self.received = 0
         self.peer_closed = False
+
+    @property
+    def signing_rejected(self) -> int:
+        return int(self.mav.signing.reject_count) if self.signing else 0
 
     @property
     def fd(self) -> int | None:

@@ -6,6 +6,10 @@ brings the physics up to "now" before handling each message, so a setpoint acts 
 time it arrived. Lockstep mode (while a companion is streaming setpoints) runs from one
 telemetry tick to the next as soon as a setpoint has answered the last one, so a run is
 deterministic and as fast as the two processes go.
+
+A pilot takeover (``takeover_at`` vehicle seconds, or :meth:`PlantServer.pilot_takeover` from a
+SIGUSR1) flips the vehicle to HOLD as a pilot's mode switch would, and announces it at once with
+a heartbeat and a STATUSTEXT (ArduPilot's own heartbeat may take up to its 1 s period).
 """
 
 from __future__ import annotations
@@ -20,7 +24,7 @@ from . import streams
 from .clock import LockstepGate, Pacer
 from .config import PlantConfig
 from .link import Link
-from .modes import requested_custom_mode
+from .modes import hold_mode, requested_custom_mode
 from .setpoint import Setpoint
 from .telemetry import TelemetryPipe
 from .vehicle import Result, Vehicle
@@ -52,6 +56,10 @@ class PlantServer:
         self.stopping = False
         self.wake: socket.socket | None = None  # becomes readable when a signal arrives
         self.foreign = 0                  # messages addressed to another system
+        self.handler_errors = 0           # well-formed frames whose handling raised
+        self.takeover_requested = False   # set by SIGUSR1
+        self._takeover_us = (None if config.takeover_at is None
+                             else int(round(config.takeover_at * 1e6)))
 
     @property
     def t_us(self) -> int:
@@ -63,6 +71,9 @@ class PlantServer:
         self.pacer.anchor(self.wall(), 0)
         self._tick()
         while not self.stopping and not self.link.peer_closed:
+            if self.takeover_requested:
+                self.takeover_requested = False
+                self.pilot_takeover()
             if not self._lockstep():
                 self._catch_up()
             self._drain()
@@ -115,7 +126,11 @@ class PlantServer:
     def _advance_to(self, target_us: int) -> None:
         dt, vehicle = self.dt_us * 1e-6, self.vehicle
         nxt = self._next_send_us()
+        takeover = self._takeover_us
         while self.t_us < target_us:
+            if takeover is not None and self.t_us >= takeover:
+                self._takeover_us = takeover = None
+                self.pilot_takeover()
             vehicle.step(dt)
             if vehicle.texts:
                 self._flush_texts()
@@ -168,6 +183,14 @@ class PlantServer:
         vx, vy = self.vehicle.velocity()
         return self.telemetry.sample(self.t_us, s.x, s.y, s.yaw, vx, vy, s.omega)
 
+    def pilot_takeover(self) -> None:
+        """A pilot flips the mode switch to HOLD: the vehicle stops following setpoints."""
+        v = self.vehicle
+        v.set_mode(hold_mode(v.autopilot))
+        v.texts.append((SEVERITY_WARNING, "Pilot took over: HOLD"))
+        self._flush_texts()
+        self.link.heartbeat(v.autopilot, v.base_mode, v.custom_mode, v.armed)
+
     def _flush_texts(self) -> None:
         for severity, text in self.vehicle.pop_texts():
             self.link.statustext(severity, text)
@@ -185,6 +208,7 @@ class PlantServer:
                 self._handle(msg)
             except Exception:             # noqa: BLE001 - no input may stop the vehicle
                 self.link.bad_data += 1   # a well-formed frame with nonsense in it
+                self.handler_errors += 1  # (a bug to fix: the fuzz test asserts none)
             if self.vehicle.texts:
                 self._flush_texts()
 

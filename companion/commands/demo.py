@@ -23,7 +23,8 @@ from dataclasses import replace
 from pathlib import Path
 
 from ..errors import UserError
-from .run import add_gain_arguments, install_signals, logger, non_negative, positive, print_result
+from .run import (add_gain_arguments, add_safety_arguments, install_signals, logger, non_negative,
+                  open_flight_log, positive, print_result, signing_key)
 
 DEFAULT_D_CEN = 0.3
 
@@ -44,6 +45,7 @@ def register(subparsers) -> None:
                    help="plant waits for each setpoint (default on, off when --speedup is given)")
     p.add_argument("--speedup", type=positive, metavar="N", help="plant runs N x real time")
     add_gain_arguments(p)
+    add_safety_arguments(p)
     p.add_argument("--out", metavar="DIR", default="out", help="where the plot goes (default out/)")
     p.add_argument("--no-plot", dest="plot", action="store_false", help="skip the plot")
     p.add_argument("--json", action="store_true", help="print one JSON result object")
@@ -79,6 +81,8 @@ def plant_argv(args, port: int, rate: float) -> list[str]:
         argv.append("--lockstep")
     if args.speedup is not None:
         argv += ["--speedup", repr(args.speedup)]
+    if getattr(args, "signing_key", None):
+        argv += ["--signing-key", args.signing_key]
     return argv
 
 
@@ -108,16 +112,19 @@ def run(args) -> int:
     max_speed = args.max_speed or min(base.max_speed, params.max_speed)
     max_yaw_rate = args.max_yaw_rate or min(base.max_yaw_rate, params.max_yaw_rate)
     port = _free_port()
+    key = signing_key(args)
+    log = logger("companion demo", args.quiet)
+    paths, log_sinks = open_flight_log(args, "demo", log)
     settings = RunSettings(
-        link=LinkConfig(url=f"udpin:127.0.0.1:{port}", heartbeat_timeout=15.0),
+        link=LinkConfig(url=f"udpin:127.0.0.1:{port}", heartbeat_timeout=15.0,
+                        signing_key=key, tlog=paths.tlog if paths else None),
         mission=mission, runner=RunnerConfig(arm=True), rate=args.rate, gains_file=args.gains,
         gain_flags=GainFlags(args.k_df, args.lambda_f, args.k_dc, args.lambda_c),
         max_speed=max_speed, max_yaw_rate=max_yaw_rate, w_c=params.w_c, d_cen=args.d_cen)
     rate = requested_rate(settings)
     argv = plant_argv(args, port, rate)
-    log = logger("companion demo", args.quiet)
     trace = TraceSink()
-    sinks = [ProgressSink(mission.duration, mission.name), trace]
+    sinks = [*log_sinks, ProgressSink(mission.duration, mission.name), trace]
 
     log(f"plant: {' '.join(argv[2:])}")
     plant_log = tempfile.TemporaryFile(mode="w+")
@@ -138,11 +145,15 @@ def run(args) -> int:
         restore()
         plant_code = _stop(plant)
         plant_log.close()
+        for sink in log_sinks:
+            sink.close()    # idempotent: the loop closed it unless the set-up failed
 
     if result.exit_code == 2:
         raise UserError(result.reason)
     extra = {"plant": " ".join(argv[2:]), "plant_exit": plant_code, "preset": args.preset,
              "d_cen": args.d_cen}
+    if paths is not None:
+        extra.update(tlog=paths.tlog, csv=paths.csv)
     if args.plot and trace.log["t"]:
         from ..mission_plot import plot_run
         out = Path(args.out)

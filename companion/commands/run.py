@@ -6,6 +6,7 @@ import argparse
 import json
 import math
 import sys
+from typing import Any
 
 from ..errors import UserError
 
@@ -57,6 +58,37 @@ def add_gain_arguments(p: argparse.ArgumentParser) -> None:
                    help="turn-rate limit of every setpoint (rad/s)")
 
 
+def add_safety_arguments(p: argparse.ArgumentParser) -> None:
+    """Flight logs and MAVLink signing (companion run and demo)."""
+    g = p.add_argument_group("flight log and signing")
+    g.add_argument("--log-dir", metavar="DIR",
+                   help="where the .tlog (all MAVLink traffic) and .csv (control loop) go "
+                        "(default ./logs); written as they go, a crash loses at most 100 ms")
+    g.add_argument("--no-log", dest="log", action="store_false", help="write no flight log")
+    g.add_argument("--signing-key", metavar="FILE",
+                   help="MAVLink 2 signing: 32-byte secret (raw or 64 hex digits, mode 600); "
+                        "sign what is sent, refuse unsigned or wrongly signed input")
+
+
+def open_flight_log(args, label: str, log) -> tuple[Any, list]:
+    """(paths or None, [CSV sink]) for ``--log-dir`` / ``--no-log``; the paths are logged."""
+    if not getattr(args, "log", True):
+        return None, []
+    from ..flightlog import new_paths, open_csv
+    paths = new_paths(getattr(args, "log_dir", None), label)
+    sink = open_csv(paths.csv)
+    log(f"flight log: {paths.tlog} and {paths.csv}")
+    return paths, [sink]
+
+
+def signing_key(args) -> bytes | None:
+    path = getattr(args, "signing_key", None)
+    if path is None:
+        return None
+    from ..signing import load_key
+    return load_key(path)
+
+
 def register(subparsers) -> None:
     p = subparsers.add_parser(
         "run", help="track a mission on a live vehicle over MAVLink",
@@ -88,6 +120,7 @@ def register(subparsers) -> None:
     t.add_argument("--arm-timeout", type=positive, default=60.0, metavar="S")
     t.add_argument("--lost-timeout", type=positive, default=30.0, metavar="S",
                    help="give up when telemetry stays lost for S (default 30)")
+    add_safety_arguments(p)
     o = p.add_argument_group("output")
     o.add_argument("--json", action="store_true", help="print one JSON result object at the end")
     o.add_argument("--progress", action="store_true", help="progress bar on stderr")
@@ -95,13 +128,15 @@ def register(subparsers) -> None:
     p.set_defaults(func=run)
 
 
-def settings_from_args(args, mission, url: str):
+def settings_from_args(args, mission, url: str, key: bytes | None = None,
+                       tlog: str | None = None):
     from ..link import LinkConfig
     from ..runner import RunnerConfig
     from ..session import GainFlags, RunSettings
     return RunSettings(
         link=LinkConfig(url=url, sysid=getattr(args, "sysid", None),
-                        heartbeat_timeout=getattr(args, "heartbeat_timeout", 10.0)),
+                        heartbeat_timeout=getattr(args, "heartbeat_timeout", 10.0),
+                        signing_key=key, tlog=tlog),
         mission=mission,
         runner=RunnerConfig(stale_timeout=getattr(args, "stale_timeout", 0.5),
                             arm=getattr(args, "arm", True),
@@ -161,7 +196,7 @@ def print_result(result, as_json: bool, extra: dict | None = None) -> None:
         f"HOLD {'confirmed' if d['hold_confirmed'] else 'not confirmed'}",
         f"gains       {d['gains_source']}",
     ]
-    for key in ("plot",):
+    for key in ("plot", "tlog", "csv"):
         if key in d:
             lines.append(f"{key:<11} {d[key]}")
     print("\n".join(lines), flush=True)
@@ -180,16 +215,23 @@ def run(args) -> int:
     from ..session import StopSwitch, fly
 
     mission = load_mission(args.mission, args.origin)
-    settings = settings_from_args(args, mission, args.connect)
-    sinks = [ProgressSink(mission.duration, mission.name)] if args.progress else []
+    key = signing_key(args)
+    log = logger("companion run", args.quiet)
+    paths, log_sinks = open_flight_log(args, "run", log)
+    sinks = list(log_sinks)
+    settings = settings_from_args(args, mission, args.connect, key,
+                                  paths.tlog if paths else None)
+    if args.progress:
+        sinks.append(ProgressSink(mission.duration, mission.name))
     switch = StopSwitch()
     restore = install_signals(switch)
     try:
-        result = fly(settings, sinks=sinks, log=logger("companion run", args.quiet),
-                     switch=switch)
+        result = fly(settings, sinks=sinks, log=log, switch=switch)
     finally:
         restore()
+        for sink in log_sinks:
+            sink.close()    # idempotent: the loop closed it unless the set-up failed
     if result.exit_code == 2:
         raise UserError(result.reason)
-    print_result(result, args.json)
+    print_result(result, args.json, {"tlog": paths.tlog, "csv": paths.csv} if paths else None)
     return result.exit_code
