@@ -22,6 +22,7 @@ COMMANDS = [
     "tune",
     "mission",
     "simulate",
+    "plot",
 ]
 
 

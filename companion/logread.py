@@ -1,0 +1,235 @@
+"""Read a flight log back: the companion's CSV, or any MAVLink .tlog (ours, MAVProxy's, QGC's).
+
+Both come out as one :class:`Flight`: vehicle time, measured pose and speed, and whatever else
+the log holds (reference, filtered pose, commands). The .tlog is read by pymavlink
+(``mavutil.mavlink_connection``); a .tlog carries no reference, so one is rebuilt from the
+mission (``mission=``) anchored, as the companion anchors it, at the first sample answered by a
+moving setpoint (mission time 0) -- right for a run without pauses or failsafes.
+
+Tracking metrics are the paper's, as :mod:`companion.stats` computes them live: f_cost =
+sqrt(trapezoidal integral of |p_ref - p|^2 over mission time), steady RMS over the second half
+of the mission time logged.
+
+A log cut short by a crash is fine: a CSV line that does not parse is skipped and counted
+(``corrupt``, with line numbers), a .tlog frame that does not parse likewise (pymavlink's
+BAD_DATA).
+"""
+
+from __future__ import annotations
+
+import csv
+import math
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from .errors import UserError
+from .flightlog import CSV_FIELDS
+
+_NUMERIC = CSV_FIELDS[:16]          # vehicle_time ... yaw_rate_cmd
+
+
+@dataclass
+class Flight:
+    source: str
+    kind: str                                   # "csv" or "tlog"
+    t: np.ndarray                               # vehicle time, s
+    x: np.ndarray                               # measured NED position, m
+    y: np.ndarray
+    yaw: np.ndarray
+    speed: np.ndarray                           # measured ground speed, m/s
+    yaw_rate: np.ndarray                        # measured turn rate, rad/s
+    mission_t: np.ndarray | None = None         # mission time, s (with a reference)
+    x_ref: np.ndarray | None = None
+    y_ref: np.ndarray | None = None
+    x_hat: np.ndarray | None = None             # filtered pose (CSV only)
+    y_hat: np.ndarray | None = None
+    yaw_hat: np.ndarray | None = None
+    cmd_t: np.ndarray | None = None             # setpoints: vehicle time they answered
+    speed_cmd: np.ndarray | None = None
+    yaw_rate_cmd: np.ndarray | None = None
+    events: list[tuple[float | None, str]] = field(default_factory=list)
+    corrupt: list[int] = field(default_factory=list)   # CSV line numbers / tlog frame indices
+    records: int = 0
+
+    def metrics(self) -> dict[str, Any]:
+        out: dict[str, Any] = {"samples": int(len(self.t)), "records": self.records,
+                               "corrupt": len(self.corrupt),
+                               "vehicle_time_s": float(self.t[-1] - self.t[0]) if len(self.t) else 0.0}
+        if self.mission_t is None or self.x_ref is None or len(self.mission_t) < 2:
+            out.update(f_cost=None, steady_rms=None, mission_time_s=None)
+            return out
+        mt = self.mission_t
+        e2 = (self.x_ref - self.x) ** 2 + (self.y_ref - self.y) ** 2
+        cost = float(np.sum(0.5 * (e2[1:] + e2[:-1]) * np.diff(mt)))
+        steady = e2[mt >= 0.5 * mt[-1]]
+        out.update(f_cost=math.sqrt(max(cost, 0.0)),
+                   steady_rms=float(np.sqrt(np.mean(steady))) if len(steady) else None,
+                   mission_time_s=float(mt[-1]), max_error=float(np.sqrt(e2.max())))
+        return out
+
+
+def read(path: str, mission: Any = None) -> Flight:
+    """A .csv or .tlog flight log; UserError (one line, exit 2) when it cannot be read."""
+    p = Path(path)
+    if not p.exists():
+        raise UserError(f"LOG {path}: no such file")
+    if not p.is_file() or not os.access(p, os.R_OK):
+        raise UserError(f"LOG {path}: not a readable file")
+    suffix = p.suffix.lower()
+    if suffix == ".csv":
+        flight = read_csv(p)
+    elif suffix in (".tlog", ".log", ".mav"):
+        flight = read_tlog(p, mission)
+    else:
+        raise UserError(f"LOG {path}: expected a .csv or .tlog flight log")
+    if len(flight.t) == 0:
+        raise UserError(f"LOG {path}: no pose samples in it"
+                        + (f" ({len(flight.corrupt)} corrupt records)" if flight.corrupt else ""))
+    return flight
+
+
+def read_csv(path: str | Path) -> Flight:
+    rows: list[list[float]] = []
+    modes: list[str] = []
+    events: list[tuple[float | None, str]] = []
+    corrupt: list[int] = []
+    try:
+        with open(path, newline="", encoding="utf-8", errors="replace") as f:
+            reader = csv.reader(f)
+            header = next(reader, None)
+            if header is None or header[:len(_NUMERIC)] != _NUMERIC:
+                raise UserError(f"LOG {path}: not a companion flight-log CSV (header "
+                                f"{','.join((header or [])[:4])}...)")
+            width = len(header)
+            for line_no, row in enumerate(reader, start=2):
+                if len(row) != width:
+                    corrupt.append(line_no)
+                    continue
+                if row[-1]:
+                    try:
+                        vt = float(row[0]) if row[0] else None
+                    except ValueError:
+                        corrupt.append(line_no)
+                        continue
+                    events.append((vt, row[-1]))
+                    continue
+                try:
+                    values = [float(v) for v in row[:len(_NUMERIC)]]
+                except ValueError:
+                    corrupt.append(line_no)
+                    continue
+                rows.append(values)
+                modes.append(row[len(_NUMERIC)])
+    except OSError as exc:
+        raise UserError(f"LOG {path}: cannot read: {exc.strerror}") from None
+    except csv.Error as exc:
+        raise UserError(f"LOG {path}: not a CSV file: {exc}") from None
+    a = np.array(rows, dtype=float).reshape(-1, len(_NUMERIC))
+    col = {name: a[:, i] for i, name in enumerate(_NUMERIC)}
+    t = col["vehicle_time"]
+    speed, yaw_rate = _differentiate(t, col["x"], col["y"], col["yaw"])
+    return Flight(str(path), "csv", t, col["x"], col["y"], col["yaw"], speed, yaw_rate,
+                  mission_t=col["mission_time"], x_ref=col["x_ref"], y_ref=col["y_ref"],
+                  x_hat=col["x_hat"], y_hat=col["y_hat"], yaw_hat=col["yaw_hat"], cmd_t=t,
+                  speed_cmd=col["speed_cmd"], yaw_rate_cmd=col["yaw_rate_cmd"], events=events,
+                  corrupt=corrupt, records=len(rows) + len(events))
+
+
+def _differentiate(t, x, y, yaw) -> tuple[np.ndarray, np.ndarray]:
+    """Speed and turn rate by central differences (the CSV keeps poses, not velocities)."""
+    if len(t) < 3:
+        return np.zeros_like(t), np.zeros_like(t)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        speed = np.hypot(np.gradient(x, t), np.gradient(y, t))
+        rate = np.gradient(np.unwrap(yaw), t)
+    return np.nan_to_num(speed), np.nan_to_num(rate)
+
+
+def read_tlog(path: str | Path, mission: Any = None) -> Flight:
+    from .link import mavutil   # MAVLink 2 set up before pymavlink is imported
+    try:
+        conn = mavutil.mavlink_connection(str(path), dialect="ardupilotmega")
+    except Exception as exc:  # noqa: BLE001 - pymavlink raises anything on a bad file
+        raise UserError(f"LOG {path}: cannot open as a tlog: {exc}") from None
+    vehicle: tuple[int, int] | None = None
+    att: dict[tuple[int, int], tuple[float, float]] = {}
+    poses: list[tuple[float, float, float, float, float, float]] = []
+    cmds: dict[int, tuple[float, float]] = {}
+    events: list[tuple[float | None, str]] = []
+    corrupt: list[int] = []
+    last_t = -math.inf
+    index = 0
+    try:
+        while True:
+            try:
+                msg = conn.recv_msg()
+            except Exception:  # noqa: BLE001 - a torn last frame: pymavlink may raise
+                corrupt.append(index)
+                break
+            if msg is None:
+                break
+            index += 1
+            kind = msg.get_type()
+            if kind == "BAD_DATA":
+                corrupt.append(index)
+                continue
+            src = (msg.get_srcSystem(), msg.get_srcComponent())
+            if kind == "HEARTBEAT" and vehicle is None and conn.probably_vehicle_heartbeat(msg):
+                vehicle = src
+            elif kind == "ATTITUDE":
+                att[src] = (msg.yaw, msg.yawspeed)
+            elif kind == "LOCAL_POSITION_NED" and (vehicle is None or src == vehicle):
+                t = msg.time_boot_ms * 1e-3
+                values = (msg.x, msg.y, msg.vx, msg.vy)
+                if t <= last_t or not all(math.isfinite(v) for v in values) or src not in att:
+                    continue     # a reboot, a duplicate or a bad sample: the companion refused it too
+                last_t = t
+                yaw, rate = att[src]
+                poses.append((t, msg.x, msg.y, yaw, math.hypot(msg.vx, msg.vy), rate))
+            elif kind == "SET_POSITION_TARGET_LOCAL_NED":
+                if msg.type_mask & (1 << 11):       # yaw rate ignored: PX4's velocity vector
+                    cmds[msg.time_boot_ms] = (math.hypot(msg.vx, msg.vy), math.nan)
+                else:
+                    cmds[msg.time_boot_ms] = (msg.vx, msg.yaw_rate)
+            elif kind == "STATUSTEXT" and src == vehicle:
+                events.append((last_t if poses else None, f"vehicle: {msg.text}"))
+    finally:
+        conn.close()
+    a = np.array(poses, dtype=float).reshape(-1, 6)
+    t, x, y, yaw, speed, rate = (a[:, i] for i in range(6))
+    ms = np.round(t * 1e3).astype(np.int64)
+    answered = [k for k, m in enumerate(ms) if int(m) in cmds]
+    flight = Flight(str(path), "tlog", t, x, y, yaw, speed, rate, events=events,
+                    corrupt=corrupt, records=index)
+    if answered:
+        flight.cmd_t = t[answered]
+        flight.speed_cmd = np.array([cmds[int(ms[k])][0] for k in answered])
+        flight.yaw_rate_cmd = np.array([cmds[int(ms[k])][1] for k in answered])
+    if mission is not None:
+        _attach_reference(flight, mission, cmds, ms)
+    return flight
+
+
+def _attach_reference(flight: Flight, mission: Any, cmds: dict, ms: np.ndarray) -> None:
+    """Mission time 0 = the first sample answered by a moving setpoint (the companion's anchor)."""
+    start = next((k for k, m in enumerate(ms)
+                  if int(m) in cmds and any(v != 0.0 for v in cmds[int(m)] if math.isfinite(v))),
+                 None)
+    if start is None:
+        return
+    keep = slice(start, None)
+    t0 = flight.t[start]
+    mt = flight.t[keep] - t0
+    inside = mt <= mission.duration + 1e-9
+    trajectory = mission.anchored(float(flight.x[start]), float(flight.y[start]),
+                                  float(flight.yaw[start]))
+    refs = [trajectory.sample(float(m)) for m in mt[inside]]
+    for name in ("t", "x", "y", "yaw", "speed", "yaw_rate"):
+        setattr(flight, name, getattr(flight, name)[keep][inside])
+    flight.mission_t = mt[inside]
+    flight.x_ref = np.array([r.x for r in refs])
+    flight.y_ref = np.array([r.y for r in refs])
