@@ -95,6 +95,12 @@ class Link:
             self.tlog.attach(self.master)
             self.on_idle.append(self.tlog.idle)
         self.vehicle: VehicleInfo | None = None
+        # Mode and arming as the vehicle's own heartbeats say (is_vehicle_heartbeat), not
+        # pymavlink's per-system state, which any frame carrying our vehicle's system id
+        # rewrites (a stranger's heartbeat, a corrupted one claiming another vehicle type).
+        self._mode = ""
+        self._armed = False
+        self._mode_map: dict[str, int] = {}
         self._mask = MASK_SPEED_YAW_RATE
         self._frame = mavlink.MAV_FRAME_BODY_NED
         self._speed_yaw_rate = True
@@ -118,9 +124,17 @@ class Link:
     def recv(self) -> Any | None:
         """One parsed message, or None when nothing is waiting. Never blocks, never raises."""
         try:
-            return self.master.recv_msg()
+            msg = self.master.recv_msg()
         except OSError:
             return None
+        if (msg is not None and msg.get_type() == "HEARTBEAT" and self.vehicle is not None
+                and self.is_vehicle_heartbeat(msg)):
+            self._note_heartbeat(msg)
+        return msg
+
+    def _note_heartbeat(self, msg: Any) -> None:
+        self._mode = mavutil.mode_string_v10(msg)
+        self._armed = bool(msg.base_mode & mavlink.MAV_MODE_FLAG_SAFETY_ARMED)
 
     def wait(self, timeout: float) -> None:
         """Sleep until data arrives or ``timeout`` seconds pass (pymavlink's select)."""
@@ -134,14 +148,29 @@ class Link:
         v = self.vehicle
         return v is not None and msg.get_srcSystem() == v.sysid and msg.get_srcComponent() == v.compid
 
+    def is_for_us(self, msg: Any) -> bool:
+        """A COMMAND_ACK (or any targeted message) addressed to us or to everyone: the vehicle
+        answers every ground station on the link, and another's ACK is not ours."""
+        cfg = self.config
+        return (getattr(msg, "target_system", 0) in (0, cfg.source_system)
+                and getattr(msg, "target_component", 0) in (0, cfg.source_component))
+
+    def is_vehicle_heartbeat(self, msg: Any) -> bool:
+        """A HEARTBEAT of our vehicle that still says what it said at first (autopilot and
+        MAV_TYPE): one claiming to be another kind of vehicle is corrupted or forged, and its
+        mode number would be read in another table (pymavlink names modes by type)."""
+        v = self.vehicle
+        return (self.is_vehicle(msg) and msg.type == v.mav_type
+                and AUTOPILOTS.get(msg.autopilot) == v.autopilot)
+
     @property
     def mode(self) -> str:
         """The vehicle's flight mode from its last heartbeat (pymavlink's name)."""
-        return self.master.flightmode
+        return self._mode
 
     @property
     def armed(self) -> bool:
-        return bool(self.master.motors_armed())
+        return self._armed
 
     # --- connection set-up (blocking; before the control loop) ------------------------------
     def wait_vehicle(self, should_stop=lambda: False) -> VehicleInfo:
@@ -166,6 +195,9 @@ class Link:
                                        msg.type)
             self.master.target_system = self.vehicle.sysid
             self.master.target_component = self.vehicle.compid
+            self._note_heartbeat(msg)
+            self._mode_map = (dict(mavutil.px4_map) if autopilot == PX4
+                              else mavutil.mode_mapping_byname(msg.type) or {})
             if autopilot == PX4:
                 self._mask, self._frame = MASK_VELOCITY, mavlink.MAV_FRAME_LOCAL_NED
                 self._speed_yaw_rate = False
@@ -194,7 +226,7 @@ class Link:
                 if msg is None:
                     self.wait(min(left, 0.05))
                 elif (msg.get_type() == "COMMAND_ACK" and msg.command == command
-                      and self.is_vehicle(msg)):
+                      and self.is_vehicle(msg) and self.is_for_us(msg)):
                     self.last_ack[command] = msg.result
                     return msg.result
         return None
@@ -227,11 +259,18 @@ class Link:
 
     # --- commands used inside the control loop (never wait) ---------------------------------
     def request_mode(self, name: str) -> None:
-        """MAV_CMD_DO_SET_MODE for a mode name (pymavlink's mode tables for either autopilot)."""
-        mapping = self.master.mode_mapping() or {}
+        """MAV_CMD_DO_SET_MODE for a mode name (pymavlink's mode tables for either autopilot,
+        chosen once from the vehicle's first heartbeat)."""
+        mapping = self._mode_map
         if name not in mapping:
             raise UserError(f"the vehicle has no mode {name!r}")
-        self.master.set_mode(name)
+        if self.vehicle.autopilot == PX4:
+            self.master.set_mode_px4(*mapping[name])
+        else:
+            self.master.set_mode_apm(mapping[name])
+
+    def mode_names(self) -> set[str]:
+        return set(self._mode_map)
 
     def request_arm(self) -> None:
         self.master.arducopter_arm()   # MAV_CMD_COMPONENT_ARM_DISARM param1 = 1, any vehicle

@@ -200,7 +200,8 @@ class Runner:
             elif kind == "COMMAND_ACK":
                 self._on_ack(msg)
             elif kind == "STATUSTEXT" and link.is_vehicle(msg):
-                self.log(f"vehicle says: {msg.text}")
+                self.log("vehicle says: " + "".join(c if c.isprintable() else "?"
+                                                     for c in msg.text))
             if t_read >= self._next_timer:
                 self._timers(t_read)
 
@@ -302,7 +303,7 @@ class Runner:
             self._safely(sink.record, rec)
 
     def _on_heartbeat(self, msg: Any) -> None:
-        if not self.link.is_vehicle(msg):
+        if not self.link.is_vehicle_heartbeat(msg):
             return
         self._last_heartbeat_wall = time.perf_counter()
         if self._heartbeat_lost_said:
@@ -323,7 +324,7 @@ class Runner:
             self._engage(time.perf_counter())
 
     def _on_ack(self, msg: Any) -> None:
-        if not self.link.is_vehicle(msg):
+        if not self.link.is_vehicle(msg) or not self.link.is_for_us(msg):
             return
         if msg.command == 176 and self._mode_request is not None:   # MAV_CMD_DO_SET_MODE
             if msg.result == 0:
@@ -497,7 +498,8 @@ class Runner:
                 sample = self.telemetry.position(msg)   # bad ones get no answer, even now
                 if sample is not None:
                     link.send_stop(sample.time_boot_ms)
-            elif kind == "HEARTBEAT" and link.mode == self.hold_mode:
+            elif (kind == "HEARTBEAT" and link.is_vehicle_heartbeat(msg)
+                  and link.mode == self.hold_mode):
                 self._hold_confirmed = True
             elif kind == "COMMAND_ACK":
                 self._on_ack(msg)

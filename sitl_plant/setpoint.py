@@ -79,7 +79,14 @@ STOP = TurnRateSpeed(0.0, 0.0)
 
 @dataclass(frozen=True)
 class Rejected:
-    reason: str  # "frame", "acceleration", "non-finite", "nothing to do"
+    reason: str  # "frame", "acceleration", "non-finite", "out of range", "nothing to do"
+
+
+# Beyond these no rover goes: a field this large is corrupted or forged, and the paper's plant
+# (no speed limit of its own) would otherwise obey it. A real autopilot clamps to WP_SPEED.
+MAX_TARGET_POSITION = 1.0e6   # m
+MAX_TARGET_SPEED = 100.0      # m/s
+MAX_TARGET_RATE = 100.0       # rad/s
 
 
 @dataclass(frozen=True)
@@ -97,6 +104,10 @@ def _used(mask: int, group: int) -> bool:
 
 def _finite(*values: float) -> bool:
     return all(math.isfinite(v) for v in values)
+
+
+def _plausible(*values: float, limit: float) -> bool:
+    return all(abs(v) <= limit for v in values)
 
 
 def _body_to_ne(x: float, y: float, yaw: float) -> tuple[float, float]:
@@ -126,6 +137,11 @@ def decode_ardupilot(sp: Setpoint, pose: Pose, max_speed: float) -> Target | Rej
     if ((pos and not _finite(sp.x, sp.y)) or (vel and not _finite(sp.vx, sp.vy))
             or (yaw and not _finite(sp.yaw)) or (rate and not _finite(sp.yaw_rate))):
         return Rejected("non-finite")
+    if ((pos and not _plausible(sp.x, sp.y, limit=MAX_TARGET_POSITION))
+            or (vel and not _plausible(sp.vx, sp.vy, limit=MAX_TARGET_SPEED))
+            or (yaw and abs(sp.yaw) > 100.0)
+            or (rate and not _plausible(sp.yaw_rate, limit=MAX_TARGET_RATE))):
+        return Rejected("out of range")
     if pos:
         return _position(sp, pose)
     body = sp.frame in BODY_FRAMES
@@ -154,6 +170,9 @@ def decode_px4(sp: Setpoint, pose: Pose, max_speed: float) -> Target | Rejected:
     pos, vel = _used(mask, POS_IGNORE), _used(mask, VEL_IGNORE)
     if (pos and not _finite(sp.x, sp.y)) or (vel and not _finite(sp.vx, sp.vy)):
         return Rejected("non-finite")
+    if ((pos and not _plausible(sp.x, sp.y, limit=MAX_TARGET_POSITION))
+            or (vel and not _plausible(sp.vx, sp.vy, limit=MAX_TARGET_SPEED))):
+        return Rejected("out of range")
     if pos and sp.frame == FRAME_LOCAL_NED:
         return PositionTarget(sp.x, sp.y)
     if vel:
