@@ -201,7 +201,9 @@ def main(argv: list[str] | None = None) -> int:
           f"{ignored} ignored {dict(sorted(v.setpoints_ignored.items()))}, "
           f"{server.foreign} for other systems, {server.gate.timeouts} lockstep timeouts, "
           f"{link.signing_rejected} refused for their signature, "
-          f"{server.handler_errors} handler errors",
+          f"{server.handler_errors} handler errors; telemetry faults: "
+          f"{server.telemetry.dropped} dropped, {server.telemetry.duplicated} duplicated, "
+          f"{server.telemetry.reordered} reordered, {server.telemetry.bursts} bursts",
           file=sys.stderr, flush=True)
     if link.peer_closed:
         print("sitl-plant: the TCP peer closed the connection", file=sys.stderr)

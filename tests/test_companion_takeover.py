@@ -1,0 +1,119 @@
+"""A pilot takes over (the plant flips to HOLD mid-mission): the companion sends nothing more,
+not even a zero setpoint or a mode request, and says so. And a vehicle whose heartbeat stops
+for 3 s is stopped (zero setpoint, HOLD) and only re-engaged once heartbeats are back.
+Real processes over loopback UDP."""
+
+from __future__ import annotations
+
+import signal
+import time
+
+import pytest
+
+from companion_harness import (Companion, FakeVehicle, Proxy, ellipse_mission, is_mode_command,
+                               is_zero)
+from sitl_plant.testing import PlantProcess, free_udp_port
+
+HOLD, GUIDED = 4, 15
+TAKEOVER_S = 5.0
+
+
+@pytest.mark.parametrize("how", ["lockstep --takeover-at", "paced SIGUSR1"])
+def test_pilot_takeover_stops_the_companion_within_one_cycle(tmp_path, how):
+    mission = ellipse_mission(tmp_path / "m.toml", 30.0)
+    plant_args = (["--lockstep", "--takeover-at", str(TAKEOVER_S)] if how.startswith("lockstep")
+                  else ["--speedup", "2"])
+    with Proxy() as proxy, \
+            PlantProcess(*plant_args, "--d-cen", "0.3", port=proxy.plant_port) as plant, \
+            Companion(proxy.companion_port, "--arm", "--json", "--mission", str(mission),
+                      "--log-dir", str(tmp_path)) as comp:
+        if how.startswith("paced"):
+            proxy.wait_for(lambda: sum(1 for s in proxy.companion_sent(
+                "SET_POSITION_TARGET_LOCAL_NED") if not is_zero(s.msg)) >= 100, 20.0)
+            plant.proc.send_signal(signal.SIGUSR1)
+        code = comp.wait(30.0)
+        r = comp.result()
+        time.sleep(0.3)
+    assert code == 3, comp.stderr
+    assert r["reason"] == "pilot_override: mode changed to HOLD by someone else"
+    assert "pilot took over" in comp.stderr
+    hold_hb = [s for s in proxy.plant_sent("HEARTBEAT") if s.msg.custom_mode == HOLD]
+    assert hold_hb, "the plant never reported HOLD"
+    t_hold = hold_hb[0].wall
+    after = [s for s in proxy.from_companion if s.wall > t_hold
+             and s.msg.get_type() in ("SET_POSITION_TARGET_LOCAL_NED", "COMMAND_LONG")]
+    assert after == [], [s.msg.get_type() for s in after]     # not one setpoint, no mode request
+    # the last setpoint answered the last sample sent before the takeover: within one cycle
+    last_sp = proxy.companion_sent("SET_POSITION_TARGET_LOCAL_NED")[-1]
+    before = [s.msg.time_boot_ms for s in proxy.plant_sent("LOCAL_POSITION_NED")
+              if s.wall < t_hold]
+    assert last_sp.msg.time_boot_ms == before[-1], (last_sp.msg.time_boot_ms, before[-3:])
+    assert not is_zero(last_sp.msg)                  # it was tracking, and then it was silent
+    if how.startswith("lockstep"):
+        assert before[-1] == TAKEOVER_S * 1000
+    csv = next(tmp_path.glob("*.csv")).read_text()
+    assert "pilot_override: mode changed to HOLD by someone else" in csv
+    print(f"\ntakeover ({how}): last setpoint answered sample {last_sp.msg.time_boot_ms} ms, "
+          f"sent {1e3 * (t_hold - last_sp.wall):.2f} ms before the HOLD heartbeat reached the "
+          f"proxy; 0 setpoints or commands after it; companion exit {code}")
+
+
+class QuietVehicle(FakeVehicle):
+    """The scripted vehicle, with heartbeats that can be switched off, and wall times of what
+    the companion sent it."""
+
+    silent = False
+
+    def _heartbeat(self) -> None:
+        if not self.silent:
+            self.last_heartbeat = time.monotonic()
+            super()._heartbeat()
+
+    def _handle(self, msg) -> bool:
+        self.stamped = getattr(self, "stamped", [])
+        self.stamped.append((time.monotonic(), msg))
+        return super()._handle(msg)
+
+
+def test_heartbeat_lost_for_3_s_stops_the_rover_then_holds_and_resumes(tmp_path):
+    mission = ellipse_mission(tmp_path / "m.toml", 3600.0)
+    port = free_udp_port()
+    with Companion(port, "--arm", "--json", "--mission", str(mission), "--log-dir",
+                   str(tmp_path)) as comp, QuietVehicle(port) as fake:
+        deadline = time.monotonic() + 20
+        while sum(1 for sp in fake.setpoints if not is_zero(sp)) < 40:
+            assert time.monotonic() < deadline, comp.stderr
+            time.sleep(0.02)
+        fake.silent = True
+        time.sleep(0.05)
+        t_last = fake.last_heartbeat
+        time.sleep(4.5)
+        fake.silent = False
+        t_resumed = time.monotonic()
+        deadline = t_resumed + 10
+        while not any(w > t_resumed and m.get_type() == "SET_POSITION_TARGET_LOCAL_NED"
+                      and not is_zero(m) for w, m in list(fake.stamped)):
+            assert time.monotonic() < deadline, comp.stderr
+            time.sleep(0.05)
+        comp.proc.send_signal(signal.SIGTERM)
+        assert comp.wait(20.0) == 0, comp.stderr
+        r = comp.result()
+    stamped = [(w, m) for w, m in fake.stamped if w > t_last]
+    holds = [w for w, m in stamped if m.get_type() == "COMMAND_LONG" and is_mode_command(m, HOLD)]
+    assert holds, "no HOLD after the heartbeat stopped"
+    reaction = holds[0] - t_last
+    assert 3.0 <= reaction <= 3.8, (reaction, comp.stderr)
+    # from the failsafe until heartbeats came back: only zero setpoints
+    t_back = t_last + 4.55
+    sps = [(w, m) for w, m in stamped if m.get_type() == "SET_POSITION_TARGET_LOCAL_NED"]
+    during = [m for w, m in sps if holds[0] <= w < t_back]
+    assert during and all(is_zero(m) for m in during)
+    assert is_zero([m for w, m in sps if w < holds[0]][-1])     # the stop came before HOLD
+    guided = [w for w, m in stamped if m.get_type() == "COMMAND_LONG"
+              and is_mode_command(m, GUIDED) and w > holds[0]]
+    assert guided and guided[0] >= t_back - 0.05           # re-engaged once the link was back
+    assert r["reason"] == "SIGTERM" and r["failsafes"] == 1
+    assert "heartbeat lost" in comp.stderr
+    print(f"\nheartbeat lost: HOLD requested {reaction:.2f} s after the last heartbeat; "
+          f"{len(during)} zero setpoints meanwhile; GUIDED again {guided[0] - t_back:+.2f} s "
+          f"after heartbeats resumed")
