@@ -119,7 +119,9 @@ class PoseFilter:
         dt = t - self.t
         if not dt > 0.0:  # also catches NaN
             raise ValueError(f"filter time must increase: dt = {dt!r}")
-        if dt != self._dt:
+        # Recompute exp(A_L dt) only when dt really changes: sample times like k * 0.001 differ
+        # in the last bits from step to step, which would otherwise cost an exp per sample.
+        if self._dt is None or abs(dt - self._dt) > 1e-9 * dt:
             self._phi = transition(self.gains, dt, self._m)
             self._dt = dt
         p11, p12, p21, p22 = self._phi
