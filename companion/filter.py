@@ -135,7 +135,7 @@ class PoseFilter:
         self.y = meas.y + p11 * ey + p12 * self.vy
         self.vy = p21 * ey + p22 * self.vy
 
-        yaw_meas = self._yaw_meas + wrap(meas.yaw - self._yaw_meas)
+        yaw_meas = self._yaw_meas + self._m.wrap(meas.yaw - self._yaw_meas)
         eyaw = self.yaw - yaw_meas
         yaw = yaw_meas + p11 * eyaw + p12 * self.yaw_rate
         self.yaw_rate = p21 * eyaw + p22 * self.yaw_rate
@@ -143,4 +143,4 @@ class PoseFilter:
         turns = TAU * self._m.floor((yaw_meas + math.pi) / TAU)
         self._yaw_meas = yaw_meas - turns
         self.yaw = yaw - turns
-        return Estimate(self.x, self.y, wrap(self.yaw), self.vx, self.vy, self.yaw_rate)
+        return Estimate(self.x, self.y, self._m.wrap(self.yaw), self.vx, self.vy, self.yaw_rate)

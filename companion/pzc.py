@@ -49,7 +49,7 @@ from . import ops as _ops
 from .angles import wrap
 from .filter import FilterGains, PoseFilter
 from .lead import ActuatorLead
-from .limits import SPEED_LAWS, Limits, clamp, speed_from_up
+from .limits import SPEED_LAWS, Limits, clamp, keep_if, speed_from_up
 from .signals import Command, Estimate, Measurement, Num, Reference
 
 
@@ -145,7 +145,7 @@ class PZCLaw:
             uy = uy + g.accel_ff * ref.ay
 
         yaw_ref = m.atan2(uy, ux)
-        eyaw = wrap(yaw_ref - est.yaw)
+        eyaw = m.wrap(yaw_ref - est.yaw)
         int_yaw = self.int_yaw + eyaw * dt
         yaw_rate = g.kp_yaw * eyaw + g.ki_yaw * int_yaw
         if g.heading_rate_ff is not False:
@@ -155,9 +155,9 @@ class PZCLaw:
         speed = speed_from_up(m, g.speed_law, norm_up, eyaw)
         cmd, speed_free, rate_free = clamp(m, lim, speed, yaw_rate, ux, uy, norm_up)
         # Conditional integration: keep the new integrator state only while unsaturated.
-        self.int_x = m.where(speed_free, int_x, self.int_x)
-        self.int_y = m.where(speed_free, int_y, self.int_y)
-        self.int_yaw = m.where(rate_free, int_yaw, self.int_yaw)
+        self.int_x = keep_if(m, speed_free, int_x, self.int_x)
+        self.int_y = keep_if(m, speed_free, int_y, self.int_y)
+        self.int_yaw = keep_if(m, rate_free, int_yaw, self.int_yaw)
         return cmd
 
 

@@ -148,3 +148,19 @@ def test_accel_feed_forward_cancels_a_first_order_actuator():
         v += (1.0 - math.exp(-w_c * dt)) * (cmd.ux - v)
         errs.append(abs(v - (1.0 + 0.5 * math.sin(t + dt))))
     assert max(errs[1000:]) < 2e-3
+
+
+def test_wrap_is_half_open_and_the_same_for_floats_and_arrays():
+    from companion import ops
+    edge = [math.pi, -math.pi, 3 * math.pi, -3 * math.pi, 0.0, 2 * math.pi, 1e-12, -1e-12,
+            math.pi + 1e-12, -math.pi + 1e-12, 100.0, -100.0]
+    rng = np.random.default_rng(1)
+    values = np.concatenate([edge, rng.uniform(-50, 50, 1000)])
+    arr = ops.array.wrap(values)
+    assert np.all(arr > -math.pi) and np.all(arr <= math.pi)
+    assert ops.array.wrap(np.array([math.pi, -math.pi])) == pytest.approx([math.pi, math.pi])
+    for v, a in zip(values, arr):
+        s = ops.scalar.wrap(float(v))
+        assert -math.pi < s <= math.pi
+        assert s == pytest.approx(wrap(float(v)), abs=1e-12)
+        assert math.cos(a - s) == pytest.approx(1.0) and abs(a - s) < 1e-9

@@ -52,7 +52,8 @@ def _check(args) -> None:
         raise UserError(f"--jobs must be at least 1, not {args.jobs!r}")
 
 
-def tuned_gains(rate: float, w_c: float, gains_file: str | None, progress=None):
+def tuned_gains(rate: float, w_c: float, gains_file: str | None, progress=None,
+                duration: float = 60.0):
     """(FilterGains, PZCGains, source) for pzc_tuned."""
     from .. import gains as gains_mod
     if gains_file:
@@ -61,8 +62,10 @@ def tuned_gains(rate: float, w_c: float, gains_file: str | None, progress=None):
     shipped = gains_mod.find_tuned(rate, w_c)
     if shipped is not None:
         return shipped.filter, shipped.pzc, f"shipped {gains_mod.tuned_path(rate, w_c).name}"
+    from ..limits import Limits
     from ..tuning import TuneConfig, tune
-    cfg = TuneConfig(rate_hz=rate, w_c=w_c, population=48, rounds=3)
+    cfg = TuneConfig(rate_hz=rate, w_c=w_c, duration=duration, population=48, rounds=3,
+                     limits=Limits())     # the table's plant has no limits; tune for it
     result = tune(cfg, progress)
     return (result.gains.filter, result.gains.pzc,
             f"tuned on the fly (population {cfg.population}, {cfg.rounds} rounds; "
@@ -171,9 +174,14 @@ def run(args) -> int:
     from ..experiment import TableConfig
     from ..filter import FilterGains  # noqa: F401  (imported early: a bad install fails here)
 
-    show = not args.no_progress
+    # A gains file is read (and any mistake in it reported) before anything else starts.
+    preset = None
+    if args.gains:
+        from .. import gains as gains_mod
+        g = gains_mod.load(args.gains)
+        preset = (g.filter, g.pzc, f"file {args.gains}")
     bar = None
-    if show:
+    if not args.no_progress:
         from tqdm import tqdm
         bar = tqdm(total=100, desc="paper-table", file=sys.stderr,
                    bar_format="{desc} {percentage:3.0f}%|{bar}| {elapsed}<{remaining}",
@@ -183,7 +191,8 @@ def run(args) -> int:
             if bar is not None:
                 bar.set_description_str("tuning pzc_tuned", refresh=False)
             _advance(bar, 100 * frac)
-        fg, pg, source = tuned_gains(args.rate, args.w_c, args.gains, tune_progress)
+        fg, pg, source = preset or tuned_gains(args.rate, args.w_c, None, tune_progress,
+                                                         args.duration)
         if bar is not None:
             bar.set_description_str("paper-table", refresh=False)
             bar.reset()
