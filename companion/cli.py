@@ -22,6 +22,8 @@ COMMANDS = [
     "tune",
     "mission",
     "simulate",
+    "monitor",
+    "router",
 ]
 
 
