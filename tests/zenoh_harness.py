@@ -176,3 +176,107 @@ def secret_file(path: Path, secret: str = "correct horse battery staple") -> Pat
     path.write_text(secret + "\n")
     path.chmod(0o600)
     return path
+
+
+# --------------------------------------------------------------------------- fleets
+
+@dataclass
+class FleetRun:
+    n: int
+    snapshot: dict[str, Any]           # the monitor's --once --json snapshot
+    results: list[dict[str, Any]]      # each companion's --json result (None: no result)
+    codes: list[int | None]
+    gaps_ms: dict[str, float]          # per vehicle: longest gap between state messages (record)
+    counts: dict[str, int]
+    wall_s: float
+    stderr_tail: str = ""
+
+
+def _popen(argv: list[str], log: Path) -> subprocess.Popen:
+    f = open(log, "w")
+    try:
+        return subprocess.Popen(argv, stdout=f, stderr=subprocess.STDOUT, cwd=ROOT,
+                                env={**os.environ, "PYTHONUNBUFFERED": "1"})
+    finally:
+        f.close()
+
+
+def run_fleet(n: int, tmp: Path, rate: float = 20.0, duration: float = 10.0,
+              arm_delay: float | None = None, timeout: float = 120.0) -> FleetRun:
+    """One router, ``n`` sitl-plant + ``companion run`` pairs in real time at ``rate`` Hz, all
+    publishing through the router (client mode), and one ``companion monitor --once --json
+    --record``. Plants refuse arming for ``arm_delay`` s so every pair starts tracking after all
+    the processes are up. Every process is killed on the way out, whatever happened."""
+    from sitl_plant.testing import free_udp_port
+    t0 = time.monotonic()
+    arm_delay = arm_delay if arm_delay is not None else 4.0 + 0.5 * n
+    mission = mission_file(tmp / "fleet.toml", duration)
+    router_port = free_tcp_port()
+    router_ep = endpoint(router_port)
+    zenoh_client = ["--zenoh-mode", "client", "--zenoh-connect", router_ep, *ISOLATED]
+    record = tmp / "fleet.jsonl"
+    procs: list[subprocess.Popen] = []
+    companions: list[subprocess.Popen] = []
+    try:
+        router = _popen([sys.executable, "-m", "companion", "router", "--zenoh-listen",
+                         router_ep, *ISOLATED], tmp / "router.log")
+        procs.append(router)
+        deadline = time.monotonic() + 15.0
+        while "routing" not in (tmp / "router.log").read_text():
+            assert router.poll() is None and time.monotonic() < deadline, \
+                (tmp / "router.log").read_text()
+            time.sleep(0.05)
+        monitor = _popen([sys.executable, "-m", "companion", "monitor", "--once", "--json",
+                          "--wait", str(timeout), "--record", str(record), *zenoh_client],
+                         tmp / "monitor.out")
+        procs.append(monitor)
+        loop_rate = max(50.0, rate / 0.8 + 1)
+        for i in range(1, n + 1):
+            port = free_udp_port()
+            procs.append(_popen(
+                [sys.executable, "-m", "sitl_plant", "--connect", f"udpout:127.0.0.1:{port}",
+                 "--sysid", str(i), "--d-cen", "0.3", "--arm-delay", str(arm_delay),
+                 "--loop-rate", f"{loop_rate:g}", "--physics-dt", "0.002"],
+                tmp / f"plant{i}.log"))
+            c = _popen([sys.executable, "-m", "companion", "run", "--connect",
+                        f"udpin:127.0.0.1:{port}", "--sysid", str(i), "--mission", str(mission),
+                        "--arm", "--arm-timeout", "120", "--json", "-q", "--rate", f"{rate:g}",
+                        *zenoh_client], tmp / f"companion{i}.out")
+            procs.append(c)
+            companions.append(c)
+        deadline = t0 + timeout
+        for c in companions:
+            c.wait(max(0.1, deadline - time.monotonic()))
+        monitor.send_signal(signal.SIGTERM)     # --once: SIGTERM ends the wait, prints the snapshot
+        monitor.wait(5.0)
+        out = (tmp / "monitor.out").read_text()
+        snap = json.loads([line for line in out.splitlines() if line.startswith("{")][-1])
+        results, codes = [], []
+        for i, c in enumerate(companions, 1):
+            lines = [line for line in (tmp / f"companion{i}.out").read_text().splitlines()
+                     if line.startswith("{")]
+            results.append(json.loads(lines[-1]) if lines else None)
+            codes.append(c.returncode)
+    finally:
+        for p in procs:
+            if p.poll() is None:
+                p.terminate()
+        for p in procs:
+            try:
+                p.wait(3.0)
+            except subprocess.TimeoutExpired:
+                p.kill()
+                p.wait()
+    gaps: dict[str, float] = {}
+    counts: dict[str, int] = {}
+    last: dict[str, float] = {}
+    for line in record.read_text().splitlines():
+        r = json.loads(line)
+        if not r["key"].endswith("/state"):
+            continue
+        vid = r["payload"]["vehicle_id"]
+        counts[vid] = counts.get(vid, 0) + 1
+        if vid in last:
+            gaps[vid] = max(gaps.get(vid, 0.0), (r["rx"] - last[vid]) * 1e3)
+        last[vid] = r["rx"]
+    return FleetRun(n, snap, results, codes, gaps, counts, time.monotonic() - t0)
