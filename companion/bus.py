@@ -46,7 +46,8 @@ nothing. The secret travels in clear over TCP: on an untrusted network use Zenoh
 endpoints or its access control as well. :func:`control_request` is the client side.
 
 Publishing never blocks the loop: publishers use ``CongestionControl.DROP`` (a full queue drops
-the sample instead of waiting), and the loop's only work is one ``json.dumps`` and one ``put``.
+the sample instead of waiting), and the loop's only work is one ``json.dumps`` (~15 us) and one
+``put`` that only enqueues (~1 us; Zenoh's own thread writes the socket).
 Zenoh's callback threads are not daemon threads: every session is closed on every path out
 (:meth:`Bus.close`, :func:`close_all`), or the process never exits.
 """
@@ -354,13 +355,16 @@ class Bus:
             self.vehicle_id = f"rover{sysid}"
         vid = self.vehicle_id
         json_enc = zenoh.Encoding.APPLICATION_JSON
-        # DROP: a congested link loses samples instead of stalling the control loop. Express:
-        # no batching delay, one sample is one message (20-1000 per second is little).
+        # DROP: a congested link loses samples instead of stalling the control loop. Not
+        # express: put only enqueues (~1 us; Zenoh's own thread writes the socket), where an
+        # express put writes it in the caller (~35 us), for the same latency (measured:
+        # benchmarks/bench_zenoh.py).
         self._state_pub = self.session.declare_publisher(
             state_key(vid), encoding=json_enc, congestion_control=zenoh.CongestionControl.DROP,
-            priority=zenoh.Priority.DATA, express=True)
+            priority=zenoh.Priority.DATA)
         # Life-cycle events go on a higher priority (its own queue) so a flood of state
-        # samples cannot crowd them out.
+        # samples cannot crowd them out, and express so the last one ("stopped") is on the
+        # wire before the session closes.
         self._status_pub = self.session.declare_publisher(
             status_key(vid), encoding=json_enc, congestion_control=zenoh.CongestionControl.DROP,
             priority=zenoh.Priority.DATA_HIGH, express=True)
