@@ -136,7 +136,10 @@ def latency(rate: float, seconds: float) -> None:
 
 
 def fleet(sizes: list[int], rate: float, duration: float) -> None:
-    best = 0
+    """Grow the fleet until a companion misses a control cycle (or a run fails); report the
+    largest size with no missed cycle and, separately, the largest whose monitor also saw no
+    state gap over 200 ms (the monitor is one more process competing for the same 2 cores)."""
+    best_loop = best_gap = 0
     for n in sizes:
         with tempfile.TemporaryDirectory() as tmp:
             try:
@@ -149,17 +152,20 @@ def fleet(sizes: list[int], rate: float, duration: float) -> None:
         missed = sum(r["missed_cycles"] for r in f.results if r)
         gap = max(f.gaps_ms.values(), default=math.inf)
         seen = len(f.snapshot["vehicles"])
-        ok = done == n and missed == 0 and gap < 200.0 and seen == n
+        loop_ok = done == n and missed == 0
+        gap_ok = loop_ok and gap < 200.0 and seen == n
         p99_lat = max((r["latency_p99_ms"] for r in f.results if r), default=math.nan)
-        print(f"fleet {n:3d} at {rate:g} Hz: {done}/{n} missions done, {seen} seen by the "
-              f"monitor, missed cycles {missed}, max state gap {gap:.0f} ms, worst loop p99 "
-              f"{p99_lat:.2f} ms, wall {f.wall_s:.0f} s -> {'OK' if ok else 'NOT HELD'}",
-              flush=True)
-        if not ok:
+        print(f"fleet {n:3d} at {rate:g} Hz: {done}/{n} missions done, missed control cycles "
+              f"{missed}, worst loop p99 {p99_lat:.2f} ms; monitor saw {seen}, max state gap "
+              f"{gap:.0f} ms; monitor/router exit after SIGTERM "
+              f"{max(f.exit_s.values()):.2f} s; wall {f.wall_s:.0f} s", flush=True)
+        if not loop_ok:
             break
-        best = n
-    print(f"largest fleet held at {rate:g} Hz with no missed control cycle: {best or 'none'}"
-          f" (of the sizes tried: {sizes})")
+        best_loop = n
+        if gap_ok:
+            best_gap = n
+    print(f"largest fleet at {rate:g} Hz with no missed control cycle: {best_loop or 'none'}; "
+          f"with also no monitor gap over 200 ms: {best_gap or 'none'} (sizes tried: {sizes})")
 
 
 def main() -> None:

@@ -199,26 +199,26 @@ def close_all() -> None:
         close_session(session)
 
 
-def read_secret(path: str) -> bytes:
+def read_secret(path: str, flag: str = "--control-secret") -> bytes:
     """The shared control secret; refused when group or others may read or write the file."""
     p = Path(path)
     try:
         st = p.stat()
     except FileNotFoundError:
-        raise UserError(f"--control-secret {path}: no such file") from None
+        raise UserError(f"{flag} {path}: no such file") from None
     except OSError as exc:
-        raise UserError(f"--control-secret {path}: cannot read: {exc.strerror}") from None
+        raise UserError(f"{flag} {path}: cannot read: {exc.strerror}") from None
     if not stat.S_ISREG(st.st_mode):
-        raise UserError(f"--control-secret {path}: not a regular file")
+        raise UserError(f"{flag} {path}: not a regular file")
     if st.st_mode & 0o077:
-        raise UserError(f"--control-secret {path}: permissions {stat.filemode(st.st_mode)} let "
+        raise UserError(f"{flag} {path}: permissions {stat.filemode(st.st_mode)} let "
                         f"group or others read it; run `chmod 600 {path}`")
     try:
         secret = p.read_bytes().strip()
     except OSError as exc:
-        raise UserError(f"--control-secret {path}: cannot read: {exc.strerror}") from None
+        raise UserError(f"{flag} {path}: cannot read: {exc.strerror}") from None
     if len(secret) < 8:
-        raise UserError(f"--control-secret {path}: the secret must be at least 8 bytes")
+        raise UserError(f"{flag} {path}: the secret must be at least 8 bytes")
     return secret
 
 
@@ -491,16 +491,24 @@ def control_request(session, vehicle_id: str, verb: str, secret: bytes | str | N
                     payload: bytes | str | None = None, timeout: float = 5.0) -> dict[str, Any]:
     """Send one control request; the decoded reply, ``ok`` False for an error reply, or
     ``{"ok": False, "message": "no reply ..."}`` when nothing answered."""
-    kwargs: dict[str, Any] = {"timeout": timeout}
+    kwargs: dict[str, Any] = {}
     if secret is not None:
         kwargs["attachment"] = secret
     if payload is not None:
         kwargs["payload"] = payload
     selector = control_key(vehicle_id) + (f"?verb={verb}" if verb else "")
-    for reply in session.get(selector, **kwargs):
-        if reply.ok is not None:
-            return _reply_body(reply.ok.payload.to_bytes(), True)
-        return _reply_body(reply.err.payload.to_bytes(), False)
+    deadline = time.monotonic() + timeout
+    while (left := deadline - time.monotonic()) > 0:
+        asked = time.monotonic()
+        for reply in session.get(selector, timeout=left, **kwargs):
+            if reply.ok is not None:
+                return _reply_body(reply.ok.payload.to_bytes(), True)
+            return _reply_body(reply.err.payload.to_bytes(), False)
+        if time.monotonic() - asked > 0.5 * left:
+            break       # something took the query but did not answer: never send it twice
+        # No queryable matched (yet): a session that just opened may still be learning its
+        # routes (peers find each other by gossip after the open returns). Ask again shortly.
+        time.sleep(0.1)
     return {"ok": False, "verb": verb,
             "message": f"no reply from {control_key(vehicle_id)} within {timeout:g} s "
                        "(control not enabled, or the vehicle not reachable)"}

@@ -23,6 +23,7 @@ COMMANDS = [
     "mission",
     "simulate",
     "monitor",
+    "control",
     "router",
 ]
 

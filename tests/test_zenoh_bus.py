@@ -75,7 +75,7 @@ MISSION_TEXT = ('name = "loaded"\nframe = "start"\nduration = 20\n'
                 '[trajectory]\nkind = "ellipse"\nf_r = 0.12\n')
 
 
-def test_every_control_verb_and_every_refusal(tmp_path):
+def test_every_control_verb_and_every_refusal(tmp_path, capsys):
     port = free_tcp_port()
     secret = "correct horse battery staple"
     key_file = secret_file(tmp_path / "secret", secret)
@@ -140,9 +140,16 @@ def test_every_control_verb_and_every_refusal(tmp_path):
             assert (s2["state"], s2["mission"], s2["mission_time"]) == ("ready", "loaded", 0.0)
             assert ask("start")["ok"]
             heard.wait(lambda: status()["mission_time"] > 0.2, 5.0, "tracking the new mission")
+            # The operator's command line: `companion control` (in this process).
+            cli = ["control", "alpha", "--zenoh-connect", endpoint(port), *ISOLATED]
+            wrong = secret_file(tmp_path / "wrong", "not the secret at all")
+            code, _ = _main(capsys, *cli[:2], "status", "--secret", str(wrong), *cli[2:])
+            assert code == 1
+            code, err = _main(capsys, *cli[:2], "status", "--secret", str(key_file), *cli[2:])
+            assert code == 0, err
             # abort: stop and HOLD now
-            r = ask("abort")
-            assert r["ok"], r
+            code, err = _main(capsys, *cli[:2], "abort", "--secret", str(key_file), *cli[2:])
+            assert code == 0, err
             assert run.wait(10.0) == 0, run.stderr
             result = run.result()
         heard.wait(lambda: "stopped" in heard.statuses("alpha"), 3.0, "stopped")

@@ -19,8 +19,11 @@ def test_ten_vehicles_through_one_router_seen_by_one_monitor(tmp_path):
     seen = {v["vehicle_id"]: v for v in fleet.snapshot["vehicles"]}
     missed = [r and r["missed_cycles"] for r in fleet.results]
     print(f"\nfleet of {N} at {RATE:g} Hz: wall {fleet.wall_s:.1f} s, max gap per vehicle (ms) "
-          f"{ {k: round(v) for k, v in sorted(fleet.gaps_ms.items())} }, missed cycles {missed}")
+          f"{ {k: round(v) for k, v in sorted(fleet.gaps_ms.items())} }, missed cycles {missed}, "
+          f"exit after SIGTERM {fleet.exit_s}")
     assert set(seen) == ids, sorted(seen)
+    assert max(fleet.exit_s.values()) <= 2.0, fleet.exit_s      # monitor, router: SIGTERM
+
     assert fleet.codes == [0] * N, (fleet.codes, fleet.results)
     for r in fleet.results:
         assert r["reason"] == "mission_done" and r["duration_s"] >= DURATION - 0.1, r

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import contextlib
 import json
+import math
 import os
 import signal
 import socket
@@ -189,7 +190,7 @@ class FleetRun:
     gaps_ms: dict[str, float]          # per vehicle: longest gap between state messages (record)
     counts: dict[str, int]
     wall_s: float
-    stderr_tail: str = ""
+    exit_s: dict[str, float]           # monitor / router: seconds from SIGTERM to exit
 
 
 def _popen(argv: list[str], log: Path) -> subprocess.Popen:
@@ -247,8 +248,16 @@ def run_fleet(n: int, tmp: Path, rate: float = 20.0, duration: float = 10.0,
         deadline = t0 + timeout
         for c in companions:
             c.wait(max(0.1, deadline - time.monotonic()))
-        monitor.send_signal(signal.SIGTERM)     # --once: SIGTERM ends the wait, prints the snapshot
-        monitor.wait(5.0)
+        exit_s = {}
+        for name, p in (("monitor", monitor), ("router", router)):
+            # --once: SIGTERM ends the monitor's wait and it prints the snapshot.
+            t_sig = time.monotonic()
+            p.send_signal(signal.SIGTERM)
+            try:
+                p.wait(5.0)
+            except subprocess.TimeoutExpired:
+                pass
+            exit_s[name] = time.monotonic() - t_sig if p.poll() is not None else math.inf
         out = (tmp / "monitor.out").read_text()
         snap = json.loads([line for line in out.splitlines() if line.startswith("{")][-1])
         results, codes = [], []
@@ -279,4 +288,4 @@ def run_fleet(n: int, tmp: Path, rate: float = 20.0, duration: float = 10.0,
         if vid in last:
             gaps[vid] = max(gaps.get(vid, 0.0), (r["rx"] - last[vid]) * 1e3)
         last[vid] = r["rx"]
-    return FleetRun(n, snap, results, codes, gaps, counts, time.monotonic() - t0)
+    return FleetRun(n, snap, results, codes, gaps, counts, time.monotonic() - t0, exit_s)
