@@ -307,6 +307,7 @@ class Bus:
         self._status_seq = 0
         self.published = 0
         self.refused = 0
+        self._next_refusal_log = 0.0
         self._closed = False
 
     # --- Sink ------------------------------------------------------------------------------
@@ -387,6 +388,10 @@ class Bus:
         if problem is not None:
             self.refused += 1
             _reply(query, False, verb, problem)
+            now = time.monotonic()
+            if now >= self._next_refusal_log:     # at most a line a second, even under a flood
+                self._next_refusal_log = now + 1.0
+                self.log(f"control: {problem} ({self.refused} refused so far)")
             return
         # The loop answers within a cycle; waiting for it here would stall Zenoh's thread.
         self._requests.put((query, verb, payload))
@@ -435,6 +440,8 @@ class Bus:
                 except ValueError:
                     pass
             _reply(query, ok, verb, message, extra)
+            if verb != "status":
+                self.log(f"control: {verb}: {'done' if ok else 'refused'}: {message}")
         # Anything still queued gets an answer too, not a silent timeout.
         while True:
             try:

@@ -21,7 +21,13 @@ ISOLATED_ZENOH = """{
 """
 
 
+_PATH = Path(tempfile.gettempdir()) / f"pzc-rover-zenoh-isolated-{os.getpid()}.json5"
+
+
 def pytest_configure(config):
-    path = Path(tempfile.gettempdir()) / f"pzc-rover-zenoh-isolated-{os.getpid()}.json5"
-    path.write_text(ISOLATED_ZENOH)
-    os.environ["ZENOH_CONFIG"] = str(path)
+    _PATH.write_text(ISOLATED_ZENOH)
+    os.environ["ZENOH_CONFIG"] = str(_PATH)
+
+
+def pytest_unconfigure(config):
+    _PATH.unlink(missing_ok=True)

@@ -200,3 +200,33 @@ def test_bad_config_file_and_shared_secret_file_are_refused(tmp_path, capsys):
     assert code == 2 and "at least 8 bytes" in err, err
     code, err = _main(capsys, "router", "--zenoh-listen", "tcp/8.8.8.8:80", *ISOLATED)
     assert code == 2 and "tcp/8.8.8.8:80" in err and len(err.splitlines()) == 1, err
+
+
+def test_failsafe_and_recovery_are_published_with_reasons(tmp_path):
+    import signal
+    port = free_tcp_port()
+    mission = mission_file(tmp_path / "m.toml", 60.0)
+    with session(listen=[endpoint(port)]) as s:
+        heard = Collector(s)
+        with PlantProcess("--speedup", "1", "--d-cen", "0.3", sysid=5) as plant, \
+                Proc("run", "--connect", f"udpin:127.0.0.1:{plant.port}", "--mission",
+                     str(mission), "--arm", "--json", "--rate", "20",
+                     "--zenoh-connect", endpoint(port), *ISOLATED, tmp=tmp_path,
+                     name="run") as run:
+            heard.wait(lambda: len(heard.of("state")) > 5, 20.0, "state flowing")
+            plant.proc.send_signal(signal.SIGSTOP)          # the vehicle goes silent
+            try:
+                heard.wait(lambda: "failsafe" in heard.statuses(), 5.0, "failsafe status")
+            finally:
+                plant.proc.send_signal(signal.SIGCONT)
+            heard.wait(lambda: "resumed" in heard.statuses(), 10.0, "resumed status")
+            n = len(heard.of("state"))
+            heard.wait(lambda: len(heard.of("state")) > n + 5, 10.0, "tracking again")
+            code, _ = run.stop(signal.SIGTERM)
+            assert code == 0, run.stderr
+        heard.wait(lambda: "stopped" in heard.statuses(), 2.0, "stopped status")
+    by_kind = {h.msg["kind"]: h.msg for h in heard.of("status")}
+    assert "telemetry stale" in by_kind["failsafe"]["reason"], by_kind["failsafe"]
+    assert by_kind["resumed"]["reason"] == "telemetry back"
+    assert by_kind["stopped"]["reason"] == "SIGTERM"
+    assert heard.statuses()[:4] == ["connected", "tracking", "failsafe", "resumed"]
