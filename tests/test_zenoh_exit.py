@@ -88,3 +88,26 @@ def test_demo_exits_on_sigterm(tmp_path):
             code, _ = demo.stop(signal.SIGTERM, within=2.0)
             assert code == 0, demo.stderr
             assert demo.result()["plant_exit"] == 0
+
+
+def test_losing_the_router_mid_mission_disturbs_neither_the_loop_nor_the_exit(tmp_path):
+    port = free_tcp_port()
+    mission = mission_file(tmp_path / "m.toml", 5.0)
+    with Proc("router", "--zenoh-listen", endpoint(port), *ISOLATED, tmp=tmp_path,
+              name="router") as router:
+        router.wait_line("routing", 10.0)
+        with session(mode="client", connect=[endpoint(port)]) as s:
+            heard = Collector(s)
+            with PlantProcess("--speedup", "1") as plant, \
+                    Proc("run", "--connect", f"udpin:127.0.0.1:{plant.port}", "--mission",
+                         str(mission), "--arm", "--json", "--rate", "40", "--zenoh-mode",
+                         "client", "--zenoh-connect", endpoint(port), *ISOLATED, tmp=tmp_path,
+                         name="run") as run:
+                heard.wait(lambda: len(heard.of("state")) > 40, 20.0, "state via the router")
+                router.proc.kill()                      # the network dies mid-mission
+                assert run.wait(15.0) == 0, run.stderr
+                r = run.result()
+    assert r["reason"] == "mission_done" and r["duration_s"] >= 4.9
+    # A put that blocked on the dead link would stall the loop (and this run) for good; a
+    # couple of missed cycles is what a busy shared machine costs anyway.
+    assert r["missed_cycles"] <= 2 and r["sink_errors"] == 0, r
