@@ -5,7 +5,8 @@ last life-cycle event, speed (from successive poses on the vehicle's clock), tra
 age of the last message, message counts, lost samples (gaps in ``seq``) and the longest gap
 between two state messages as received here. ``--record FILE`` writes every message as one JSON
 line ``{"rx": unix time received, "key": key expression, "payload": {...}}``. ``--once --json``
-listens for ``--wait`` seconds, prints one ``pzc-rover/monitor/1`` snapshot and exits.
+listens for ``--wait`` seconds (SIGTERM / Ctrl-C ends the wait early), prints one
+``pzc-rover/monitor/1`` snapshot and exits.
 """
 
 from __future__ import annotations
@@ -197,7 +198,7 @@ def run(args) -> int:
             signal.signal(s, h)
         if record is not None:
             record.close()
-    if args.once or not stop.is_set():
+    if args.once:
         _show(snap, args.json, False)
     return 0
 
