@@ -206,13 +206,17 @@ def test_failsafe_and_recovery_are_published_with_reasons(tmp_path):
     import signal
     port = free_tcp_port()
     mission = mission_file(tmp_path / "m.toml", 60.0)
+    # This companion takes its Zenoh settings from a config file (--zenoh-config) alone.
+    zconf = tmp_path / "zenoh.json5"
+    zconf.write_text('{ mode: "peer", scouting: { multicast: { enabled: false } }, '
+                     f'connect: {{ endpoints: ["{endpoint(port)}"] }}, '
+                     'listen: { endpoints: ["tcp/127.0.0.1:0"] } }')
     with session(listen=[endpoint(port)]) as s:
         heard = Collector(s)
         with PlantProcess("--speedup", "1", "--d-cen", "0.3", sysid=5) as plant, \
                 Proc("run", "--connect", f"udpin:127.0.0.1:{plant.port}", "--mission",
                      str(mission), "--arm", "--json", "--rate", "20",
-                     "--zenoh-connect", endpoint(port), *ISOLATED, tmp=tmp_path,
-                     name="run") as run:
+                     "--zenoh-config", str(zconf), tmp=tmp_path, name="run") as run:
             heard.wait(lambda: len(heard.of("state")) > 5, 20.0, "state flowing")
             plant.proc.send_signal(signal.SIGSTOP)          # the vehicle goes silent
             try:
