@@ -15,8 +15,8 @@ positions are LOCAL_NED (x north, y east), yaw from north towards east.
 ``pzc-rover/state/1``::
 
     {"schema": "pzc-rover/state/1", "vehicle_id": "rover1",
-     "seq": 42,                 # control-cycle count since the companion started (steps by N
-                                # when decimated: a jump larger than "every" means a lost sample)
+     "seq": 42,                 # tracking-cycle count since the companion started (steps by
+                                # N when decimated: a jump larger than "every" is a lost sample)
      "every": 1,                # the decimation N
      "sent_at": 1732368000.123, # companion wall clock (Unix s) at publication
      "vehicle_time": 12.345,    # vehicle clock (time_boot_ms / 1000)
