@@ -234,3 +234,17 @@ def test_failsafe_and_recovery_are_published_with_reasons(tmp_path):
     assert by_kind["resumed"]["reason"] == "telemetry back"
     assert by_kind["stopped"]["reason"] == "SIGTERM"
     assert heard.statuses()[:4] == ["connected", "tracking", "failsafe", "resumed"]
+
+
+def test_no_zenoh_opens_no_session(tmp_path, capsys):
+    """--no-zenoh: even a broken Zenoh config is never read; what fails is the MAVLink side."""
+    from sitl_plant.testing import free_udp_port
+    mission = mission_file(tmp_path / "m.toml", 3.0)
+    bad = tmp_path / "bad.json5"
+    bad.write_text("{ mode: 3 ")
+    argv = ["run", "--connect", f"udpin:127.0.0.1:{free_udp_port()}", "--mission", str(mission),
+            "--heartbeat-timeout", "0.5", "--zenoh-config", str(bad)]
+    code, err = _main(capsys, *argv)
+    assert code == 2 and "not a valid Zenoh config" in err, err
+    code, err = _main(capsys, *argv, "--no-zenoh")
+    assert code == 2 and "Zenoh" not in err and "heartbeat" in err.lower(), err
