@@ -22,6 +22,9 @@ COMMANDS = [
     "tune",
     "mission",
     "simulate",
+    "monitor",
+    "control",
+    "router",
 ]
 
 
