@@ -418,9 +418,7 @@ class Bus:
             text = data.decode("utf-8")
         except UnicodeDecodeError:
             return verb, "", "mission text is not UTF-8"
-        # A leading comment line keeps the loop from ever reading the payload as a local path:
-        # a remote operator sends mission text, never a file name on this machine.
-        return verb, "# load-mission over Zenoh\n" + text, None
+        return verb, text, None
 
     def _serve(self) -> None:
         while True:
@@ -431,7 +429,9 @@ class Bus:
             if self._closed:
                 _reply(query, False, verb, "the companion is stopping")
                 continue
-            ok, message = self.control.submit(verb, payload, timeout=CONTROL_TIMEOUT)
+            # A remote operator sends mission text, never a file name on this machine.
+            ok, message = self.control.submit(verb, payload, timeout=CONTROL_TIMEOUT,
+                                              allow_path=False)
             extra = {}
             if ok and verb == "status":
                 try:

@@ -3,6 +3,8 @@ and status streams of a SITL run, every control verb, refusals, and bad input.""
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import json
 import math
 import time
@@ -129,6 +131,10 @@ def test_every_control_verb_and_every_refusal(tmp_path, capsys):
             bad = ask("load-mission", payload='name = "x"\n[trajectory]\nkind = "nope"\n')
             assert not bad["ok"] and "trajectory.kind" in bad["message"], bad
             assert status()["mission"] == "first"
+            # A file name on the companion's machine is not read for a remote operator.
+            shipped = str(Path(__file__).resolve().parent.parent / "missions" / "circle.toml")
+            by_path = ask("load-mission", payload=shipped)
+            assert not by_path["ok"] and status()["mission"] == "first", by_path
             assert ask("resume")["ok"]
             time.sleep(0.3)
             assert status()["mission_time"] > t_paused
