@@ -19,7 +19,7 @@ from dataclasses import dataclass
 
 from . import ops as _ops
 from .angles import wrap
-from .limits import Limits, clamp, speed_from_up
+from .limits import Limits, clamp, keep_if, speed_from_up
 from .pzc import reference_heading_rate
 from .signals import Command, Measurement, Num, Reference
 
@@ -59,18 +59,18 @@ class PIDTracker:
         uy = g.kp * ey + g.ki * int_y + g.kd * (ref.vy - meas.vy)
 
         yaw_ref = m.atan2(uy, ux)
-        yaw_ref_rate = 0.0 if first else wrap(yaw_ref - self.prev_yaw_ref) / dt
+        yaw_ref_rate = 0.0 if first else m.wrap(yaw_ref - self.prev_yaw_ref) / dt
         self.prev_yaw_ref = yaw_ref
-        eyaw = wrap(yaw_ref - meas.yaw)
+        eyaw = m.wrap(yaw_ref - meas.yaw)
         int_yaw = self.int_yaw + eyaw * dt
         yaw_rate = g.kp * eyaw + g.ki * int_yaw + g.kd * (yaw_ref_rate - meas.yaw_rate)
 
         norm_up = m.hypot(ux, uy)
         speed = speed_from_up(m, g.speed_law, norm_up, eyaw)
         cmd, speed_free, rate_free = clamp(m, self.limits, speed, yaw_rate, ux, uy, norm_up)
-        self.int_x = m.where(speed_free, int_x, self.int_x)
-        self.int_y = m.where(speed_free, int_y, self.int_y)
-        self.int_yaw = m.where(rate_free, int_yaw, self.int_yaw)
+        self.int_x = keep_if(m, speed_free, int_x, self.int_x)
+        self.int_y = keep_if(m, speed_free, int_y, self.int_y)
+        self.int_yaw = keep_if(m, rate_free, int_yaw, self.int_yaw)
         return cmd
 
 
@@ -101,7 +101,7 @@ class KanayamaTracker:
         ex = c * dx + s * dy
         ey = -s * dx + c * dy
         v_r = m.hypot(ref.vx, ref.vy)
-        eth = wrap(m.atan2(ref.vy, ref.vx) - meas.yaw)
+        eth = m.wrap(m.atan2(ref.vy, ref.vx) - meas.yaw)
         speed = v_r * m.cos(eth) + g.kx * ex
         yaw_rate = reference_heading_rate(ref, m) + v_r * (g.ky * ey + g.kth * m.sin(eth))
         # u_p: the commanded velocity vector, for a velocity-vector autopilot.

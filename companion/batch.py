@@ -14,7 +14,7 @@ Metrics (Section 5.3), per vehicle, integrated on the plant step:
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field, fields
+from dataclasses import dataclass, field
 from typing import Callable, Protocol, Sequence
 
 import numpy as np
@@ -64,7 +64,7 @@ class SimResult:
 
 def _take(obj, sl):
     """The slice ``sl`` of every field of a signal dataclass."""
-    return type(obj)(*(getattr(obj, f.name)[sl] for f in fields(obj)))
+    return type(obj)(*[getattr(obj, name)[sl] for name in obj.__slots__])
 
 
 def simulate(trackers: Tracker | Sequence[tuple[Tracker, slice]], params: RoverParams,
@@ -161,7 +161,7 @@ def _record(trace, t, state, ref, speed_cmd, yaw_rate_cmd, meas, groups, n):
         if est is None:
             continue
         m = meas if sl is None else _take(meas, sl)
-        idx = slice(None) if sl is None else sl
+        idx = ... if sl is None else sl   # Ellipsis also indexes the 0-d array of one vehicle
         ef["ex"][idx] = m.x - est.x
         ef["ey"][idx] = m.y - est.y
         ef["eyaw"][idx] = (m.yaw - est.yaw + math.pi) % (2 * math.pi) - math.pi

@@ -22,6 +22,9 @@ COMMANDS = [
     "tune",
     "mission",
     "simulate",
+    "monitor",
+    "control",
+    "router",
     "plot",
 ]
 
@@ -37,13 +40,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
     for name in COMMANDS:
-        try:
-            module = importlib.import_module(f"companion.commands.{name}")
-        except ModuleNotFoundError as exc:
-            if exc.name == f"companion.commands.{name}":
-                continue  # a command still being written is simply not offered
-            raise
-        module.register(sub)
+        importlib.import_module(f"companion.commands.{name}").register(sub)
     return parser
 
 

@@ -80,6 +80,9 @@ class Sink(Protocol):
 class ControlRequest:
     verb: str
     payload: str = ""
+    # A load-mission payload may name a file on this machine only for a local requester;
+    # remote ones (the Zenoh queryable) always send mission text.
+    allow_path: bool = True
     _done: threading.Event = field(default_factory=threading.Event, repr=False)
     ok: bool = False
     message: str = ""
@@ -95,9 +98,10 @@ class ControlChannel:
     def __init__(self) -> None:
         self._queue: queue.Queue[ControlRequest] = queue.Queue()
 
-    def submit(self, verb: str, payload: str = "", timeout: float = 2.0) -> tuple[bool, str]:
+    def submit(self, verb: str, payload: str = "", timeout: float = 2.0,
+               allow_path: bool = True) -> tuple[bool, str]:
         """Called from any thread; blocks until the loop answers or ``timeout`` seconds pass."""
-        request = ControlRequest(verb, payload)
+        request = ControlRequest(verb, payload, allow_path)
         self._queue.put(request)
         if not request._done.wait(timeout):
             return False, f"no answer from the control loop within {timeout:g} s"

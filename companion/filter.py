@@ -119,7 +119,9 @@ class PoseFilter:
         dt = t - self.t
         if not dt > 0.0:  # also catches NaN
             raise ValueError(f"filter time must increase: dt = {dt!r}")
-        if dt != self._dt:
+        # Recompute exp(A_L dt) only when dt really changes: sample times like k * 0.001 differ
+        # in the last bits from step to step, which would otherwise cost an exp per sample.
+        if self._dt is None or abs(dt - self._dt) > 1e-9 * dt:
             self._phi = transition(self.gains, dt, self._m)
             self._dt = dt
         p11, p12, p21, p22 = self._phi
@@ -133,7 +135,7 @@ class PoseFilter:
         self.y = meas.y + p11 * ey + p12 * self.vy
         self.vy = p21 * ey + p22 * self.vy
 
-        yaw_meas = self._yaw_meas + wrap(meas.yaw - self._yaw_meas)
+        yaw_meas = self._yaw_meas + self._m.wrap(meas.yaw - self._yaw_meas)
         eyaw = self.yaw - yaw_meas
         yaw = yaw_meas + p11 * eyaw + p12 * self.yaw_rate
         self.yaw_rate = p21 * eyaw + p22 * self.yaw_rate
@@ -141,4 +143,4 @@ class PoseFilter:
         turns = TAU * self._m.floor((yaw_meas + math.pi) / TAU)
         self._yaw_meas = yaw_meas - turns
         self.yaw = yaw - turns
-        return Estimate(self.x, self.y, wrap(self.yaw), self.vx, self.vy, self.yaw_rate)
+        return Estimate(self.x, self.y, self._m.wrap(self.yaw), self.vx, self.vy, self.yaw_rate)

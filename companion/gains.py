@@ -19,6 +19,9 @@ A small TOML file::
     lambda_c_yaw = 3.0
     velocity_ff = true
     heading_rate_ff = true
+    accel_ff = 0.8          # s, reference-acceleration feed-forward (about 1 / w_c)
+    lead_tau = 0.8          # s, actuator lead (companion.lead): the actuator's 1 / w_c
+    lead_max_gain = 8.0
     speed_law = "projected"
 
 Files for the rates and actuators we ship with live in ``companion/tuned/``.
@@ -106,6 +109,16 @@ def parse(data: dict, where: str) -> TunedGains:
     for key in ("k_dc_yaw", "lambda_c_yaw"):
         if key in pzc:
             kwargs[key] = _number(pzc, key, f"{where}: pzc")
+    for key in ("lead_tau", "lead_max_gain"):
+        if key in pzc:
+            kwargs[key] = _number(pzc, key, f"{where}: pzc", positive=False)
+            if kwargs[key] < (0 if key == "lead_tau" else 1):
+                raise UserError(f"{where}: pzc.{key} must be >= {0 if key == 'lead_tau' else 1}, "
+                                f"not {kwargs[key]!r}")
+    if "accel_ff" in pzc:
+        kwargs["accel_ff"] = _number(pzc, "accel_ff", f"{where}: pzc", positive=False)
+        if kwargs["accel_ff"] < 0:
+            raise UserError(f"{where}: pzc.accel_ff must be >= 0 s, not {kwargs['accel_ff']!r}")
     for key in ("velocity_ff", "heading_rate_ff"):
         if key in pzc:
             if not isinstance(pzc[key], bool):

@@ -46,6 +46,8 @@ def clamp(m, lim: Limits, speed: Num, yaw_rate: Num, ux: Num, uy: Num, norm_up: 
     Returns ``(command, speed_free, rate_free)``; the two flags are False where a clamp bit, and
     the caller must then hold the matching integrator (conditional-integration anti-windup).
     """
+    if lim.max_speed == math.inf and lim.max_yaw_rate == math.inf:
+        return Command(speed, yaw_rate, ux, uy), True, True     # nothing to clamp or hold
     speed_free = abs(speed) <= lim.max_speed
     rate_free = abs(yaw_rate) <= lim.max_yaw_rate
     speed = m.clip(speed, -lim.max_speed, lim.max_speed)
@@ -53,3 +55,8 @@ def clamp(m, lim: Limits, speed: Num, yaw_rate: Num, ux: Num, uy: Num, norm_up: 
     # u_p for a velocity-vector autopilot (PX4) obeys the same speed limit.
     scale = m.minimum(1.0, lim.max_speed / m.maximum(norm_up, 1e-12))
     return Command(speed, yaw_rate, ux * scale, uy * scale), speed_free, rate_free
+
+
+def keep_if(m, free, new: Num, old: Num) -> Num:
+    """Conditional integration: the new integrator value where ``free``, else the old one."""
+    return new if free is True else m.where(free, new, old)

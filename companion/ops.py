@@ -12,9 +12,27 @@ from types import SimpleNamespace
 
 import numpy as np
 
+TAU = 2.0 * math.pi
+
 
 def _clip(x, lo, hi):
     return lo if x < lo else (hi if x > hi else x)
+
+
+def _array_clip(x, lo, hi):
+    # Two ufunc calls: about 3x faster than np.clip's Python-level dispatch on small arrays.
+    return np.minimum(np.maximum(x, lo), hi)
+
+
+def _scalar_wrap(angle):
+    # See companion.angles.wrap: (-pi, pi], one float modulo.
+    return math.pi - (math.pi - angle) % TAU
+
+
+def _array_wrap(angle):
+    # (-pi, pi] with a ceil instead of numpy's float modulo (several times slower per element):
+    # (a - pi) / 2 pi lies in (k - 1, k] exactly when a - 2 pi k lies in (-pi, pi].
+    return angle - TAU * np.ceil((angle - math.pi) * (1.0 / TAU))
 
 
 def _where(cond, a, b):
@@ -24,13 +42,13 @@ def _where(cond, a, b):
 scalar = SimpleNamespace(
     sin=math.sin, cos=math.cos, atan2=math.atan2, hypot=math.hypot, exp=math.exp,
     sqrt=math.sqrt, clip=_clip, where=_where, maximum=max, minimum=min, isfinite=math.isfinite,
-    floor=math.floor, zeros=lambda n: 0.0,
+    floor=math.floor, zeros=lambda n: 0.0, wrap=_scalar_wrap,
 )
 
 array = SimpleNamespace(
     sin=np.sin, cos=np.cos, atan2=np.arctan2, hypot=np.hypot, exp=np.exp, sqrt=np.sqrt,
-    clip=np.clip, where=np.where, maximum=np.maximum, minimum=np.minimum, isfinite=np.isfinite,
-    floor=np.floor, zeros=lambda n: np.zeros(n),
+    clip=_array_clip, where=np.where, maximum=np.maximum, minimum=np.minimum, isfinite=np.isfinite,
+    floor=np.floor, zeros=lambda n: np.zeros(n), wrap=_array_wrap,
 )
 
 

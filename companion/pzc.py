@@ -28,7 +28,14 @@ chosen by ``companion tune``):
 * separate gain pairs for the yaw loop (``k_dc_yaw``, ``lambda_c_yaw``); the paper uses one pair;
 * reference-velocity feed-forward ``u_p += p_ref'`` (``velocity_ff``), which makes the error
   dynamics p~' = -(K_P p~ + K_I int p~) exact for a moving reference;
-* heading-rate feed-forward ``omega_ref += d/dt heading(p_ref')`` (``heading_rate_ff``).
+* heading-rate feed-forward ``omega_ref += d/dt heading(p_ref')`` (``heading_rate_ff``);
+* reference-acceleration feed-forward ``u_p += tau p_ref''`` (``accel_ff = tau`` seconds), which
+  compensates a slow actuator: a first-order lag w_c/(s + w_c) driven by v_ref + p_ref''/w_c
+  delivers p_ref' exactly, so tau = 1/w_c is the ideal value for a linear actuator. Because
+  p_ref'' has a centripetal part, it also turns phi_ref = atan2(u_p) ahead of the path, leading
+  the (equally slow) yaw actuator;
+* actuator lead (``lead_tau`` = the actuator's time constant 1/w_c in seconds, ``lead_max_gain``):
+  cancels a slow actuator's pole, see :mod:`companion.lead`.
 
 Limits: speed and yaw rate are clamped; while either output is clamped its integrator is held
 (conditional integration), so nothing winds up in saturation.
@@ -41,7 +48,8 @@ from dataclasses import dataclass, replace
 from . import ops as _ops
 from .angles import wrap
 from .filter import FilterGains, PoseFilter
-from .limits import SPEED_LAWS, Limits, clamp, speed_from_up
+from .lead import ActuatorLead
+from .limits import SPEED_LAWS, Limits, clamp, keep_if, speed_from_up
 from .signals import Command, Estimate, Measurement, Num, Reference
 
 
@@ -60,6 +68,9 @@ class PZCGains:
     lambda_c_yaw: Num | None = None
     velocity_ff: Num = False
     heading_rate_ff: Num = False
+    accel_ff: Num = 0.0
+    lead_tau: Num = 0.0
+    lead_max_gain: Num = 1.0
     speed_law: str = "projected"
 
     def __post_init__(self):
@@ -90,6 +101,11 @@ class PZCGains:
         k = self.k_dc if self.k_dc_yaw is None else self.k_dc_yaw
         lam = self.lambda_c if self.lambda_c_yaw is None else self.lambda_c_yaw
         return k, lam
+
+
+def _is_zero(value: Num) -> bool:
+    """True for a plain 0 (the extension is off): skips the work on the one-vehicle path."""
+    return isinstance(value, (int, float)) and value == 0
 
 
 def reference_heading_rate(ref: Reference, m=_ops.scalar) -> Num:
@@ -124,9 +140,12 @@ class PZCLaw:
         int_y = self.int_y + ey * dt
         ux = g.kp * ex + g.ki * int_x + g.velocity_ff * ref.vx
         uy = g.kp * ey + g.ki * int_y + g.velocity_ff * ref.vy
+        if not _is_zero(g.accel_ff):
+            ux = ux + g.accel_ff * ref.ax
+            uy = uy + g.accel_ff * ref.ay
 
         yaw_ref = m.atan2(uy, ux)
-        eyaw = wrap(yaw_ref - est.yaw)
+        eyaw = m.wrap(yaw_ref - est.yaw)
         int_yaw = self.int_yaw + eyaw * dt
         yaw_rate = g.kp_yaw * eyaw + g.ki_yaw * int_yaw
         if g.heading_rate_ff is not False:
@@ -136,9 +155,9 @@ class PZCLaw:
         speed = speed_from_up(m, g.speed_law, norm_up, eyaw)
         cmd, speed_free, rate_free = clamp(m, lim, speed, yaw_rate, ux, uy, norm_up)
         # Conditional integration: keep the new integrator state only while unsaturated.
-        self.int_x = m.where(speed_free, int_x, self.int_x)
-        self.int_y = m.where(speed_free, int_y, self.int_y)
-        self.int_yaw = m.where(rate_free, int_yaw, self.int_yaw)
+        self.int_x = keep_if(m, speed_free, int_x, self.int_x)
+        self.int_y = keep_if(m, speed_free, int_y, self.int_y)
+        self.int_yaw = keep_if(m, rate_free, int_yaw, self.int_yaw)
         return cmd
 
 
@@ -151,17 +170,19 @@ class PZCTracker:
                  limits: Limits = Limits(), n: int | None = None):
         self.filter = PoseFilter(filter_gains, n)
         self.law = PZCLaw(gains, limits, n)
+        self.lead = ActuatorLead(gains.lead_tau, gains.lead_max_gain, limits, n)
         self.estimate: Estimate | None = None
 
     def reset(self) -> None:
         """Forget everything: the next sample re-initialises the filter and the integrators."""
         self.filter = PoseFilter(self.filter.gains, self.filter.n)
         self.law.reset()
+        self.lead.reset()
         self.estimate = None
 
     def step(self, t: float, meas: Measurement, ref: Reference) -> Command:
         self.estimate = self.filter.step(t, meas)
-        return self.law.step(t, self.estimate, ref)
+        return self.lead.step(t, self.law.step(t, self.estimate, ref))
 
 
 def with_paper_speed_law(gains: PZCGains) -> PZCGains:

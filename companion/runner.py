@@ -552,8 +552,9 @@ class Runner:
         text = req.payload.strip()
         try:
             path = Path(text)
-            new = (missions.load(path) if "\n" not in text and path.suffix and path.exists()
-                   else missions.loads(text, "<load-mission>"))
+            local_file = (req.allow_path and "\n" not in text and path.suffix != ""
+                          and path.exists())
+            new = missions.load(path) if local_file else missions.loads(text, "<load-mission>")
         except UserError as err:
             req.reply(False, str(err))
             return

@@ -11,8 +11,8 @@ limits of the real vehicle, and the search keeps the set with the lowest objecti
 
 The search is a seeded random search followed by rounds of log-normal perturbation around the
 best sets (a simple evolution strategy): no gradient, no model, just the simulator. It also
-chooses the extensions of :mod:`companion.pzc` (separate yaw pair, velocity and heading-rate
-feed-forward) per candidate, so their worth is measured, not assumed.
+chooses the extensions of :mod:`companion.pzc` (separate yaw pair, velocity, heading-rate and
+acceleration feed-forward, actuator lead) per candidate, so their worth is measured, not assumed.
 """
 
 from __future__ import annotations
@@ -39,8 +39,11 @@ RANGES = {
     "lambda_c": (0.1, 30.0),
     "k_dc_yaw": (0.1, 60.0),
     "lambda_c_yaw": (0.1, 30.0),
+    "accel_ff": (0.01, 3.0),
+    "lead_tau": (0.02, 3.0),
+    "lead_max_gain": (1.0, 50.0),
 }
-FLAGS = ("velocity_ff", "heading_rate_ff", "separate_yaw")
+FLAGS = ("velocity_ff", "heading_rate_ff", "separate_yaw", "use_accel_ff", "use_lead")
 
 
 @dataclass(frozen=True)
@@ -81,7 +84,10 @@ class Candidates:
                 PZCGains(p["k_dc"], p["lambda_c"],
                          k_dc_yaw=p["k_dc_yaw"] if separate else None,
                          lambda_c_yaw=p["lambda_c_yaw"] if separate else None,
-                         velocity_ff=f["velocity_ff"], heading_rate_ff=f["heading_rate_ff"]))
+                         velocity_ff=f["velocity_ff"], heading_rate_ff=f["heading_rate_ff"],
+                         accel_ff=p["accel_ff"] if f["use_accel_ff"] else 0.0,
+                         lead_tau=p["lead_tau"] if f["use_lead"] else 0.0,
+                         lead_max_gain=p["lead_max_gain"] if f["use_lead"] else 1.0))
 
     def take(self, index: np.ndarray) -> "Candidates":
         return Candidates({k: v[index] for k, v in self.params.items()},
@@ -96,16 +102,18 @@ class Candidates:
 def seeds() -> Candidates:
     """Hand-picked starting points: the paper's gains in the paper's form and with every extension."""
     rows = [
-        # k_df, lambda_f, k_dc, lambda_c, k_dc_yaw, lambda_c_yaw, vff, hff, separate
-        (1000, 120, 5, 12, 5, 12, 0, 0, 0),
-        (1000, 120, 5, 12, 5, 12, 1, 1, 0),
-        (200, 40, 2, 1, 5, 3, 1, 1, 1),
-        (100, 20, 1, 0.5, 3, 2, 1, 1, 1),
+        # k_df, lambda_f, k_dc, lambda_c, k_dc_yaw, lambda_c_yaw, accel_ff, lead_tau, lead_max_gain,
+        # then the flags vff, hff, separate, use_accel_ff, use_lead
+        (1000, 120, 5, 12, 5, 12, 0.05, 0.05, 1, 0, 0, 0, 0, 0),
+        (1000, 120, 5, 12, 5, 12, 0.05, 0.05, 1, 1, 1, 0, 0, 0),
+        (200, 40, 2, 1, 5, 3, 0.05, 0.05, 1, 1, 1, 1, 0, 0),
+        (100, 20, 1, 0.5, 3, 2, 0.05, 0.05, 1, 1, 1, 1, 0, 0),
+        (100, 20, 1, 0.5, 3, 2, 0.8, 0.8, 8, 1, 1, 1, 1, 1),
     ]
     a = np.array(rows, dtype=float)
     names = list(RANGES)
     return Candidates({k: a[:, i] for i, k in enumerate(names)},
-                      {k: a[:, 6 + i] for i, k in enumerate(FLAGS)})
+                      {k: a[:, len(names) + i] for i, k in enumerate(FLAGS)})
 
 
 def random_candidates(rng: np.random.Generator, n: int) -> Candidates:
@@ -142,7 +150,10 @@ def evaluate(cands: Candidates, cfg: TuneConfig,
         PZCGains(rep(p["k_dc"]), rep(p["lambda_c"]),
                  k_dc_yaw=rep(np.where(separate, p["k_dc_yaw"], p["k_dc"])),
                  lambda_c_yaw=rep(np.where(separate, p["lambda_c_yaw"], p["lambda_c"])),
-                 velocity_ff=rep(f["velocity_ff"]), heading_rate_ff=rep(f["heading_rate_ff"])),
+                 velocity_ff=rep(f["velocity_ff"]), heading_rate_ff=rep(f["heading_rate_ff"]),
+                 accel_ff=rep(np.where(f["use_accel_ff"] > 0.5, p["accel_ff"], 0.0)),
+                 lead_tau=rep(np.where(f["use_lead"] > 0.5, p["lead_tau"], 0.0)),
+                 lead_max_gain=rep(np.where(f["use_lead"] > 0.5, p["lead_max_gain"], 1.0))),
         cfg.limits, n=n)
     vehicle = cfg.vehicle.with_(d_cen=np.full(n, cfg.d_cen))
     reference = Ellipse.paper(np.tile(np.asarray(cfg.f_r, dtype=float), n_c))
@@ -162,6 +173,7 @@ class TuneResult:
     cost_per_reference: list[float]
     steady_rms_per_reference: list[float]
     evaluated: int
+    f_r: tuple[float, ...] = ()
 
 
 def tune(cfg: TuneConfig, progress: Callable[[float], None] | None = None) -> TuneResult:
@@ -192,7 +204,7 @@ def tune(cfg: TuneConfig, progress: Callable[[float], None] | None = None) -> Tu
     return TuneResult(
         TunedGains(fg, pg, rate_hz=cfg.rate_hz, w_c=cfg.w_c, d_cen=cfg.d_cen, cost=float(obj[0])),
         cost_per_reference=cost_each, steady_rms_per_reference=[float(v) for v in rms[0]],
-        evaluated=evaluated)
+        evaluated=evaluated, f_r=tuple(cfg.f_r))
 
 
 def _per_reference_cost(winner: Candidates, cfg: TuneConfig) -> list[float]:

@@ -50,6 +50,8 @@ def register(subparsers) -> None:
     p.add_argument("--no-plot", dest="plot", action="store_false", help="skip the plot")
     p.add_argument("--json", action="store_true", help="print one JSON result object")
     p.add_argument("-q", "--quiet", action="store_true", help="no log lines on stderr")
+    from .zenoh_args import add_zenoh_arguments
+    add_zenoh_arguments(p)
     p.set_defaults(func=run)
 
 
@@ -98,6 +100,7 @@ def _stop(proc: subprocess.Popen) -> int | None:
 
 
 def run(args) -> int:
+    from ..bus import open_bus, shut
     from ..link import LinkConfig
     from ..plant import RoverParams
     from ..progress import ProgressSink, TraceSink
@@ -132,16 +135,26 @@ def run(args) -> int:
                              env={**os.environ, "PYTHONUNBUFFERED": "1"})
     switch = StopSwitch()
     restore = install_signals(switch)
+    bus, flying = None, False
     try:
         try:
-            result = fly(settings, sinks=sinks, log=log, switch=switch)
+            from .zenoh_args import bus_options
+            bus = open_bus(bus_options(args), log)   # closed on every path out (finally)
+            flying = True
+            if bus is not None:
+                sinks.append(bus)
+            result = fly(settings, sinks=sinks, log=log, switch=switch,
+                         control=bus.control if bus else None)
         except UserError as err:
+            if not flying:
+                raise     # a bad --zenoh-* flag or file: its own message says which
             if plant.poll() is not None:
                 plant_log.seek(0)
                 last = (plant_log.read().strip().splitlines() or ["(no output)"])[-1]
                 raise UserError(f"the plant exited ({plant.returncode}): {last}") from None
             raise UserError(f"{err} (plant: {' '.join(argv[2:])})") from None
     finally:
+        shut(bus)
         restore()
         plant_code = _stop(plant)
         plant_log.close()

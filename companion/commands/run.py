@@ -125,6 +125,8 @@ def register(subparsers) -> None:
     o.add_argument("--json", action="store_true", help="print one JSON result object at the end")
     o.add_argument("--progress", action="store_true", help="progress bar on stderr")
     o.add_argument("-q", "--quiet", action="store_true", help="no log lines on stderr")
+    from .zenoh_args import add_zenoh_arguments
+    add_zenoh_arguments(p)
     p.set_defaults(func=run)
 
 
@@ -211,8 +213,10 @@ def load_mission(path: str, origin_text: str | None):
 
 
 def run(args) -> int:
+    from ..bus import open_bus, shut
     from ..progress import ProgressSink
     from ..session import StopSwitch, fly
+    from .zenoh_args import bus_options
 
     mission = load_mission(args.mission, args.origin)
     key = signing_key(args)
@@ -225,9 +229,13 @@ def run(args) -> int:
         sinks.append(ProgressSink(mission.duration, mission.name))
     switch = StopSwitch()
     restore = install_signals(switch)
+    bus = None
     try:
-        result = fly(settings, sinks=sinks, log=log, switch=switch)
+        bus = open_bus(bus_options(args), log)   # inside the try: closed on every path out
+        result = fly(settings, sinks=sinks + ([bus] if bus else []), log=log, switch=switch,
+                     control=bus.control if bus else None)
     finally:
+        shut(bus)
         restore()
         for sink in log_sinks:
             sink.close()    # idempotent: the loop closed it unless the set-up failed

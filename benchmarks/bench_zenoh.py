@@ -1,0 +1,196 @@
+"""Zenoh telemetry figures: what publishing costs the loop, state latency, and fleet capacity.
+
+1. put cost in the loop: the in-process time of ``Bus.record`` (JSON encode + non-blocking
+   ``put``) with a subscriber in another session connected over TCP loopback, per call;
+2. state-publication latency: a ``sitl-plant`` + ``companion run`` pair in real time publishing
+   every cycle; a subscriber in this process takes, per state message, its callback's wall
+   clock minus the payload's ``sent_at`` (taken by the companion right before encoding, so the
+   figure is encode + put + transport + Zenoh's dispatch to the callback); p50 / p99 / max. The
+   same run with ``--no-zenoh`` gives the loop's own telemetry-to-setpoint latency without
+   publishing, for comparison;
+3. fleet capacity: ``n`` plant + companion pairs at 20 Hz through one ``companion router`` with
+   one ``companion monitor`` (tests/zenoh_harness.run_fleet), for growing ``n``; the largest ``n``
+   with every mission done, no missed control cycle in any companion (gaps + overruns, as
+   ``companion run --json`` counts them) and no state gap over 200 ms at the monitor.
+
+Prints figures; asserts nothing. Shared, 2-core machine: run it when the machine is quiet, and
+read the figures as orders of magnitude.
+Run: .venv/bin/python benchmarks/bench_zenoh.py [--seconds 10] [--rate 40] [--fleet 10,20,30]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import signal
+import statistics
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "tests"))
+
+import zenoh  # noqa: E402
+
+from companion.bus import Bus, BusOptions, decode  # noqa: E402
+from companion.events import LoopRecord, StatusEvent  # noqa: E402
+from zenoh_harness import config, endpoint, free_tcp_port, mission_file, run_fleet  # noqa: E402
+
+
+def pct(values: list[float], q: float) -> float:
+    if not values:
+        return math.nan
+    s = sorted(values)
+    return s[min(len(s) - 1, max(0, math.ceil(q / 100 * len(s)) - 1))]
+
+
+def put_cost(n: int = 20000) -> None:
+    port = free_tcp_port()
+    got = [0]
+    a = zenoh.open(config(listen=[endpoint(port)]))
+    b = zenoh.open(config(connect=[endpoint(port)]))
+    try:
+        b.declare_subscriber("rover/*/state", lambda s: got.__setitem__(0, got[0] + 1))
+        time.sleep(0.3)
+        bus = Bus(a, BusOptions(vehicle_id="bench"))
+        bus.status(StatusEvent("connected", "bench", None, {"sysid": 1}))
+        rec = LoopRecord(12.345, 3.21, 1.0, 2.0, 0.3, 1.01, 2.01, 0.31, 1.1, 2.1, 0.14, 0.02,
+                         1.2, 0.3, 1.25, 0.4, "GUIDED", True)
+        times = []
+        clock = time.perf_counter
+        for _ in range(n):
+            t = clock()
+            bus.record(rec)
+            times.append(clock() - t)
+            if len(times) % 50 == 0:
+                time.sleep(0.001)     # ~1 kHz-like pacing, not a tight burst
+        time.sleep(0.5)
+        bus.close()
+        us = [x * 1e6 for x in times]
+        print(f"put cost in the loop (Bus.record: JSON encode + put, DROP), {n} calls: "
+              f"p50 {pct(us, 50):.1f} us, p99 {pct(us, 99):.1f} us, max {max(us):.0f} us; "
+              f"{got[0]} of {n} received")
+    finally:
+        a.close()
+        b.close()
+
+
+def _pair(tmp: Path, rate: float, seconds: float, zenoh_args: list[str]) -> dict:
+    from sitl_plant.testing import free_udp_port
+    port = free_udp_port()
+    mission = mission_file(tmp / "bench.toml", seconds)
+    loop_rate = max(50.0, math.ceil(rate / 0.8) + 1)
+    plant = subprocess.Popen([sys.executable, "-m", "sitl_plant", "--connect",
+                              f"udpout:127.0.0.1:{port}", "--d-cen", "0.3",
+                              "--loop-rate", f"{loop_rate:g}"],
+                             stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    try:
+        out = subprocess.run([sys.executable, "-m", "companion", "run", "--connect",
+                              f"udpin:127.0.0.1:{port}", "--mission", str(mission), "--arm",
+                              "--json", "-q", "--rate", f"{rate:g}", *zenoh_args],
+                             capture_output=True, text=True, timeout=seconds + 60, cwd=ROOT)
+    finally:
+        plant.terminate()
+        plant.wait(5)
+    lines = [line for line in out.stdout.splitlines() if line.startswith("{")]
+    if not lines:
+        raise SystemExit(f"companion run failed: {out.stderr[-1000:]}")
+    return json.loads(lines[-1])
+
+
+def latency(rate: float, seconds: float) -> None:
+    port = free_tcp_port()
+    lat: list[float] = []
+    lock = threading.Lock()
+
+    def on_state(sample) -> None:
+        rx = time.time()
+        msg = decode(sample.payload.to_bytes(), "state")
+        with lock:
+            lat.append(rx - msg["sent_at"])
+
+    with tempfile.TemporaryDirectory() as tmp:
+        s = zenoh.open(config(listen=[endpoint(port)]))
+        try:
+            s.declare_subscriber("rover/*/state", on_state)
+            with_bus = _pair(Path(tmp), rate, seconds,
+                             ["--zenoh-connect", endpoint(port), "--no-zenoh-scouting"])
+        finally:
+            s.close()
+        without = _pair(Path(tmp), rate, seconds, ["--no-zenoh"])
+    ms = [x * 1e3 for x in lat]
+    print(f"state latency, companion put -> subscriber callback (another process, TCP loopback, "
+          f"{rate:g} Hz for {seconds:g} s, {len(ms)} messages): p50 {pct(ms, 50):.3f} ms, "
+          f"p99 {pct(ms, 99):.3f} ms, max {max(ms):.3f} ms")
+    for name, r in (("with Zenoh publishing", with_bus), ("with --no-zenoh", without)):
+        print(f"  loop {name:<22}: telemetry->setpoint p50 {r['latency_p50_ms']:.3f} ms, "
+              f"p99 {r['latency_p99_ms']:.3f} ms, {r['cycles']} cycles, "
+              f"{r['missed_cycles']} missed, sink errors {r.get('sink_errors', 0)}")
+
+
+def fleet(sizes: list[int], rate: float, duration: float) -> None:
+    """Grow the fleet until a companion misses a control cycle (or a run fails); report the
+    largest size with no missed cycle and, separately, the largest whose monitor also saw no
+    state gap over 200 ms (the monitor is one more process competing for the same 2 cores)."""
+    best_loop = best_gap = 0
+    for n in sizes:
+        with tempfile.TemporaryDirectory() as tmp:
+            try:
+                # Arming waits until every process has started (~0.6 s of CPU each on
+                # 2 cores), so what is measured is the fleet running, not the fleet starting.
+                f = run_fleet(n, Path(tmp), rate=rate, duration=duration,
+                              arm_delay=6.0 + 0.8 * n, timeout=120.0 + 2.0 * n)
+            except Exception as exc:  # noqa: BLE001  (a fleet too big can fail in many ways)
+                print(f"fleet {n:3d} at {rate:g} Hz: failed ({type(exc).__name__}: {exc})"[:300])
+                break
+        done = sum(1 for r in f.results if r and r["reason"] == "mission_done")
+        missed = sum(r["missed_cycles"] for r in f.results if r)
+        gap = max(f.gaps_ms.values(), default=math.inf)
+        seen = len(f.snapshot["vehicles"])
+        loop_ok = done == n and missed == 0
+        gap_ok = loop_ok and gap < 200.0 and seen == n
+        p99_lat = max((r["latency_p99_ms"] for r in f.results if r), default=math.nan)
+        print(f"fleet {n:3d} at {rate:g} Hz: {done}/{n} missions done, missed control cycles "
+              f"{missed}, worst loop p99 {p99_lat:.2f} ms; monitor saw {seen}, max state gap "
+              f"{gap:.0f} ms; monitor/router exit after SIGTERM "
+              f"{max(f.exit_s.values()):.2f} s; wall {f.wall_s:.0f} s", flush=True)
+        if not loop_ok:
+            break
+        best_loop = n
+        if gap_ok:
+            best_gap = n
+    print(f"largest fleet at {rate:g} Hz with no missed control cycle: {best_loop or 'none'}; "
+          f"with also no monitor gap over 200 ms: {best_gap or 'none'} (sizes tried: {sizes})")
+
+
+def main() -> None:
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    p.add_argument("--seconds", type=float, default=10.0, help="latency run length (vehicle s)")
+    p.add_argument("--rate", type=float, default=40.0, help="latency run rate (Hz)")
+    p.add_argument("--fleet", default="10,20,30,40", help="fleet sizes to try, in order")
+    p.add_argument("--fleet-rate", type=float, default=20.0)
+    p.add_argument("--fleet-duration", type=float, default=10.0)
+    p.add_argument("--skip", default="", help="comma list of parts to skip: put,latency,fleet")
+    args = p.parse_args()
+    skip = set(filter(None, args.skip.split(",")))
+    from importlib.metadata import version
+    print(f"eclipse-zenoh {version('eclipse-zenoh')} / Python {sys.version.split()[0]}, "
+          f"{os.cpu_count()} CPUs, load average {os.getloadavg()[0]:.2f}")
+    if "put" not in skip:
+        put_cost()
+    if "latency" not in skip:
+        latency(args.rate, args.seconds)
+    if "fleet" not in skip:
+        fleet([int(x) for x in args.fleet.split(",")], args.fleet_rate, args.fleet_duration)
+
+
+if __name__ == "__main__":
+    signal.signal(signal.SIGTERM, lambda *a: sys.exit(143))
+    main()

@@ -1,0 +1,224 @@
+"""``companion paper-table``: the paper's Figure 13 reproduced (Section 5), with two more controllers.
+
+Six scenarios x four controllers (paper-gain PZC, tuned PZC, the paper's PID, Kanayama) in batch
+simulation; see :mod:`companion.experiment` for the set-up and what the paper leaves unsaid.
+The controllers are split over up to two worker processes (``--jobs``), one per core here.
+
+``pzc_tuned`` gains, first found wins: ``--gains FILE``; the shipped file for this rate and w_c
+(``companion/tuned/``); else a short tuning run on the spot. The JSON says which
+(``pzc_tuned_source``).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import sys
+import time
+
+from ..errors import UserError
+
+
+def register(subparsers) -> None:
+    p = subparsers.add_parser(
+        "paper-table", help="reproduce the paper's Figure 13 cost table (and Figures 4-12)",
+        description="Simulate the paper's six Section 5 scenarios with PZC (paper gains), PZC "
+                    "(tuned gains), the paper's PID and Kanayama's law; print f_cost and steady RMS.")
+    p.add_argument("--rate", type=float, default=1000.0, metavar="HZ",
+                   help="controller rate (default 1000, the paper's)")
+    p.add_argument("--w-c", type=float, default=20.0, dest="w_c", metavar="RAD_S",
+                   help="actuator bandwidth w_c of the simulated rover (default 20)")
+    p.add_argument("--duration", type=float, default=60.0, metavar="S",
+                   help="simulated seconds per scenario (default 60)")
+    p.add_argument("--gains", metavar="FILE", help="tuned-gains file for pzc_tuned")
+    p.add_argument("--literal", action="store_true",
+                   help="also run the paper's literal speed law v_ref = |u_p| (pzc_literal)")
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+    p.add_argument("--plot", metavar="DIR", help="write the paper's Figures 4-13 as PNG files")
+    p.add_argument("--jobs", type=int, default=min(2, os.cpu_count() or 1), metavar="N",
+                   help="worker processes (default: up to 2)")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.set_defaults(func=run)
+
+
+def _check(args) -> None:
+    for flag, value in (("--rate", args.rate), ("--w-c", args.w_c), ("--duration", args.duration)):
+        if not (math.isfinite(value) and value > 0):
+            raise UserError(f"{flag} must be a number > 0, not {value!r}")
+    if args.rate > 10000:
+        raise UserError(f"--rate must be at most 10000 Hz, not {args.rate!r}")
+    if args.jobs < 1:
+        raise UserError(f"--jobs must be at least 1, not {args.jobs!r}")
+
+
+def tuned_gains(rate: float, w_c: float, gains_file: str | None, progress=None,
+                duration: float = 60.0):
+    """(FilterGains, PZCGains, source) for pzc_tuned."""
+    from .. import gains as gains_mod
+    if gains_file:
+        g = gains_mod.load(gains_file)
+        return g.filter, g.pzc, f"file {gains_file}"
+    shipped = gains_mod.find_tuned(rate, w_c)
+    if shipped is not None:
+        return shipped.filter, shipped.pzc, f"shipped {gains_mod.tuned_path(rate, w_c).name}"
+    from ..limits import Limits
+    from ..tuning import TuneConfig, tune
+    cfg = TuneConfig(rate_hz=rate, w_c=w_c, duration=duration, population=48, rounds=3,
+                     limits=Limits())     # the table's plant has no limits; tune for it
+    result = tune(cfg, progress)
+    return (result.gains.filter, result.gains.pzc,
+            f"tuned on the fly (population {cfg.population}, {cfg.rounds} rounds; "
+            f"`companion tune --rate {rate:g} --w-c {w_c:g}` searches longer)")
+
+
+def _worker(config, tuned, source, only, shared, conn):
+    from ..experiment import run_table
+
+    def progress(frac):
+        shared.value = frac
+    try:
+        conn.send(("ok", run_table(config, tuned, source, progress, only)))
+    except BaseException as exc:          # reported by the parent, which owns the exit code
+        conn.send(("error", f"{type(exc).__name__}: {exc}"))
+    finally:
+        conn.close()
+
+
+def _advance(bar, percent: float) -> None:
+    # update() honours tqdm's mininterval, so a fast caller does not flood the terminal.
+    if bar is not None and percent > bar.n:
+        bar.update(round(percent - bar.n, 1))
+
+
+def _split(names: tuple[str, ...], jobs: int) -> list[tuple[str, ...]]:
+    # pzc + pzc_tuned run as one stacked tracker, so they stay together; roughly equal halves.
+    if jobs < 2:
+        return [names]
+    first = tuple(n for n in names if n in ("pzc", "pzc_tuned"))
+    rest = tuple(n for n in names if n not in first)
+    return [part for part in (first, rest) if part]
+
+
+def compute(config, tuned, source, jobs: int, bar=None):
+    """Run the table, in ``jobs`` processes when more than one; ``bar`` is a tqdm bar or None."""
+    from ..experiment import merge, run_table
+    parts = _split(config.controllers, jobs)
+    if len(parts) == 1:
+        def progress(frac):
+            _advance(bar, 100 * frac)
+        return run_table(config, tuned, source, progress)
+    import multiprocessing as mp
+    ctx = mp.get_context("fork" if sys.platform.startswith("linux") else "spawn")
+    shared = [ctx.Value("d", 0.0, lock=False) for _ in parts]
+    pipes = [ctx.Pipe(duplex=False) for _ in parts]
+    procs = [ctx.Process(target=_worker, args=(config, tuned, source, part, value, send),
+                         daemon=True)
+             for part, value, (_, send) in zip(parts, shared, pipes)]
+    try:
+        for proc in procs:
+            proc.start()
+        results: list = [None] * len(parts)
+        while any(r is None for r in results):
+            for i, (recv, _) in enumerate(pipes):
+                if results[i] is None and recv.poll():
+                    results[i] = recv.recv()
+                elif results[i] is None and not procs[i].is_alive() and not recv.poll():
+                    results[i] = ("error", f"worker exited with code {procs[i].exitcode}")
+            _advance(bar, 100 * sum(v.value for v in shared) / len(shared))
+            time.sleep(0.05)
+    finally:
+        for proc in procs:
+            if proc.is_alive():
+                proc.terminate()
+            proc.join()
+    errors = [msg for kind, msg in results if kind == "error"]
+    if errors:
+        raise RuntimeError("paper-table worker failed: " + "; ".join(errors))
+    return merge([table for _, table in results])
+
+
+def _print_table(result) -> None:
+    d = result.as_dict()
+    names = list(d["average"])
+    print(f"paper-table: {d['rate_hz']:g} Hz controller, w_c {d['w_c']:g} rad/s, "
+          f"{d['duration_s']:g} s per run; start at the origin at rest heading +x")
+    print(f"pzc_tuned gains: {d['pzc_tuned_source']}")
+    print("f_cost (steady RMS m)")
+    print(f"{'f_r Hz':>7} {'d_cen m':>8} " + " ".join(f"{n:>18}" for n in names))
+    for s in d["scenarios"]:
+        cells = [_cell(s["controllers"][n]) for n in names]
+        print(f"{s['f_r']:7.2f} {s['d_cen']:8.1f} " + " ".join(f"{c:>18}" for c in cells))
+    averages = ["diverged" if _any_diverged(d, n) else f"{d['average'][n]:.3f}" for n in names]
+    print(f"{'average':>16} " + " ".join(f"{a:>18}" for a in averages))
+    pzc = ("diverged" if _any_diverged(d, "pzc") else f"{100 * d['improvement_vs_pid']:.1f} %")
+    tuned = ("diverged" if _any_diverged(d, "pzc_tuned")
+             else f"{100 * d['improvement_vs_pid_tuned']:.1f} %")
+    print(f"improvement vs PID (average f_cost): pzc {pzc}, pzc_tuned {tuned} (paper: 37 %)")
+    if not _any_diverged(d, "pzc"):
+        print(f"pzc f_cost spread over the scenarios (max/min): {d['pzc_cost_spread']:.2f}")
+
+
+def _any_diverged(d: dict, name: str) -> bool:
+    return any(s["controllers"][name]["diverged"] for s in d["scenarios"])
+
+
+def _cell(c: dict) -> str:
+    if c["diverged"]:
+        return "diverged"
+    return f"{c['f_cost']:8.3f} ({c['steady_rms']:6.3f})"
+
+
+def run(args) -> int:
+    _check(args)
+    from ..experiment import TableConfig
+    from ..filter import FilterGains  # noqa: F401  (imported early: a bad install fails here)
+
+    # A gains file is read (and any mistake in it reported) before anything else starts.
+    preset = None
+    if args.gains:
+        from .. import gains as gains_mod
+        g = gains_mod.load(args.gains)
+        preset = (g.filter, g.pzc, f"file {args.gains}")
+    bar = None
+    if not args.no_progress:
+        from tqdm import tqdm
+        bar = tqdm(total=100, desc="paper-table", file=sys.stderr,
+                   bar_format="{desc} {percentage:3.0f}%|{bar}| {elapsed}<{remaining}",
+                   mininterval=0.5)
+    try:
+        def tune_progress(frac):
+            if bar is not None:
+                bar.set_description_str("tuning pzc_tuned", refresh=False)
+            _advance(bar, 100 * frac)
+        fg, pg, source = preset or tuned_gains(args.rate, args.w_c, None, tune_progress,
+                                                         args.duration)
+        if bar is not None:
+            bar.set_description_str("paper-table", refresh=False)
+            bar.reset()
+        config = TableConfig(rate_hz=args.rate, w_c=args.w_c, duration=args.duration,
+                             with_literal=args.literal,
+                             trace_every=0.02 if args.plot else None)
+        started = time.perf_counter()
+        result = compute(config, (fg, pg), source, args.jobs, bar)
+        wall = time.perf_counter() - started
+    finally:
+        if bar is not None:
+            bar.close()
+
+    files = []
+    if args.plot:
+        from ..paper_plots import plot_all
+        files = plot_all(result, args.plot)
+    if args.json:
+        out = result.as_dict()
+        out["wall_time_s"] = round(wall, 3)
+        if files:
+            out["plots"] = [str(f) for f in files]
+        print(json.dumps(out))
+    else:
+        _print_table(result)
+        print(f"simulated in {wall:.1f} s")
+        if files:
+            print(f"figures: {len(files)} PNG files in {args.plot}")
+    return 0

@@ -1,0 +1,55 @@
+"""``companion router``: a Zenoh router in a Python process, for sites without ``zenohd``.
+
+A session opened in ``router`` mode routes between the clients and peers that connect to it
+(no separate binary: none is on PyPI). Fleets point each companion and monitor at it with
+``--zenoh-connect tcp/HOST:7447`` (``--zenoh-mode client`` sends everything through it). Runs
+until SIGTERM / Ctrl-C, then closes the session and exits 0.
+"""
+
+from __future__ import annotations
+
+import argparse
+import signal
+import sys
+import threading
+
+from .zenoh_args import add_zenoh_arguments, bus_options
+
+DEFAULT_LISTEN = "tcp/[::]:7447"
+
+
+def register(subparsers) -> None:
+    p = subparsers.add_parser(
+        "router", help="run a Zenoh router (for fleets; no zenohd needed)",
+        description=__doc__.split("\n\n", 1)[1], formatter_class=argparse.RawDescriptionHelpFormatter)
+    add_zenoh_arguments(p, vehicle=False, modes=("router",))
+    p.set_defaults(func=run)
+
+
+def run(args) -> int:
+    from ..bus import close_all, close_session, open_session
+
+    if not args.zenoh_listen and not args.zenoh_config:
+        args.zenoh_listen = [DEFAULT_LISTEN]
+    stop = threading.Event()
+
+    def on_signal(signum, frame):
+        stop.set()
+
+    old = {s: signal.signal(s, on_signal) for s in (signal.SIGTERM, signal.SIGINT)}
+    session = None
+    try:
+        session = open_session(bus_options(args, mode="router"), default_mode="router")
+        where = " ".join(args.zenoh_listen) or f"as in {args.zenoh_config}"
+        print(f"companion router: routing, listening on {where} (zid {session.zid()})",
+              file=sys.stderr, flush=True)
+        while not stop.wait(1.0):
+            pass
+    finally:
+        if session is not None:
+            close_session(session)
+        close_all()
+        for s, h in old.items():
+            signal.signal(s, h)
+    print("companion router: stopped", file=sys.stderr, flush=True)
+    return 0

@@ -1,0 +1,154 @@
+"""``companion tune``: search filter and PZC gains for a loop rate, actuator and limits.
+
+The search is :func:`companion.tuning.tune` (batch simulation of a population of gain sets on the
+paper's ellipse at several reference speeds at once). The result prints as a table, or as JSON
+with ``--json``, and ``--out FILE`` writes a tuned-gains file that ``companion run``, ``demo``,
+``simulate`` and ``paper-table`` read (``--gains FILE``). Files named
+``companion/tuned/rate<HZ>_wc<W_C>.toml`` are picked up automatically for that rate and w_c.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import sys
+from pathlib import Path
+
+from ..errors import UserError
+
+
+def register(subparsers) -> None:
+    p = subparsers.add_parser(
+        "tune", help="search the filter and PZC gains for a loop rate and actuator",
+        description="Search k_df, lambda_f, k_dc, lambda_c (and the optional yaw pair and "
+                    "feed-forward extensions) by batch simulation for the lowest mean f_cost "
+                    "over several reference speeds.")
+    p.add_argument("--rate", type=float, required=True, metavar="HZ", help="controller rate")
+    p.add_argument("--w-c", type=float, default=20.0, dest="w_c", metavar="RAD_S",
+                   help="actuator bandwidth of the rover (default 20; a stock rover is about 1.2)")
+    p.add_argument("--d-cen", type=float, default=0.0, dest="d_cen", metavar="M",
+                   help="distance from the tracked point to the wheel axle (default 0)")
+    p.add_argument("--f-r", default="0.04,0.08,0.12", metavar="HZ,HZ,...",
+                   help="reference frequencies of the paper's ellipse to tune over together")
+    p.add_argument("--duration", type=float, default=60.0, metavar="S",
+                   help="simulated seconds per run (default 60)")
+    p.add_argument("--max-speed", type=float, default=6.0, metavar="M_S",
+                   help="command speed limit (default 6, the companion's default)")
+    p.add_argument("--max-yaw-rate", type=float, default=6.0, metavar="RAD_S",
+                   help="command yaw-rate limit (default 6, the companion's default)")
+    p.add_argument("--max-accel", type=float, default=math.inf, metavar="M_S2",
+                   help="the rover's acceleration limit (default none)")
+    p.add_argument("--population", type=int, default=128, metavar="N",
+                   help="gain sets simulated per round (default 128)")
+    p.add_argument("--rounds", type=int, default=4, metavar="N", help="search rounds (default 4)")
+    p.add_argument("--seed", type=int, default=1, help="random seed (default 1)")
+    p.add_argument("--out", metavar="FILE", help="write the gains to this TOML file")
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.set_defaults(func=run)
+
+
+def _frequencies(text: str) -> tuple[float, ...]:
+    try:
+        values = tuple(float(v) for v in text.split(","))
+    except ValueError:
+        raise UserError(f"--f-r must be comma-separated frequencies in Hz, not {text!r}") from None
+    if not values or not all(math.isfinite(v) and v > 0 for v in values):
+        raise UserError(f"--f-r frequencies must be > 0, not {text!r}")
+    return values
+
+
+def check(args) -> tuple[float, ...]:
+    for flag, value in (("--rate", args.rate), ("--w-c", args.w_c), ("--duration", args.duration),
+                        ("--max-speed", args.max_speed), ("--max-yaw-rate", args.max_yaw_rate)):
+        if not (math.isfinite(value) and value > 0):
+            raise UserError(f"{flag} must be a number > 0, not {value!r}")
+    if args.rate > 10000:
+        raise UserError(f"--rate must be at most 10000 Hz, not {args.rate!r}")
+    if not (math.isfinite(args.d_cen) and args.d_cen >= 0):
+        raise UserError(f"--d-cen must be a distance >= 0, not {args.d_cen!r}")
+    if not args.max_accel > 0:
+        raise UserError(f"--max-accel must be > 0, not {args.max_accel!r}")
+    if args.population < 8:
+        raise UserError(f"--population must be at least 8, not {args.population}")
+    if args.rounds < 1:
+        raise UserError(f"--rounds must be at least 1, not {args.rounds}")
+    if args.out:
+        parent = Path(args.out).resolve().parent
+        if not parent.is_dir():
+            raise UserError(f"--out {args.out}: directory {parent} does not exist")
+    return _frequencies(args.f_r)
+
+
+def _describe(result) -> dict:
+    g = result.gains
+    pzc = g.pzc
+    return {
+        "rate_hz": g.rate_hz, "w_c": g.w_c, "d_cen": g.d_cen,
+        "filter": {"k_df": float(g.filter.k_df), "lambda_f": float(g.filter.lambda_f)},
+        "pzc": {"k_dc": float(pzc.k_dc), "lambda_c": float(pzc.lambda_c),
+                "k_dc_yaw": None if pzc.k_dc_yaw is None else float(pzc.k_dc_yaw),
+                "lambda_c_yaw": None if pzc.lambda_c_yaw is None else float(pzc.lambda_c_yaw),
+                "velocity_ff": bool(pzc.velocity_ff), "heading_rate_ff": bool(pzc.heading_rate_ff),
+                "accel_ff": float(pzc.accel_ff),
+                "lead_tau": float(pzc.lead_tau), "lead_max_gain": float(pzc.lead_max_gain),
+                "speed_law": pzc.speed_law},
+        "cost": g.cost,
+        "f_r": list(result.f_r),
+        "f_cost": result.cost_per_reference,
+        "steady_rms": result.steady_rms_per_reference,
+        "evaluated": result.evaluated,
+    }
+
+
+def run(args) -> int:
+    f_r = check(args)
+    from ..limits import Limits
+    from ..tuning import TuneConfig, tune
+
+    cfg = TuneConfig(rate_hz=args.rate, w_c=args.w_c, d_cen=args.d_cen, f_r=f_r,
+                     duration=args.duration,
+                     limits=Limits(max_speed=args.max_speed, max_yaw_rate=args.max_yaw_rate),
+                     max_accel=args.max_accel, population=args.population, rounds=args.rounds,
+                     seed=args.seed)
+    bar = None
+    if not args.no_progress:
+        from tqdm import tqdm
+        bar = tqdm(total=100, desc=f"tune {args.rate:g} Hz", file=sys.stderr, mininterval=0.5,
+                   bar_format="{desc} {percentage:3.0f}%|{bar}| {elapsed}<{remaining}")
+
+    def progress(frac: float) -> None:
+        if bar is not None and 100 * frac > bar.n:
+            bar.update(round(100 * frac - bar.n, 1))
+    try:
+        result = tune(cfg, progress)
+    finally:
+        if bar is not None:
+            bar.close()
+
+    if args.out:
+        result.gains.save(args.out)
+    d = _describe(result)
+    if args.json:
+        if args.out:
+            d["out"] = args.out
+        print(json.dumps(d))
+        return 0
+    p = d["pzc"]
+    print(f"tuned for {args.rate:g} Hz, w_c {args.w_c:g} rad/s, d_cen {args.d_cen:g} m, "
+          f"limits {args.max_speed:g} m/s, {args.max_yaw_rate:g} rad/s "
+          f"({result.evaluated} gain sets simulated)")
+    print(f"filter  k_df {d['filter']['k_df']:.4g}  lambda_f {d['filter']['lambda_f']:.4g}")
+    yaw = ("same as position" if p["k_dc_yaw"] is None
+           else f"k_dc_yaw {p['k_dc_yaw']:.4g}  lambda_c_yaw {p['lambda_c_yaw']:.4g}")
+    print(f"pzc     k_dc {p['k_dc']:.4g}  lambda_c {p['lambda_c']:.4g}  yaw: {yaw}")
+    print(f"        velocity_ff {p['velocity_ff']}  heading_rate_ff {p['heading_rate_ff']}  "
+          f"accel_ff {p['accel_ff']:.3g} s  speed_law {p['speed_law']}")
+    print(f"        actuator lead: " + ("off" if p["lead_tau"] == 0 else
+                                        f"tau {p['lead_tau']:.3g} s, max gain {p['lead_max_gain']:.3g}"))
+    for fr, cost, rms in zip(d["f_r"], d["f_cost"], d["steady_rms"]):
+        print(f"  f_r {fr:5.2f} Hz: f_cost {cost:7.3f}  steady RMS {rms:6.3f} m")
+    print(f"cost (mean f_cost) {d['cost']:.4f}")
+    if args.out:
+        print(f"written to {args.out}")
+    return 0

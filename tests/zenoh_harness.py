@@ -1,0 +1,291 @@
+"""Helpers for tests with real Zenoh sessions on loopback: isolated configs (multicast scouting
+off, explicit endpoints, free ports), a subscriber that keeps what it hears, and process helpers
+that always stop what they start."""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import math
+import os
+import signal
+import socket
+import subprocess
+import sys
+import threading
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Iterator
+
+import zenoh
+
+from companion.bus import decode
+
+ROOT = Path(__file__).resolve().parents[1]
+ISOLATED = ["--no-zenoh-scouting"]
+
+
+def free_tcp_port() -> int:
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def endpoint(port: int) -> str:
+    return f"tcp/127.0.0.1:{port}"
+
+
+def config(mode: str = "peer", listen: list[str] | None = None,
+           connect: list[str] | None = None) -> zenoh.Config:
+    c = zenoh.Config()
+    c.insert_json5("mode", json.dumps(mode))
+    c.insert_json5("scouting/multicast/enabled", "false")
+    c.insert_json5("listen/endpoints", json.dumps(listen or []))
+    c.insert_json5("connect/endpoints", json.dumps(connect or []))
+    return c
+
+
+@contextlib.contextmanager
+def session(**kwargs) -> Iterator[zenoh.Session]:
+    """A session that is closed on every path out (callbacks would otherwise hang the exit)."""
+    s = zenoh.open(config(**kwargs))
+    try:
+        yield s
+    finally:
+        s.close()
+
+
+@dataclass
+class Heard:
+    rx: float          # monotonic
+    key: str
+    msg: dict[str, Any]
+
+
+class Collector:
+    """Callback subscriber on ``rover/*/state`` and ``rover/*/status``; decodes with the schema
+    check (a payload that fails it is kept in ``bad``)."""
+
+    def __init__(self, s: zenoh.Session, key: str = "rover/*"):
+        self.lock = threading.Lock()
+        self.heard: list[Heard] = []
+        self.bad: list[tuple[str, bytes]] = []
+        self.subs = [s.declare_subscriber(f"{key}/{k}", self._on) for k in ("state", "status")]
+
+    def _on(self, sample) -> None:
+        key, data = str(sample.key_expr), sample.payload.to_bytes()
+        try:
+            msg = decode(data, key.rsplit("/", 1)[-1])
+        except ValueError:
+            with self.lock:
+                self.bad.append((key, data))
+            return
+        with self.lock:
+            self.heard.append(Heard(time.monotonic(), key, msg))
+
+    def of(self, kind: str, vehicle: str | None = None) -> list[Heard]:
+        with self.lock:
+            return [h for h in self.heard if h.key.endswith("/" + kind)
+                    and (vehicle is None or h.msg["vehicle_id"] == vehicle)]
+
+    def statuses(self, vehicle: str | None = None) -> list[str]:
+        return [h.msg["kind"] for h in self.of("status", vehicle)]
+
+    def wait(self, predicate, timeout: float, what: str = "condition") -> None:
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            if predicate():
+                return
+            time.sleep(0.02)
+        raise AssertionError(f"{what} not met within {timeout} s; statuses {self.statuses()}")
+
+
+class Proc:
+    """``python -m companion ARGS`` (stdout/stderr to files) for a ``with`` block; killed on
+    exit whatever happened."""
+
+    def __init__(self, *args: str, tmp: Path, name: str):
+        self.argv = [sys.executable, "-m", "companion", *args]
+        self.out_path, self.err_path = tmp / f"{name}.out", tmp / f"{name}.err"
+        self.proc: subprocess.Popen | None = None
+
+    def __enter__(self) -> "Proc":
+        self._out, self._err = open(self.out_path, "w"), open(self.err_path, "w")
+        self.proc = subprocess.Popen(self.argv, stdout=self._out, stderr=self._err, cwd=ROOT,
+                                     env={**os.environ, "PYTHONUNBUFFERED": "1"})
+        return self
+
+    def __exit__(self, *exc) -> None:
+        if self.proc is not None and self.proc.poll() is None:
+            self.proc.kill()
+            self.proc.wait()
+        self._out.close()
+        self._err.close()
+
+    @property
+    def stdout(self) -> str:
+        return self.out_path.read_text()
+
+    @property
+    def stderr(self) -> str:
+        return self.err_path.read_text()
+
+    def wait(self, timeout: float) -> int:
+        try:
+            return self.proc.wait(timeout)
+        except subprocess.TimeoutExpired:
+            raise AssertionError(f"{self.argv[3]} still running after {timeout} s; stderr:\n"
+                                 f"{self.stderr[-2000:]}") from None
+
+    def stop(self, sig: int = signal.SIGTERM, within: float = 2.0) -> tuple[int, float]:
+        """Send ``sig``; the exit code and how long the process took to exit (it must within
+        ``within`` s, else AssertionError)."""
+        t0 = time.monotonic()
+        self.proc.send_signal(sig)
+        try:
+            code = self.proc.wait(within)
+        except subprocess.TimeoutExpired:
+            raise AssertionError(f"{' '.join(self.argv[2:5])} did not exit within {within} s of "
+                                 f"{signal.Signals(sig).name}; stderr:\n{self.stderr[-2000:]}"
+                                 ) from None
+        return code, time.monotonic() - t0
+
+    def wait_line(self, text: str, timeout: float) -> None:
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            if text in self.stderr:
+                return
+            if self.proc.poll() is not None:
+                break
+            time.sleep(0.02)
+        raise AssertionError(f"no {text!r} on stderr within {timeout} s:\n{self.stderr[-2000:]}")
+
+    def result(self) -> dict[str, Any]:
+        lines = [line for line in self.stdout.splitlines() if line.startswith("{")]
+        assert lines, f"no JSON on stdout:\n{self.stdout}\nstderr:\n{self.stderr[-2000:]}"
+        return json.loads(lines[-1])
+
+
+def mission_file(path: Path, duration: float, name: str = "ellipse") -> Path:
+    path.write_text(f'name = "{name}"\nframe = "start"\nduration = {duration}\n'
+                    '[trajectory]\nkind = "ellipse"\nf_r = 0.12\n')
+    return path
+
+
+def secret_file(path: Path, secret: str = "correct horse battery staple") -> Path:
+    path.write_text(secret + "\n")
+    path.chmod(0o600)
+    return path
+
+
+# --------------------------------------------------------------------------- fleets
+
+@dataclass
+class FleetRun:
+    n: int
+    snapshot: dict[str, Any]           # the monitor's --once --json snapshot
+    results: list[dict[str, Any]]      # each companion's --json result (None: no result)
+    codes: list[int | None]
+    gaps_ms: dict[str, float]          # per vehicle: longest gap between state messages (record)
+    counts: dict[str, int]
+    wall_s: float
+    exit_s: dict[str, float]           # monitor / router: seconds from SIGTERM to exit
+
+
+def _popen(argv: list[str], log: Path) -> subprocess.Popen:
+    f = open(log, "w")
+    try:
+        return subprocess.Popen(argv, stdout=f, stderr=subprocess.STDOUT, cwd=ROOT,
+                                env={**os.environ, "PYTHONUNBUFFERED": "1"})
+    finally:
+        f.close()
+
+
+def run_fleet(n: int, tmp: Path, rate: float = 20.0, duration: float = 10.0,
+              arm_delay: float | None = None, timeout: float = 120.0) -> FleetRun:
+    """One router, ``n`` sitl-plant + ``companion run`` pairs in real time at ``rate`` Hz, all
+    publishing through the router (client mode), and one ``companion monitor --once --json
+    --record``. Plants refuse arming for ``arm_delay`` s so every pair starts tracking after all
+    the processes are up. Every process is killed on the way out, whatever happened."""
+    from sitl_plant.testing import free_udp_port
+    t0 = time.monotonic()
+    arm_delay = arm_delay if arm_delay is not None else 4.0 + 0.5 * n
+    mission = mission_file(tmp / "fleet.toml", duration)
+    router_port = free_tcp_port()
+    router_ep = endpoint(router_port)
+    zenoh_client = ["--zenoh-mode", "client", "--zenoh-connect", router_ep, *ISOLATED]
+    record = tmp / "fleet.jsonl"
+    procs: list[subprocess.Popen] = []
+    companions: list[subprocess.Popen] = []
+    try:
+        router = _popen([sys.executable, "-m", "companion", "router", "--zenoh-listen",
+                         router_ep, *ISOLATED], tmp / "router.log")
+        procs.append(router)
+        deadline = time.monotonic() + 15.0
+        while "routing" not in (tmp / "router.log").read_text():
+            assert router.poll() is None and time.monotonic() < deadline, \
+                (tmp / "router.log").read_text()
+            time.sleep(0.05)
+        monitor = _popen([sys.executable, "-m", "companion", "monitor", "--once", "--json",
+                          "--wait", str(timeout), "--record", str(record), *zenoh_client],
+                         tmp / "monitor.out")
+        procs.append(monitor)
+        loop_rate = max(50.0, rate / 0.8 + 1)
+        for i in range(1, n + 1):
+            port = free_udp_port()
+            procs.append(_popen(
+                [sys.executable, "-m", "sitl_plant", "--connect", f"udpout:127.0.0.1:{port}",
+                 "--sysid", str(i), "--d-cen", "0.3", "--arm-delay", str(arm_delay),
+                 "--loop-rate", f"{loop_rate:g}", "--physics-dt", "0.002"],
+                tmp / f"plant{i}.log"))
+            c = _popen([sys.executable, "-m", "companion", "run", "--connect",
+                        f"udpin:127.0.0.1:{port}", "--sysid", str(i), "--mission", str(mission),
+                        "--arm", "--arm-timeout", "120", "--json", "-q", "--rate", f"{rate:g}",
+                        *zenoh_client], tmp / f"companion{i}.out")
+            procs.append(c)
+            companions.append(c)
+        deadline = t0 + timeout
+        for c in companions:
+            c.wait(max(0.1, deadline - time.monotonic()))
+        exit_s = {}
+        for name, p in (("monitor", monitor), ("router", router)):
+            # --once: SIGTERM ends the monitor's wait and it prints the snapshot.
+            t_sig = time.monotonic()
+            p.send_signal(signal.SIGTERM)
+            try:
+                p.wait(5.0)
+            except subprocess.TimeoutExpired:
+                pass
+            exit_s[name] = time.monotonic() - t_sig if p.poll() is not None else math.inf
+        out = (tmp / "monitor.out").read_text()
+        snap = json.loads([line for line in out.splitlines() if line.startswith("{")][-1])
+        results, codes = [], []
+        for i, c in enumerate(companions, 1):
+            lines = [line for line in (tmp / f"companion{i}.out").read_text().splitlines()
+                     if line.startswith("{")]
+            results.append(json.loads(lines[-1]) if lines else None)
+            codes.append(c.returncode)
+    finally:
+        for p in procs:
+            if p.poll() is None:
+                p.terminate()
+        for p in procs:
+            try:
+                p.wait(3.0)
+            except subprocess.TimeoutExpired:
+                p.kill()
+                p.wait()
+    gaps: dict[str, float] = {}
+    counts: dict[str, int] = {}
+    last: dict[str, float] = {}
+    for line in record.read_text().splitlines():
+        r = json.loads(line)
+        if not r["key"].endswith("/state"):
+            continue
+        vid = r["payload"]["vehicle_id"]
+        counts[vid] = counts.get(vid, 0) + 1
+        if vid in last:
+            gaps[vid] = max(gaps.get(vid, 0.0), (r["rx"] - last[vid]) * 1e3)
+        last[vid] = r["rx"]
+    return FleetRun(n, snap, results, codes, gaps, counts, time.monotonic() - t0, exit_s)
