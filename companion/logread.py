@@ -58,7 +58,8 @@ class Flight:
     def metrics(self) -> dict[str, Any]:
         out: dict[str, Any] = {"samples": int(len(self.t)), "records": self.records,
                                "corrupt": len(self.corrupt),
-                               "vehicle_time_s": float(self.t[-1] - self.t[0]) if len(self.t) else 0.0}
+                               "vehicle_time_s": (float(self.t[-1] - self.t[0]) if len(self.t)
+                                                  else 0.0)}
         if self.mission_t is None or self.x_ref is None or len(self.mission_t) < 2:
             out.update(f_cost=None, steady_rms=None, mission_time_s=None)
             return out
@@ -186,7 +187,7 @@ def read_tlog(path: str | Path, mission: Any = None) -> Flight:
                 t = msg.time_boot_ms * 1e-3
                 values = (msg.x, msg.y, msg.vx, msg.vy)
                 if t <= last_t or not all(math.isfinite(v) for v in values) or src not in att:
-                    continue     # a reboot, a duplicate or a bad sample: the companion refused it too
+                    continue     # a reboot, a duplicate, a bad sample: the companion refused it
                 last_t = t
                 yaw, rate = att[src]
                 poses.append((t, msg.x, msg.y, yaw, math.hypot(msg.vx, msg.vy), rate))

@@ -574,7 +574,8 @@ class Runner:
                 "mission_time": self.mission_time, "duration": self.mission.duration,
                 "mode": self.link.mode, "armed": self.link.armed, "cycles": self.stats.cycles,
                 "telemetry_received": t.received, "telemetry_rejected": dict(t.rejected),
-                "failsafes": self.failsafes, "signing_rejected": getattr(self.link, "signing_rejected", 0)}
+                "failsafes": self.failsafes,
+                "signing_rejected": getattr(self.link, "signing_rejected", 0)}
 
     # --- sinks ------------------------------------------------------------------------------
     def _emit(self, kind: str, reason: str = "", detail: dict | None = None) -> None:

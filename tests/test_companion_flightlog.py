@@ -30,7 +30,7 @@ def companion(*args: str, cwd: Path = ROOT, timeout: float = 90.0) -> subprocess
 def demo_logs(tmp_path_factory):
     """One 10 s demo with the default log directory (./logs of the working directory)."""
     cwd = tmp_path_factory.mktemp("demo")
-    p = companion("demo", "--json", "--no-plot", "--duration", "10", cwd=cwd)
+    p = companion("demo", "--no-zenoh", "--json", "--no-plot", "--duration", "10", cwd=cwd)
     assert p.returncode == 0, p.stderr
     return cwd, json.loads(p.stdout.strip().splitlines()[-1]), p.stderr
 
@@ -60,7 +60,8 @@ def test_demo_writes_both_logs_by_default_and_says_where(demo_logs):
 
 
 def test_no_log_writes_nothing(tmp_path):
-    p = companion("demo", "--json", "--no-plot", "--duration", "2", "--no-log", cwd=tmp_path)
+    p = companion("demo", "--no-zenoh", "--json", "--no-plot", "--duration", "2", "--no-log",
+                  cwd=tmp_path)
     assert p.returncode == 0, p.stderr
     r = json.loads(p.stdout.strip().splitlines()[-1])
     assert "tlog" not in r and not (tmp_path / "logs").exists()
@@ -110,7 +111,8 @@ def test_plot_bad_logs_are_one_line_errors(tmp_path, name, content, expect):
 def test_log_dir_that_cannot_be_created_is_a_user_error(tmp_path):
     blocker = tmp_path / "file"
     blocker.write_text("")
-    p = companion("run", "--mission", "missions/circle.toml", "--log-dir", str(blocker / "x"))
+    p = companion("run", "--no-zenoh", "--mission", "missions/circle.toml", "--log-dir",
+                  str(blocker / "x"))
     assert p.returncode == 2 and "--log-dir" in p.stderr and "Traceback" not in p.stderr
 
 
@@ -141,7 +143,8 @@ def test_sigkill_mid_mission_loses_at_most_100_ms_of_either_log(tmp_path):
     logs = tmp_path / "logs"
     with Proxy() as proxy, \
             PlantProcess("--speedup", "1", "--d-cen", "0.3", port=proxy.plant_port), \
-            Companion(proxy.companion_port, "--arm", "--mission", str(mission), "--log-dir",
+            Companion(proxy.companion_port, "--arm", "--no-zenoh", "--mission", str(mission),
+                      "--log-dir",
                       str(logs), "-q") as comp:
         proxy.wait_for(lambda: sum(1 for s in proxy.companion_sent(
             "SET_POSITION_TARGET_LOCAL_NED") if not is_zero(s.msg)) >= 160, 30.0)

@@ -83,7 +83,8 @@ class FakeVehicleStream:
         return rng.choice((
             lambda: mav.local_position_ned_encode(t, pos[0], pos[1], wild(rng), pos[2], pos[3],
                                                   wild(rng)),
-            lambda: mav.attitude_encode(t, wild(rng), wild(rng), wild(rng), 0, 0, rng.uniform(-1, 1)),
+            lambda: mav.attitude_encode(t, wild(rng), wild(rng), wild(rng), 0, 0,
+                                        rng.uniform(-1, 1)),
             lambda: mav.attitude_encode(t, 0, 0, rng.uniform(-1, 1), 0, 0, wild(rng)),
             # a clock jump far ahead with sane values: refused until a second sample agrees
             lambda: mav.local_position_ned_encode(min(self.ms + rng.randint(2_000, 2**31),
@@ -260,7 +261,8 @@ def test_fuzz_both_processes_over_udp_during_a_mission(tmp_path):
     to_plant = PilotStream(seed=4)
     with InjectingProxy() as proxy, \
             PlantProcess("--speedup", "2", "--d-cen", "0.3", port=proxy.plant_port) as plant, \
-            Companion(proxy.companion_port, "--arm", "--json", "--mission", str(mission),
+            Companion(proxy.companion_port, "--arm", "--no-zenoh", "--json", "--mission",
+                      str(mission),
                       "--max-speed", "3", "--max-yaw-rate", "2", "--log-dir",
                       str(tmp_path)) as comp:
         proxy.wait_for(lambda: len(proxy.companion_sent("SET_POSITION_TARGET_LOCAL_NED")) > 5,

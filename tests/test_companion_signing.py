@@ -55,7 +55,7 @@ def test_bad_key_files_are_one_line_errors(tmp_path, case, expect):
 
 def test_bad_key_on_the_command_line_exits_2_without_traceback(tmp_path):
     key = make_key(tmp_path / "k", 0o644)
-    for argv in (["-m", "companion", "run", "--mission", "missions/circle.toml",
+    for argv in (["-m", "companion", "run", "--no-zenoh", "--mission", "missions/circle.toml",
                   "--signing-key", str(key), "--log-dir", str(tmp_path)],
                  ["-m", "sitl_plant", "--signing-key", str(key)]):
         p = subprocess.run([sys.executable, *argv], capture_output=True, text=True, cwd=ROOT,
@@ -68,7 +68,8 @@ def test_bad_key_on_the_command_line_exits_2_without_traceback(tmp_path):
 # --- a signed pair ------------------------------------------------------------------------------
 def test_a_signed_pair_flies_end_to_end_and_logs_signed_frames(tmp_path):
     key = make_key(tmp_path / "k")
-    p = subprocess.run([sys.executable, "-m", "companion", "demo", "--json", "--no-plot", "-q",
+    p = subprocess.run([sys.executable, "-m", "companion", "demo", "--no-zenoh", "--json",
+                        "--no-plot", "-q",
                         "--duration", "10", "--signing-key", str(key), "--log-dir",
                         str(tmp_path)], capture_output=True, text=True, cwd=ROOT, timeout=90)
     assert p.returncode == 0, p.stderr
@@ -140,7 +141,8 @@ def test_the_companion_ignores_unsigned_and_wrong_key_telemetry(tmp_path):
     with InjectingProxy() as proxy, \
             PlantProcess("--speedup", "2", "--d-cen", "0.3", "--signing-key", str(key),
                          port=proxy.plant_port), \
-            Companion(proxy.companion_port, "--arm", "--json", "--mission", str(mission),
+            Companion(proxy.companion_port, "--arm", "--no-zenoh", "--json", "--mission",
+                      str(mission),
                       "--signing-key", str(key), "--log-dir", str(tmp_path)) as comp:
         proxy.wait_for(lambda: len(proxy.companion_sent("SET_POSITION_TARGET_LOCAL_NED")) > 20,
                        20.0)

@@ -25,7 +25,7 @@ def test_ten_minutes_of_faulty_link_in_lockstep(tmp_path):
     with PlantProcess("--lockstep", "--lockstep-timeout", "0.02", "--d-cen", "0.3",
                       "--dropout", "0.01", "--duplicate", "0.01", "--reorder", "0.01",
                       "--burst", "0.002", "--seed", "11") as plant, \
-            Companion(plant.port, "--arm", "--json", "-q", "--mission", str(mission),
+            Companion(plant.port, "--arm", "--no-zenoh", "--json", "-q", "--mission", str(mission),
                       "--log-dir", str(tmp_path)) as comp:
         while comp.proc.poll() is None and time.monotonic() - t0 < 170:
             try:
@@ -44,7 +44,8 @@ def test_ten_minutes_of_faulty_link_in_lockstep(tmp_path):
     frames, bad = read_tlog(next(tmp_path.glob("*.tlog")))
     sps = [m for _, m in frames if m.get_type() == "SET_POSITION_TARGET_LOCAL_NED"]
     invalid = [m for m in sps if not (all(math.isfinite(v) for v in (m.vx, m.vy, m.yaw_rate))
-                                      and abs(m.vx) <= MAX_SPEED and abs(m.yaw_rate) <= MAX_YAW_RATE)]
+                                      and abs(m.vx) <= MAX_SPEED
+                                      and abs(m.yaw_rate) <= MAX_YAW_RATE)]
     # memory: from the end of the first fifth (imports, buffers, histogram warm) to the end
     steady = [kb for t, kb in rss if t >= 0.2 * rss[-1][0]]
     growth_kb = steady[-1] - steady[0]

@@ -25,7 +25,8 @@ def test_pilot_takeover_stops_the_companion_within_one_cycle(tmp_path, how):
                   else ["--speedup", "2"])
     with Proxy() as proxy, \
             PlantProcess(*plant_args, "--d-cen", "0.3", port=proxy.plant_port) as plant, \
-            Companion(proxy.companion_port, "--arm", "--json", "--mission", str(mission),
+            Companion(proxy.companion_port, "--arm", "--no-zenoh", "--json", "--mission",
+                      str(mission),
                       "--log-dir", str(tmp_path)) as comp:
         if how.startswith("paced"):
             proxy.wait_for(lambda: sum(1 for s in proxy.companion_sent(
@@ -78,7 +79,7 @@ class QuietVehicle(FakeVehicle):
 def test_heartbeat_lost_for_3_s_stops_the_rover_then_holds_and_resumes(tmp_path):
     mission = ellipse_mission(tmp_path / "m.toml", 3600.0)
     port = free_udp_port()
-    with Companion(port, "--arm", "--json", "--mission", str(mission), "--log-dir",
+    with Companion(port, "--arm", "--no-zenoh", "--json", "--mission", str(mission), "--log-dir",
                    str(tmp_path)) as comp, QuietVehicle(port) as fake:
         deadline = time.monotonic() + 20
         while sum(1 for sp in fake.setpoints if not is_zero(sp)) < 40:

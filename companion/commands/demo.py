@@ -117,17 +117,17 @@ def run(args) -> int:
     port = _free_port()
     key = signing_key(args)
     log = logger("companion demo", args.quiet)
-    paths, log_sinks = open_flight_log(args, "demo", log)
+    paths, log_sinks = None, []
     settings = RunSettings(
         link=LinkConfig(url=f"udpin:127.0.0.1:{port}", heartbeat_timeout=15.0,
-                        signing_key=key, tlog=paths.tlog if paths else None),
+                        signing_key=key),
         mission=mission, runner=RunnerConfig(arm=True), rate=args.rate, gains_file=args.gains,
         gain_flags=GainFlags(args.k_df, args.lambda_f, args.k_dc, args.lambda_c),
         max_speed=max_speed, max_yaw_rate=max_yaw_rate, w_c=params.w_c, d_cen=args.d_cen)
     rate = requested_rate(settings)
     argv = plant_argv(args, port, rate)
     trace = TraceSink()
-    sinks = [*log_sinks, ProgressSink(mission.duration, mission.name), trace]
+    sinks = [ProgressSink(mission.duration, mission.name), trace]
 
     log(f"plant: {' '.join(argv[2:])}")
     plant_log = tempfile.TemporaryFile(mode="w+")
@@ -140,6 +140,11 @@ def run(args) -> int:
         try:
             from .zenoh_args import bus_options
             bus = open_bus(bus_options(args), log)   # closed on every path out (finally)
+            # The flight log once every flag has been checked: a bad one leaves no empty log.
+            paths, log_sinks = open_flight_log(args, "demo", log)
+            if paths is not None:
+                settings = replace(settings, link=replace(settings.link, tlog=paths.tlog))
+            sinks[:0] = log_sinks
             flying = True
             if bus is not None:
                 sinks.append(bus)

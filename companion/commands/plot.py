@@ -14,7 +14,8 @@ import json
 def register(subparsers) -> None:
     p = subparsers.add_parser(
         "plot", help="figures and tracking metrics from a flight log (.csv or .tlog)",
-        description=__doc__.split("\n\n", 1)[1], formatter_class=argparse.RawDescriptionHelpFormatter)
+        description=__doc__.split("\n\n", 1)[1],
+        formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("log", metavar="LOG", help="flight log: .csv or .tlog")
     p.add_argument("--out", metavar="DIR", default="out",
                    help="where the PNG files go (default out/)")

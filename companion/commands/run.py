@@ -221,17 +221,18 @@ def run(args) -> int:
     mission = load_mission(args.mission, args.origin)
     key = signing_key(args)
     log = logger("companion run", args.quiet)
-    paths, log_sinks = open_flight_log(args, "run", log)
-    sinks = list(log_sinks)
-    settings = settings_from_args(args, mission, args.connect, key,
-                                  paths.tlog if paths else None)
-    if args.progress:
-        sinks.append(ProgressSink(mission.duration, mission.name))
     switch = StopSwitch()
     restore = install_signals(switch)
-    bus = None
+    bus, log_sinks = None, []
     try:
         bus = open_bus(bus_options(args), log)   # inside the try: closed on every path out
+        # The flight log once every flag has been checked: a bad one leaves no empty log.
+        paths, log_sinks = open_flight_log(args, "run", log)
+        settings = settings_from_args(args, mission, args.connect, key,
+                                      paths.tlog if paths else None)
+        sinks = list(log_sinks)
+        if args.progress:
+            sinks.append(ProgressSink(mission.duration, mission.name))
         result = fly(settings, sinks=sinks + ([bus] if bus else []), log=log, switch=switch,
                      control=bus.control if bus else None)
     finally:
