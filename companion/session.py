@@ -15,6 +15,7 @@ Where each setting comes from, first found wins:
 from __future__ import annotations
 
 import math
+import os
 import time
 from dataclasses import asdict, dataclass, field, replace
 from typing import Any, Callable, Sequence
@@ -56,6 +57,22 @@ class RunSettings:
     max_yaw_rate: float | None = None
     w_c: float | None = None           # the vehicle's, to pick shipped tuned gains
     d_cen: float | None = None
+    realtime: bool = False             # --realtime: SCHED_FIFO for the loop
+
+
+REALTIME_PRIORITY = 10   # low among real-time tasks: above every normal process, below the kernel's
+
+
+def take_realtime(log: Callable[[str], None]) -> bool:
+    """SCHED_FIFO for this process, so a busy board does not delay a kHz loop. Best effort:
+    without the privilege the loop runs at normal priority and says so."""
+    try:
+        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(REALTIME_PRIORITY))
+    except (AttributeError, OSError) as exc:
+        log(f"--realtime: SCHED_FIFO not granted ({exc}); running at normal priority")
+        return False
+    log(f"--realtime: control loop under SCHED_FIFO priority {REALTIME_PRIORITY}")
+    return True
 
 
 @dataclass
@@ -184,6 +201,8 @@ def fly(s: RunSettings, sinks: Sequence[Sink] = (), control: ControlChannel | No
             switch.runner = runner
             if switch.reason is not None:
                 runner.request_stop(switch.reason)
+        if s.realtime:
+            take_realtime(log)
         outcome = runner.run()
     finally:
         link.close()

@@ -107,3 +107,14 @@ def test_ardupilot_setpoints_are_body_speed_and_yaw_rate(tmp_path):
     assert is_zero(sps[-1])
     assert is_mode_command(proxy.companion_sent("COMMAND_LONG")[-1].msg, 4)
     assert not any(math.isnan(sp.vx) for sp in sps)
+
+
+def test_realtime_flag_takes_sched_fifo_or_says_why_not(tmp_path):
+    mission = ellipse_mission(tmp_path / "m.toml", 3.0)
+    with PlantProcess("--lockstep") as plant, \
+            Companion(plant.port, "--arm", "--json", "--realtime", "--mission", str(mission)) as comp:
+        assert comp.wait(60.0) == 0, comp.stderr
+        result = comp.result()
+    assert result["reason"] == "mission_done"
+    assert ("control loop under SCHED_FIFO" in comp.stderr
+            or "SCHED_FIFO not granted" in comp.stderr), comp.stderr

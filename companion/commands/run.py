@@ -121,6 +121,9 @@ def register(subparsers) -> None:
     t.add_argument("--lost-timeout", type=positive, default=30.0, metavar="S",
                    help="give up when telemetry stays lost for S (default 30)")
     add_safety_arguments(p)
+    p.add_argument("--realtime", action="store_true",
+                   help="run the control loop under SCHED_FIFO (Linux; needs root or "
+                        "CAP_SYS_NICE); for kHz loops on a busy board")
     o = p.add_argument_group("output")
     o.add_argument("--json", action="store_true", help="print one JSON result object at the end")
     o.add_argument("--progress", action="store_true", help="progress bar on stderr")
@@ -148,6 +151,7 @@ def settings_from_args(args, mission, url: str, key: bytes | None = None,
         rate=args.rate, gains_file=args.gains,
         gain_flags=GainFlags(args.k_df, args.lambda_f, args.k_dc, args.lambda_c),
         max_speed=args.max_speed, max_yaw_rate=args.max_yaw_rate,
+        realtime=getattr(args, "realtime", False),
         w_c=getattr(args, "w_c", None), d_cen=getattr(args, "d_cen", None))
 
 
