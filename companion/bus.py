@@ -60,7 +60,6 @@ import math
 import os
 import queue
 import re
-import stat
 import threading
 import time
 from dataclasses import dataclass
@@ -70,6 +69,7 @@ from typing import Any, Callable
 from . import events as ev
 from .errors import UserError
 from .events import ControlChannel, LoopRecord, StatusEvent
+from .secretfile import read_private
 
 STATE_SCHEMA = "pzc-rover/state/1"
 STATUS_SCHEMA = "pzc-rover/status/1"
@@ -200,23 +200,9 @@ def close_all() -> None:
 
 
 def read_secret(path: str, flag: str = "--control-secret") -> bytes:
-    """The shared control secret; refused when group or others may read or write the file."""
-    p = Path(path)
-    try:
-        st = p.stat()
-    except FileNotFoundError:
-        raise UserError(f"{flag} {path}: no such file") from None
-    except OSError as exc:
-        raise UserError(f"{flag} {path}: cannot read: {exc.strerror}") from None
-    if not stat.S_ISREG(st.st_mode):
-        raise UserError(f"{flag} {path}: not a regular file")
-    if st.st_mode & 0o077:
-        raise UserError(f"{flag} {path}: permissions {stat.filemode(st.st_mode)} let "
-                        f"group or others read it; run `chmod 600 {path}`")
-    try:
-        secret = p.read_bytes().strip()
-    except OSError as exc:
-        raise UserError(f"{flag} {path}: cannot read: {exc.strerror}") from None
+    """The shared control secret; refused when group or others may access the file."""
+    # Read a little past the longest sensible secret: enough to strip whitespace.
+    secret = read_private(path, flag, "secret", 4096).strip()
     if len(secret) < 8:
         raise UserError(f"{flag} {path}: the secret must be at least 8 bytes")
     return secret

@@ -17,11 +17,10 @@ because an ``allow_unsigned_callback`` is always installed (pymavlink only count
 
 from __future__ import annotations
 
-import os
-import stat
 from typing import Any
 
 from .errors import UserError
+from .secretfile import read_private
 
 KEY_BYTES = 32
 # Sent unsigned by SiK radios themselves (ArduPilot accepts it unsigned for the same reason);
@@ -31,22 +30,7 @@ UNSIGNED_OK = frozenset({109})   # RADIO_STATUS
 
 def load_key(path: str, flag: str = "--signing-key") -> bytes:
     """The 32-byte secret in ``path``; a one-line UserError naming the flag and file otherwise."""
-    try:
-        st = os.stat(path)
-    except FileNotFoundError:
-        raise UserError(f"{flag} {path}: no such file") from None
-    except OSError as exc:
-        raise UserError(f"{flag} {path}: cannot read: {exc.strerror}") from None
-    if not stat.S_ISREG(st.st_mode):
-        raise UserError(f"{flag} {path}: not a regular file")
-    if st.st_mode & 0o077:
-        raise UserError(f"{flag} {path}: other users can access the key (mode "
-                        f"{stat.S_IMODE(st.st_mode):04o}); run: chmod 600 {path}")
-    try:
-        with open(path, "rb") as f:
-            data = f.read(4 * KEY_BYTES + 1)
-    except OSError as exc:
-        raise UserError(f"{flag} {path}: cannot read: {exc.strerror}") from None
+    data = read_private(path, flag, "key", 4 * KEY_BYTES + 1)
     if len(data) == KEY_BYTES:
         return data
     text = data.strip()
