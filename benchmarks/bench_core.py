@@ -17,7 +17,6 @@ The machine is shared and noisy: figures are medians of repeats, and the spread 
 from __future__ import annotations
 
 import argparse
-import math
 import os
 import statistics
 import sys

@@ -18,7 +18,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from . import ops as _ops
-from .angles import wrap
 from .limits import Limits, clamp, keep_if, speed_from_up
 from .pzc import reference_heading_rate
 from .signals import Command, Measurement, Num, Reference

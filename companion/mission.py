@@ -275,7 +275,6 @@ def _read_vehicle(table: Table | None) -> RoverParams | None:
 def _build_trajectory(spec: Table, base: Path, laps: float | None,
                       origin: tuple[float, float] | None):
     kind = spec.string("kind", required=True, choices=KINDS)
-    dist = {"positive": True, "maximum": MAX_DISTANCE}
     speed = {"positive": True, "maximum": MAX_SPEED}
     warnings: tuple[str, ...] = ()
     try:

@@ -46,7 +46,6 @@ from __future__ import annotations
 from dataclasses import dataclass, replace
 
 from . import ops as _ops
-from .angles import wrap
 from .filter import FilterGains, PoseFilter
 from .lead import ActuatorLead
 from .limits import SPEED_LAWS, Limits, clamp, keep_if, speed_from_up

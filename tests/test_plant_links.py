@@ -3,7 +3,6 @@ telemetry (noise, dropout, latency), end to end."""
 
 from __future__ import annotations
 
-import math
 import socket
 import statistics
 import time

@@ -172,7 +172,6 @@ def _cell(c: dict) -> str:
 def run(args) -> int:
     _check(args)
     from ..experiment import TableConfig
-    from ..filter import FilterGains  # noqa: F401  (imported early: a bad install fails here)
 
     # A gains file is read (and any mistake in it reported) before anything else starts.
     preset = None

@@ -144,7 +144,7 @@ def run(args) -> int:
     print(f"pzc     k_dc {p['k_dc']:.4g}  lambda_c {p['lambda_c']:.4g}  yaw: {yaw}")
     print(f"        velocity_ff {p['velocity_ff']}  heading_rate_ff {p['heading_rate_ff']}  "
           f"accel_ff {p['accel_ff']:.3g} s  speed_law {p['speed_law']}")
-    print(f"        actuator lead: " + ("off" if p["lead_tau"] == 0 else
+    print("        actuator lead: " + ("off" if p["lead_tau"] == 0 else
                                         f"tau {p['lead_tau']:.3g} s, max gain {p['lead_max_gain']:.3g}"))
     for fr, cost, rms in zip(d["f_r"], d["f_cost"], d["steady_rms"]):
         print(f"  f_r {fr:5.2f} Hz: f_cost {cost:7.3f}  steady RMS {rms:6.3f} m")
