@@ -59,7 +59,10 @@ def test_speedup_tracks_the_paper_ellipse():
     r = fly(["--speedup", "5", "--d-cen", "0.3"], ["--mission", MISSION], timeout=60.0)
     assert r["reason"] == "mission_done"
     assert r["loop_rate_hz"] == pytest.approx(40.0, rel=0.02)
-    assert r["steady_rms"] <= 0.3
+    # Paced runs depend on getting the CPU in time: say how the loop fared if this fails.
+    health = {k: r.get(k) for k in ("failsafes", "missed_cycles", "overruns", "latency_max_ms",
+                                    "telemetry_rejected", "f_cost")}
+    assert r["steady_rms"] <= 0.3, health
     assert r["f_cost"] == pytest.approx(batch_twin(r), rel=0.10)
 
 
