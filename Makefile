@@ -12,13 +12,13 @@ $(BIN)/.installed: pyproject.toml
 	touch $@
 
 demo: $(BIN)/.installed
-	$(BIN)/companion demo $(ARGS)
+	@$(BIN)/companion demo $(ARGS)
 
 test: $(BIN)/.installed
 	$(BIN)/python -m pytest $(ARGS)
 
 paper-table: $(BIN)/.installed
-	$(BIN)/companion paper-table $(ARGS)
+	@$(BIN)/companion paper-table $(ARGS)
 
 bench: $(BIN)/.installed
 	$(BIN)/python benchmarks/bench_core.py
