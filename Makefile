@@ -6,10 +6,11 @@ BIN = $(VENV)/bin
 .PHONY: demo test bench paper-table clean
 
 $(BIN)/.installed: pyproject.toml
-	$(PYTHON) -m venv $(VENV)
-	$(BIN)/python -m pip install -q --upgrade pip
-	$(BIN)/python -m pip install -q -e '.[test]'
-	touch $@
+	@echo "setting up $(VENV) (first run, or pyproject.toml changed)" >&2
+	@$(PYTHON) -m venv $(VENV)
+	@$(BIN)/python -m pip install -q --upgrade pip >&2
+	@$(BIN)/python -m pip install -q -e '.[test]' >&2
+	@touch $@
 
 demo: $(BIN)/.installed
 	@$(BIN)/companion demo $(ARGS)
