@@ -60,8 +60,10 @@ import math
 import os
 import queue
 import re
+import signal
 import threading
 import time
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable
@@ -197,6 +199,28 @@ def close_all() -> None:
         sessions = list(_sessions)
     for session in sessions:
         close_session(session)
+
+
+@contextmanager
+def session_until_signal(opts: BusOptions, default_mode: str = "peer"):
+    """A session and an Event that SIGTERM / SIGINT set, for processes that serve until told.
+
+    On every way out the session closes first (Zenoh's callback threads would keep the process
+    alive), then every other session, then the previous signal handlers come back.
+    """
+    stop = threading.Event()
+    old = {s: signal.signal(s, lambda signum, frame: stop.set())
+           for s in (signal.SIGTERM, signal.SIGINT)}
+    session = None
+    try:
+        session = open_session(opts, default_mode=default_mode)
+        yield session, stop
+    finally:
+        if session is not None:
+            close_session(session)
+        close_all()
+        for s, h in old.items():
+            signal.signal(s, h)
 
 
 def read_secret(path: str, flag: str = "--control-secret") -> bytes:

@@ -14,7 +14,6 @@ from __future__ import annotations
 import argparse
 import json
 import math
-import signal
 import sys
 import threading
 import time
@@ -158,7 +157,7 @@ def table(snap: dict[str, Any]) -> str:
 
 def run(args) -> int:
     import zenoh  # noqa: F401  (fail here, not inside a callback, if it is missing)
-    from ..bus import close_all, close_session, open_session
+    from ..bus import session_until_signal
 
     record = None
     if args.record:
@@ -166,36 +165,23 @@ def run(args) -> int:
             record = open(args.record, "w", encoding="utf-8")
         except OSError as exc:
             raise UserError(f"--record {args.record}: cannot write: {exc.strerror}") from None
-    stop = threading.Event()
-
-    def on_signal(signum, frame):
-        stop.set()
-
-    old = {s: signal.signal(s, on_signal) for s in (signal.SIGTERM, signal.SIGINT)}
     fleet = Fleet(record)
-    session = None
     try:
-        session = open_session(bus_options(args))
-        for kind in ("state", "status"):
-            session.declare_subscriber(f"{args.key}/{kind}", fleet.on_sample)
-        t0 = time.monotonic()
-        end = t0 + (args.wait if args.once else (args.duration or math.inf))
-        tty = sys.stdout.isatty() and not args.json
-        while not stop.is_set():
-            left = end - time.monotonic()
-            if left <= 0:
-                break
-            if stop.wait(min(args.refresh, left)) or args.once:
-                continue
-            _show(fleet.snapshot(), args.json, tty)
-        snap = fleet.snapshot()
+        with session_until_signal(bus_options(args)) as (session, stop):
+            for kind in ("state", "status"):
+                session.declare_subscriber(f"{args.key}/{kind}", fleet.on_sample)
+            t0 = time.monotonic()
+            end = t0 + (args.wait if args.once else (args.duration or math.inf))
+            tty = sys.stdout.isatty() and not args.json
+            while not stop.is_set():
+                left = end - time.monotonic()
+                if left <= 0:
+                    break
+                if stop.wait(min(args.refresh, left)) or args.once:
+                    continue
+                _show(fleet.snapshot(), args.json, tty)
+            snap = fleet.snapshot()
     finally:
-        # Zenoh's callback threads keep a process alive: close before anything else.
-        if session is not None:
-            close_session(session)
-        close_all()
-        for s, h in old.items():
-            signal.signal(s, h)
         if record is not None:
             record.close()
     if args.once:

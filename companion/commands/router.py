@@ -9,9 +9,7 @@ until SIGTERM / Ctrl-C, then closes the session and exits 0.
 from __future__ import annotations
 
 import argparse
-import signal
 import sys
-import threading
 
 from .zenoh_args import add_zenoh_arguments, bus_options
 
@@ -27,29 +25,16 @@ def register(subparsers) -> None:
 
 
 def run(args) -> int:
-    from ..bus import close_all, close_session, open_session
+    from ..bus import session_until_signal
 
     if not args.zenoh_listen and not args.zenoh_config:
         args.zenoh_listen = [DEFAULT_LISTEN]
-    stop = threading.Event()
-
-    def on_signal(signum, frame):
-        stop.set()
-
-    old = {s: signal.signal(s, on_signal) for s in (signal.SIGTERM, signal.SIGINT)}
-    session = None
-    try:
-        session = open_session(bus_options(args, mode="router"), default_mode="router")
+    with session_until_signal(bus_options(args, mode="router"), default_mode="router") as (
+            session, stop):
         where = " ".join(args.zenoh_listen) or f"as in {args.zenoh_config}"
         print(f"companion router: routing, listening on {where} (zid {session.zid()})",
               file=sys.stderr, flush=True)
         while not stop.wait(1.0):
             pass
-    finally:
-        if session is not None:
-            close_session(session)
-        close_all()
-        for s, h in old.items():
-            signal.signal(s, h)
     print("companion router: stopped", file=sys.stderr, flush=True)
     return 0
