@@ -12,12 +12,11 @@ The controllers are split over up to two worker processes (``--jobs``), one per 
 from __future__ import annotations
 
 import json
-import math
 import os
 import sys
 import time
 
-from ..errors import UserError
+from ..errors import UserError, require_positive
 
 
 def register(subparsers) -> None:
@@ -44,8 +43,7 @@ def register(subparsers) -> None:
 
 def _check(args) -> None:
     for flag, value in (("--rate", args.rate), ("--w-c", args.w_c), ("--duration", args.duration)):
-        if not (math.isfinite(value) and value > 0):
-            raise UserError(f"{flag} must be a number > 0, not {value!r}")
+        require_positive(flag, value)
     if args.rate > 10000:
         raise UserError(f"--rate must be at most 10000 Hz, not {args.rate!r}")
     if args.jobs < 1:

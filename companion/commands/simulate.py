@@ -15,7 +15,7 @@ import json
 import math
 import sys
 
-from ..errors import UserError
+from ..errors import UserError, require_positive
 
 DEFAULT_RATE = 40.0
 
@@ -39,11 +39,6 @@ def register(subparsers) -> None:
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.add_argument("--plot", metavar="OUT.png", help="draw the run (path and error)")
     p.set_defaults(func=run)
-
-
-def _positive(name: str, value: float | None, minimum: float = 0.0) -> None:
-    if value is not None and not (math.isfinite(value) and value > minimum):
-        raise UserError(f"{name} must be a number > {minimum:g}, not {value!r}")
 
 
 def choose_gains(mission, rate: float, w_c: float, d_cen: float, gains_file: str | None):
@@ -92,8 +87,8 @@ def run(args) -> int:
     from ..plant import RoverParams
     from .mission import parse_origin, print_warnings
 
-    _positive("--rate", args.rate)
-    _positive("--w-c", args.w_c)
+    require_positive("--rate", args.rate)
+    require_positive("--w-c", args.w_c)
     if args.d_cen is not None and not (math.isfinite(args.d_cen) and args.d_cen >= 0):
         raise UserError(f"--d-cen must be a distance >= 0, not {args.d_cen!r}")
     if args.rate is not None and args.rate > 1000:

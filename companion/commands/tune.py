@@ -14,7 +14,7 @@ import math
 import sys
 from pathlib import Path
 
-from ..errors import UserError
+from ..errors import UserError, require_positive
 
 
 def register(subparsers) -> None:
@@ -61,8 +61,7 @@ def _frequencies(text: str) -> tuple[float, ...]:
 def check(args) -> tuple[float, ...]:
     for flag, value in (("--rate", args.rate), ("--w-c", args.w_c), ("--duration", args.duration),
                         ("--max-speed", args.max_speed), ("--max-yaw-rate", args.max_yaw_rate)):
-        if not (math.isfinite(value) and value > 0):
-            raise UserError(f"{flag} must be a number > 0, not {value!r}")
+        require_positive(flag, value)
     if args.rate > 10000:
         raise UserError(f"--rate must be at most 10000 Hz, not {args.rate!r}")
     if not (math.isfinite(args.d_cen) and args.d_cen >= 0):
