@@ -137,8 +137,8 @@ def evaluate(cands: Candidates, cfg: TuneConfig,
              progress: Callable[[float], None] | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Simulate every candidate on every reference at once.
 
-    Returns (objective per candidate, steady RMS per candidate and reference). Unstable
-    candidates (non-finite or exploding) get an infinite objective.
+    Returns (objective per candidate, f_cost and steady RMS per candidate and reference).
+    Unstable candidates (non-finite or exploding) get an infinite objective.
     """
     n_c, n_s = len(cands), len(cfg.f_r)
     n = n_c * n_s
@@ -164,7 +164,7 @@ def evaluate(cands: Candidates, cfg: TuneConfig,
     rms = result.steady_rms.reshape(n_c, n_s)
     objective = cost.mean(axis=1)
     objective[~np.isfinite(objective)] = np.inf
-    return objective, rms
+    return objective, cost, rms
 
 
 @dataclass
@@ -187,7 +187,7 @@ def tune(cfg: TuneConfig, progress: Callable[[float], None] | None = None) -> Tu
         def round_progress(frac, r=r):
             if progress is not None:
                 progress((r + frac) / cfg.rounds)
-        obj, _ = evaluate(population, cfg, round_progress)
+        obj, _, _ = evaluate(population, cfg, round_progress)
         evaluated += len(population)
         pool = population if best is None else Candidates.concat([best, population])
         pool_obj = obj if best is None else np.concatenate([best_obj, obj])
@@ -198,20 +198,9 @@ def tune(cfg: TuneConfig, progress: Callable[[float], None] | None = None) -> Tu
 
     # Re-evaluate the winner alone to report its per-reference figures.
     winner = best.take(np.array([0]))
-    obj, rms = evaluate(winner, cfg)
+    obj, cost, rms = evaluate(winner, cfg)
     fg, pg = winner.gains(0)
-    cost_each = _per_reference_cost(winner, cfg)
     return TuneResult(
         TunedGains(fg, pg, rate_hz=cfg.rate_hz, w_c=cfg.w_c, d_cen=cfg.d_cen, cost=float(obj[0])),
-        cost_per_reference=cost_each, steady_rms_per_reference=[float(v) for v in rms[0]],
-        evaluated=evaluated, f_r=tuple(cfg.f_r))
-
-
-def _per_reference_cost(winner: Candidates, cfg: TuneConfig) -> list[float]:
-    fg, pg = winner.gains(0)
-    out = []
-    for f_r in cfg.f_r:
-        res = simulate(PZCTracker(fg, pg, cfg.limits), cfg.vehicle, Ellipse.paper(f_r), None,
-                       SimConfig(duration=cfg.duration, control_rate=cfg.rate_hz))
-        out.append(float(res.f_cost))
-    return out
+        cost_per_reference=[float(v) for v in cost[0]],
+        steady_rms_per_reference=[float(v) for v in rms[0]], evaluated=evaluated, f_r=tuple(cfg.f_r))
