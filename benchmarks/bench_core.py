@@ -81,7 +81,7 @@ def throughput(n: int, rate: float, duration: float, repeats: int) -> tuple[floa
 def paper_table_wall(jobs: int) -> float:
     from companion.commands.paper_table import compute, tuned_gains
     from companion.experiment import TableConfig
-    fg, pg, source = tuned_gains(1000.0, 20.0, None)
+    fg, pg, source = tuned_gains(1000.0, 20.0)
     start = time.perf_counter()
     compute(TableConfig(rate_hz=1000.0, w_c=20.0), (fg, pg), source, jobs)
     return time.perf_counter() - start

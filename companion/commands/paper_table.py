@@ -50,13 +50,9 @@ def _check(args) -> None:
         raise UserError(f"--jobs must be at least 1, not {args.jobs!r}")
 
 
-def tuned_gains(rate: float, w_c: float, gains_file: str | None, progress=None,
-                duration: float = 60.0):
-    """(FilterGains, PZCGains, source) for pzc_tuned."""
+def tuned_gains(rate: float, w_c: float, progress=None, duration: float = 60.0):
+    """(FilterGains, PZCGains, source) for pzc_tuned when no --gains file is given."""
     from .. import gains as gains_mod
-    if gains_file:
-        g = gains_mod.load(gains_file)
-        return g.filter, g.pzc, f"file {gains_file}"
     shipped = gains_mod.find_tuned(rate, w_c)
     if shipped is not None:
         return shipped.filter, shipped.pzc, f"shipped {gains_mod.tuned_path(rate, w_c).name}"
@@ -188,8 +184,8 @@ def run(args) -> int:
             if bar is not None:
                 bar.set_description_str("tuning pzc_tuned", refresh=False)
             _advance(bar, 100 * frac)
-        fg, pg, source = preset or tuned_gains(args.rate, args.w_c, None, tune_progress,
-                                                         args.duration)
+        fg, pg, source = preset or tuned_gains(args.rate, args.w_c, tune_progress,
+                                               args.duration)
         if bar is not None:
             bar.set_description_str("paper-table", refresh=False)
             bar.reset()
