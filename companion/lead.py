@@ -30,7 +30,7 @@ class ActuatorLead:
     def __init__(self, tau: Num, max_gain: Num, limits: Limits = Limits(), n: int | None = None):
         self.tau, self.max_gain, self.limits, self.n = tau, max_gain, limits, n
         self._m = _ops.for_size(n)
-        self._active = not (isinstance(tau, (int, float)) and tau == 0)
+        self._active = not _ops.is_plain_zero(tau)
         self.reset()
 
     def reset(self) -> None:

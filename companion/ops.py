@@ -52,6 +52,12 @@ array = SimpleNamespace(
 )
 
 
+def is_plain_zero(value) -> bool:
+    """True for a plain number 0 (an optional term switched off for every vehicle), so the
+    one-vehicle path can skip the work; an array is never plain, even if all zeros."""
+    return isinstance(value, (int, float)) and value == 0
+
+
 def for_size(n: int | None) -> SimpleNamespace:
     """The namespace for ``n`` vehicles: ``None`` means one vehicle on plain floats."""
     return scalar if n is None else array

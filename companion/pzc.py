@@ -102,11 +102,6 @@ class PZCGains:
         return k, lam
 
 
-def _is_zero(value: Num) -> bool:
-    """True for a plain 0 (the extension is off): skips the work on the one-vehicle path."""
-    return isinstance(value, (int, float)) and value == 0
-
-
 def reference_heading_rate(ref: Reference, m=_ops.scalar) -> Num:
     """d/dt atan2(vy, vx) of the reference = (vx ay - vy ax) / |v|^2 (0 where it stands still)."""
     speed2 = ref.vx * ref.vx + ref.vy * ref.vy
@@ -121,6 +116,7 @@ class PZCLaw:
         self.limits = limits
         self.n = n
         self._m = _ops.for_size(n)
+        self._accel_ff = not _ops.is_plain_zero(gains.accel_ff)   # decided once, off the hot path
         self.reset()
 
     def reset(self) -> None:
@@ -139,7 +135,7 @@ class PZCLaw:
         int_y = self.int_y + ey * dt
         ux = g.kp * ex + g.ki * int_x + g.velocity_ff * ref.vx
         uy = g.kp * ey + g.ki * int_y + g.velocity_ff * ref.vy
-        if not _is_zero(g.accel_ff):
+        if self._accel_ff:
             ux = ux + g.accel_ff * ref.ax
             uy = uy + g.accel_ff * ref.ay
 
