@@ -27,13 +27,13 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 import numpy as np  # noqa: E402
 
-from companion.baselines import KanayamaGains, KanayamaTracker, PIDGains, PIDTracker  # noqa: E402
-from companion.batch import SimConfig, simulate  # noqa: E402
-from companion.filter import FilterGains  # noqa: E402
-from companion.limits import Limits  # noqa: E402
-from companion.plant import RoverModel, RoverParams, RoverState  # noqa: E402
-from companion.pzc import PZCGains, PZCTracker  # noqa: E402
-from companion.trajectory import Ellipse  # noqa: E402
+from companion.core.baselines import KanayamaGains, KanayamaTracker, PIDGains, PIDTracker  # noqa: E402
+from companion.sim.batch import SimConfig, simulate  # noqa: E402
+from companion.core.filter import FilterGains  # noqa: E402
+from companion.core.limits import Limits  # noqa: E402
+from companion.sim.plant import RoverModel, RoverParams, RoverState  # noqa: E402
+from companion.core.pzc import PZCGains, PZCTracker  # noqa: E402
+from companion.core.trajectory import Ellipse  # noqa: E402
 
 
 def step_time_us(tracker, blocks: int, per_block: int = 2000) -> tuple[float, float, float]:
@@ -80,7 +80,7 @@ def throughput(n: int, rate: float, duration: float, repeats: int) -> tuple[floa
 
 def paper_table_wall(jobs: int) -> float:
     from companion.commands.paper_table import compute, tuned_gains
-    from companion.experiment import TableConfig
+    from companion.sim.experiment import TableConfig
     fg, pg, source = tuned_gains(1000.0, 20.0)
     start = time.perf_counter()
     compute(TableConfig(rate_hz=1000.0, w_c=20.0), (fg, pg), source, jobs)

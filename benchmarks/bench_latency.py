@@ -35,10 +35,10 @@ sys.path.insert(0, str(ROOT))
 os.environ["MAVLINK20"] = "1"
 
 from companion import mission as missions  # noqa: E402
-from companion.events import LoopRecord, StatusEvent  # noqa: E402
-from companion.link import LinkConfig  # noqa: E402
-from companion.runner import RunnerConfig  # noqa: E402
-from companion.session import RunSettings, fly  # noqa: E402
+from companion.live.events import LoopRecord, StatusEvent  # noqa: E402
+from companion.live.link import LinkConfig  # noqa: E402
+from companion.live.runner import RunnerConfig  # noqa: E402
+from companion.live.session import RunSettings, fly  # noqa: E402
 
 
 class AgeSink:
@@ -110,10 +110,10 @@ def hot_path_costs(n: int = 20000) -> None:
     from pymavlink import mavutil
     from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 
-    from companion.limits import Limits
-    from companion.pzc import PZCTracker
-    from companion.signals import Measurement
-    from companion.telemetry import TelemetryCheck
+    from companion.core.limits import Limits
+    from companion.core.pzc import PZCTracker
+    from companion.core.signals import Measurement
+    from companion.live.telemetry import TelemetryCheck
 
     out = mavlink2.MAVLink(None, srcSystem=1, srcComponent=1)
     frames = [out.local_position_ned_encode(k, 1.0, 2.0, 0.0, 0.1, 0.2, 0.0).pack(out)

@@ -39,7 +39,7 @@ sys.path.insert(0, str(ROOT / "tests"))
 import zenoh  # noqa: E402
 
 from companion.bus import Bus, BusOptions, decode  # noqa: E402
-from companion.events import LoopRecord, StatusEvent  # noqa: E402
+from companion.live.events import LoopRecord, StatusEvent  # noqa: E402
 from zenoh_harness import config, endpoint, free_tcp_port, mission_file, run_fleet  # noqa: E402
 
 

@@ -68,9 +68,9 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable
 
-from . import events as ev
+from .live import events as ev
 from .errors import UserError
-from .events import ControlChannel, LoopRecord, StatusEvent
+from .live.events import ControlChannel, LoopRecord, StatusEvent
 from .secretfile import read_private
 
 STATE_SCHEMA = "pzc-rover/state/1"
@@ -294,7 +294,7 @@ def decode(data: bytes, kind: str | None = None) -> dict[str, Any]:
 # --------------------------------------------------------------------------- the vehicle side
 
 class Bus:
-    """One companion's Zenoh presence: a :class:`~companion.events.Sink` for the runner that
+    """One companion's Zenoh presence: a :class:`~companion.live.events.Sink` for the runner that
     publishes state and status, plus (with a secret) the control queryable feeding ``control``.
 
     The key expressions need the vehicle id, which defaults to ``rover<sysid>``: publishers and

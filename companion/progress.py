@@ -8,7 +8,7 @@ from __future__ import annotations
 import sys
 import time
 
-from .events import LoopRecord, StatusEvent
+from .live.events import LoopRecord, StatusEvent
 
 
 class ProgressSink:

@@ -1,6 +1,6 @@
 """``sitl-plant``: a software rover that speaks MAVLink 2 like an ArduPilot Rover (or PX4).
 
-The dynamics are the paper's (:mod:`companion.plant`, eqs. (1)-(2) with first-order actuators);
+The dynamics are the paper's (:mod:`companion.sim.plant`, eqs. (1)-(2) with first-order actuators);
 this package adds what a companion computer sees of a real vehicle: heartbeat and modes, arming,
 message-rate requests with ArduPilot's cap, SET_POSITION_TARGET_LOCAL_NED handling with the guided
 timeout, noisy / late / lossy telemetry, and real-time, accelerated or lockstep clocks.

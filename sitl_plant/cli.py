@@ -13,7 +13,7 @@ import signal
 import socket
 import sys
 
-from companion.plant import RoverParams
+from companion.sim.plant import RoverParams
 
 from .config import DEFAULT_URL, PlantConfig
 from .modes import Autopilot
@@ -63,7 +63,7 @@ def _sysid(text: str) -> int:
 
 def build_parser() -> argparse.ArgumentParser:
     p = _Parser(prog="sitl-plant", description=(
-        "A two-wheeled rover (the paper's model, companion.plant) behind a MAVLink 2 autopilot "
+        "A two-wheeled rover (the paper's model, companion.sim.plant) behind a MAVLink 2 autopilot "
         "that behaves like ArduPilot Rover (or PX4): heartbeat, modes, arming, message rates, "
         "SET_POSITION_TARGET_LOCAL_NED, the guided timeout."))
     link = p.add_argument_group("link")
@@ -136,7 +136,7 @@ def config_from_args(args: argparse.Namespace) -> PlantConfig:
                                 duplicate=args.duplicate, reorder=args.reorder, burst=args.burst)
     key = None
     if args.signing_key is not None:
-        from companion.signing import load_key
+        from companion.mav.signing import load_key
         key = load_key(args.signing_key)
     return PlantConfig(connect=args.connect, sysid=args.sysid, loop_rate=args.loop_rate,
                        speedup=args.speedup, lockstep=args.lockstep,

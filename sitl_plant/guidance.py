@@ -12,8 +12,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from companion.angles import wrap
-from companion.plant import RoverParams, RoverState
+from companion.core.angles import wrap
+from companion.sim.plant import RoverParams, RoverState
 
 from .setpoint import HeadingSpeed, PositionTarget, Target, TurnRateSpeed
 

@@ -39,8 +39,8 @@ class Link:
         except Exception as exc:  # pymavlink raises anything from ValueError to SerialException
             raise LinkError(f"cannot open {url!r}: {exc}") from None
         self.mav = self.conn.mav
-        from companion import signing
-        from companion.link import size_receive_buffer
+        from companion.mav import signing
+        from companion.mav.sockets import size_receive_buffer
         self.recv_buffer = size_receive_buffer(self.conn)   # bursts of setpoints / commands
         self.signing = signing_key is not None
         if signing_key is not None:

@@ -15,7 +15,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from companion.angles import wrap
+from companion.core.angles import wrap
 
 FRAME_LOCAL_NED = 1
 FRAME_LOCAL_OFFSET_NED = 7

@@ -19,7 +19,7 @@ import heapq
 import random
 from dataclasses import dataclass
 
-from companion.angles import wrap
+from companion.core.angles import wrap
 
 
 @dataclass(frozen=True)

@@ -2,7 +2,7 @@
 
 Pure and clock-free: the caller says how far to step (``step(dt)``), when a command or setpoint
 arrives, and drains :attr:`Vehicle.texts` (the STATUSTEXTs an autopilot would send). The rover's
-motion is :class:`companion.plant.RoverModel` (the paper's eqs. (1)-(2) with first-order
+motion is :class:`companion.sim.plant.RoverModel` (the paper's eqs. (1)-(2) with first-order
 actuators); this module only decides which (speed, turn-rate) commands it gets.
 
 Timers follow the firmware: ArduPilot's GUIDED speed/turn-rate and heading targets are dropped
@@ -16,8 +16,8 @@ import math
 from dataclasses import dataclass, field
 from enum import IntEnum
 
-from companion.angles import wrap
-from companion.plant import RoverModel, RoverParams, RoverState
+from companion.core.angles import wrap
+from companion.sim.plant import RoverModel, RoverParams, RoverState
 
 from . import guidance, modes
 from .modes import Autopilot

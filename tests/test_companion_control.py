@@ -8,10 +8,10 @@ import threading
 import time
 
 from companion import mission as missions
-from companion.events import ControlChannel
-from companion.link import LinkConfig
-from companion.runner import RunnerConfig
-from companion.session import RunSettings, fly
+from companion.live.events import ControlChannel
+from companion.live.link import LinkConfig
+from companion.live.runner import RunnerConfig
+from companion.live.session import RunSettings, fly
 from sitl_plant.testing import PlantProcess
 
 MISSION_TEXT = 'name = "loaded"\nduration = 20\n[trajectory]\nkind = "ellipse"\nf_r = 0.12\n'

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import pytest
 
-from companion.flightlog import CSV_FIELDS
+from companion.live.flightlog import CSV_FIELDS
 from companion_harness import ROOT, Companion, Proxy, ellipse_mission, is_zero
 from safety_harness import read_tlog
 from sitl_plant.testing import PlantProcess

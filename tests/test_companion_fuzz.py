@@ -13,11 +13,11 @@ import random
 import time
 from collections import Counter, deque
 
-from companion.limits import Limits
-from companion.link import Link, LinkConfig
+from companion.core.limits import Limits
+from companion.live.link import Link, LinkConfig
 from companion.mission import paper_ellipse
-from companion.pzc import PZCTracker
-from companion.runner import Runner, RunnerConfig
+from companion.core.pzc import PZCTracker
+from companion.live.runner import Runner, RunnerConfig
 from companion_harness import Companion, _parser, ellipse_mission
 from fuzzframes import Fuzzer, wild
 from safety_harness import InjectingProxy, encoder, frame

@@ -9,13 +9,13 @@ import pytest
 
 from companion import mission as missions
 from companion.errors import UserError
-from companion.filter import FilterGains
-from companion.limits import Limits
-from companion.pzc import PZCGains
-from companion.session import (DEFAULT_LIMITS, GainFlags, RunSettings, choose_gains,
+from companion.core.filter import FilterGains
+from companion.core.limits import Limits
+from companion.core.pzc import PZCGains
+from companion.live.session import (DEFAULT_LIMITS, GainFlags, RunSettings, choose_gains,
                                choose_limits, requested_rate)
-from companion.stats import LatencyHistogram, TrackingStats
-from companion.telemetry import TelemetryCheck
+from companion.live.stats import LatencyHistogram, TrackingStats
+from companion.live.telemetry import TelemetryCheck
 
 
 class Msg(SimpleNamespace):

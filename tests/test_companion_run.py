@@ -9,12 +9,12 @@ import math
 
 import pytest
 
-from companion.batch import SimConfig, simulate
-from companion.filter import FilterGains
-from companion.limits import Limits
-from companion.plant import RoverParams
-from companion.pzc import PZCGains, PZCTracker
-from companion.trajectory import Ellipse
+from companion.sim.batch import SimConfig, simulate
+from companion.core.filter import FilterGains
+from companion.core.limits import Limits
+from companion.sim.plant import RoverParams
+from companion.core.pzc import PZCGains, PZCTracker
+from companion.core.trajectory import Ellipse
 from companion_harness import Companion, Proxy, ellipse_mission, is_mode_command, is_zero
 from sitl_plant.testing import PlantProcess
 
@@ -30,7 +30,7 @@ def fly(plant_args, companion_args, timeout=60.0):
 
 
 def batch_twin(result) -> float:
-    """companion.batch.simulate of the same scenario: same gains, limits, rate, plant, start."""
+    """companion.sim.batch.simulate of the same scenario: same gains, limits, rate, plant, start."""
     g = result["gains"]
     tracker = PZCTracker(FilterGains(g["k_df"], g["lambda_f"]),
                          PZCGains(**{k: g[k] for k in ("k_dc", "lambda_c", "k_dc_yaw",

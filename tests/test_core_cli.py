@@ -13,7 +13,7 @@ from pathlib import Path
 
 import pytest
 
-from companion import gains as gains_mod
+from companion.sim import gains as gains_mod
 
 ROOT = Path(__file__).resolve().parent.parent
 

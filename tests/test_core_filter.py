@@ -12,9 +12,9 @@ import math
 import numpy as np
 import pytest
 
-from companion.angles import wrap
-from companion.filter import FilterGains, PoseFilter, transition
-from companion.signals import Measurement
+from companion.core.angles import wrap
+from companion.core.filter import FilterGains, PoseFilter, transition
+from companion.core.signals import Measurement
 
 
 def _step_response(gains: FilterGains, rate: float, duration: float) -> tuple[np.ndarray, np.ndarray]:

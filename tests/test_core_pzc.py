@@ -13,10 +13,10 @@ import math
 import numpy as np
 import pytest
 
-from companion.angles import wrap
-from companion.limits import Limits
-from companion.pzc import PZCGains, PZCLaw, reference_heading_rate
-from companion.signals import Estimate, Reference
+from companion.core.angles import wrap
+from companion.core.limits import Limits
+from companion.core.pzc import PZCGains, PZCLaw, reference_heading_rate
+from companion.core.signals import Estimate, Reference
 
 
 def _estimate(x: float, y: float = 0.0, yaw: float = 0.0) -> Estimate:
@@ -151,7 +151,7 @@ def test_accel_feed_forward_cancels_a_first_order_actuator():
 
 
 def test_wrap_is_half_open_and_the_same_for_floats_and_arrays():
-    from companion import ops
+    from companion.core import ops
     edge = [math.pi, -math.pi, 3 * math.pi, -3 * math.pi, 0.0, 2 * math.pi, 1e-12, -1e-12,
             math.pi + 1e-12, -math.pi + 1e-12, 100.0, -100.0]
     rng = np.random.default_rng(1)

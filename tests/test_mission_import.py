@@ -10,7 +10,7 @@ import sys
 import numpy as np
 import pytest
 
-from companion import geo
+from companion.mission import geo
 from companion import mission as missions
 from companion.errors import UserError
 

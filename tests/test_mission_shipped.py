@@ -12,12 +12,12 @@ from pathlib import Path
 import pytest
 
 from companion import mission as missions
-from companion.batch import SimConfig, simulate
-from companion.filter import FilterGains
-from companion.gains import find_tuned
-from companion.limits import Limits
-from companion.plant import RoverParams
-from companion.pzc import PZCGains, PZCTracker
+from companion.sim.batch import SimConfig, simulate
+from companion.core.filter import FilterGains
+from companion.sim.gains import find_tuned
+from companion.core.limits import Limits
+from companion.sim.plant import RoverParams
+from companion.core.pzc import PZCGains, PZCTracker
 
 ROOT = Path(__file__).resolve().parent.parent
 SHIPPED = sorted(str(p.relative_to(ROOT)) for p in (ROOT / "missions").iterdir()
@@ -78,7 +78,7 @@ def test_shipped_mission_is_tracked_within_0_3_m_at_40_hz(name):
     result = simulate(tracker, m.vehicle or RoverParams.paper(), m.anchored(0.0, 0.0, 0.0),
                       config=SimConfig(duration=m.duration, control_rate=40.0))
     if which == "stand-in" and result.steady_rms > 0.3:
-        # Until companion/tuned/rate40_wc20.toml ships: the stand-in's position gains (K_P 17)
+        # Until companion/sim/tuned/rate40_wc20.toml ships: the stand-in's position gains (K_P 17)
         # make the loop chatter at 40 Hz, and the mission's command limits turn that into a
         # limit cycle. With the tuned file present this is a hard failure.
         pytest.xfail(f"{name}: steady RMS {result.steady_rms:.3f} m with the stand-in gains")

@@ -7,7 +7,7 @@ import math
 
 import pytest
 
-from companion.plant import RoverParams
+from companion.sim.plant import RoverParams
 from sitl_plant import modes, setpoint as sp
 from sitl_plant.clock import LockstepGate, Pacer
 from sitl_plant.modes import Autopilot

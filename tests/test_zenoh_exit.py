@@ -9,7 +9,7 @@ import time
 import pytest
 
 from companion.bus import encode, status_payload
-from companion.events import StatusEvent
+from companion.live.events import StatusEvent
 
 from sitl_plant.testing import PlantProcess, free_udp_port
 from zenoh_harness import (ISOLATED, Collector, Proc, endpoint, free_tcp_port, mission_file,

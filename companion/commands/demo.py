@@ -101,11 +101,11 @@ def _stop(proc: subprocess.Popen) -> int | None:
 
 def run(args) -> int:
     from ..bus import open_bus, shut
-    from ..link import LinkConfig
-    from ..plant import RoverParams
+    from ..live.link import LinkConfig
+    from ..sim.plant import RoverParams
     from ..progress import ProgressSink, TraceSink
-    from ..runner import RunnerConfig
-    from ..session import DEFAULT_LIMITS, GainFlags, RunSettings, StopSwitch, fly, requested_rate
+    from ..live.runner import RunnerConfig
+    from ..live.session import DEFAULT_LIMITS, GainFlags, RunSettings, StopSwitch, fly, requested_rate
 
     mission = _mission(args)
     params = (RoverParams.paper if args.preset == "paper" else RoverParams.stock_rover)()
@@ -173,7 +173,7 @@ def run(args) -> int:
     if paths is not None:
         extra.update(tlog=paths.tlog, csv=paths.csv)
     if args.plot and trace.log["t"]:
-        from ..mission_plot import plot_run
+        from ..mission.plot import plot_run
         out = Path(args.out)
         out.mkdir(parents=True, exist_ok=True)
         path = out / "demo.png"

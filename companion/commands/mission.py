@@ -44,7 +44,7 @@ def parse_origin(text: str | None) -> tuple[float, float] | None:
     """``"LAT,LON"`` -> (lat, lon); a one-line UserError otherwise."""
     if text is None:
         return None
-    from .. import geo
+    from ..mission import geo
     try:
         lat, lon = (float(part) for part in text.split(","))
     except ValueError:
@@ -96,7 +96,7 @@ def run_show(args) -> int:
     for key, value in describe(m):
         print(f"{key:<12} {value}")
     if args.plot:
-        from ..mission_plot import plot_mission
+        from ..mission.plot import plot_mission
         plot_mission(m, args.plot, every=args.every)
         print(f"{'plot':<12} {args.plot}")
     return 0

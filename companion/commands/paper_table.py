@@ -1,11 +1,11 @@
 """``companion paper-table``: the paper's Figure 13 reproduced (Section 5), with two more controllers.
 
 Six scenarios x four controllers (paper-gain PZC, tuned PZC, the paper's PID, Kanayama) in batch
-simulation; see :mod:`companion.experiment` for the set-up and what the paper leaves unsaid.
+simulation; see :mod:`companion.sim.experiment` for the set-up and what the paper leaves unsaid.
 The controllers are split over up to two worker processes (``--jobs``), one per core here.
 
 ``pzc_tuned`` gains, first found wins: ``--gains FILE``; the shipped file for this rate and w_c
-(``companion/tuned/``); else a short tuning run on the spot. The JSON says which
+(``companion/sim/tuned/``); else a short tuning run on the spot. The JSON says which
 (``pzc_tuned_source``).
 """
 
@@ -52,12 +52,12 @@ def _check(args) -> None:
 
 def tuned_gains(rate: float, w_c: float, progress=None, duration: float = 60.0):
     """(FilterGains, PZCGains, source) for pzc_tuned when no --gains file is given."""
-    from .. import gains as gains_mod
+    from ..sim import gains as gains_mod
     shipped = gains_mod.find_tuned(rate, w_c)
     if shipped is not None:
         return shipped.filter, shipped.pzc, f"shipped {gains_mod.tuned_path(rate, w_c).name}"
-    from ..limits import Limits
-    from ..tuning import TuneConfig, tune
+    from ..core.limits import Limits
+    from ..sim.tuning import TuneConfig, tune
     cfg = TuneConfig(rate_hz=rate, w_c=w_c, duration=duration, population=48, rounds=3,
                      limits=Limits())     # the table's plant has no limits; tune for it
     result = tune(cfg, progress)
@@ -67,7 +67,7 @@ def tuned_gains(rate: float, w_c: float, progress=None, duration: float = 60.0):
 
 
 def _worker(config, tuned, source, only, shared, conn):
-    from ..experiment import run_table
+    from ..sim.experiment import run_table
 
     def progress(frac):
         shared.value = frac
@@ -96,7 +96,7 @@ def _split(names: tuple[str, ...], jobs: int) -> list[tuple[str, ...]]:
 
 def compute(config, tuned, source, jobs: int, bar=None):
     """Run the table, in ``jobs`` processes when more than one; ``bar`` is a tqdm bar or None."""
-    from ..experiment import merge, run_table
+    from ..sim.experiment import merge, run_table
     parts = _split(config.controllers, jobs)
     if len(parts) == 1:
         def progress(frac):
@@ -165,12 +165,12 @@ def _cell(c: dict) -> str:
 
 def run(args) -> int:
     _check(args)
-    from ..experiment import TableConfig
+    from ..sim.experiment import TableConfig
 
     # A gains file is read (and any mistake in it reported) before anything else starts.
     preset = None
     if args.gains:
-        from .. import gains as gains_mod
+        from ..sim import gains as gains_mod
         g = gains_mod.load(args.gains)
         preset = (g.filter, g.pzc, f"file {args.gains}")
     bar = None
@@ -201,7 +201,7 @@ def run(args) -> int:
 
     files = []
     if args.plot:
-        from ..paper_plots import plot_all
+        from ..sim.paper_plots import plot_all
         files = plot_all(result, args.plot)
     if args.json:
         out = result.as_dict()

@@ -30,8 +30,8 @@ def run(args) -> int:
     from pathlib import Path
 
     from ..errors import UserError
-    from ..flight_plot import plot_flight
-    from ..logread import read
+    from ..logs.plot import plot_flight
+    from ..logs.logread import read
 
     mission = None
     if args.mission:

@@ -74,7 +74,7 @@ def open_flight_log(args, label: str, log) -> tuple[Any, list]:
     """(paths or None, [CSV sink]) for ``--log-dir`` / ``--no-log``; the paths are logged."""
     if not getattr(args, "log", True):
         return None, []
-    from ..flightlog import new_paths, open_csv
+    from ..live.flightlog import new_paths, open_csv
     paths = new_paths(getattr(args, "log_dir", None), label)
     sink = open_csv(paths.csv)
     log(f"flight log: {paths.tlog} and {paths.csv}")
@@ -85,7 +85,7 @@ def signing_key(args) -> bytes | None:
     path = getattr(args, "signing_key", None)
     if path is None:
         return None
-    from ..signing import load_key
+    from ..mav.signing import load_key
     return load_key(path)
 
 
@@ -135,9 +135,9 @@ def register(subparsers) -> None:
 
 def settings_from_args(args, mission, url: str, key: bytes | None = None,
                        tlog: str | None = None):
-    from ..link import LinkConfig
-    from ..runner import RunnerConfig
-    from ..session import GainFlags, RunSettings
+    from ..live.link import LinkConfig
+    from ..live.runner import RunnerConfig
+    from ..live.session import GainFlags, RunSettings
     return RunSettings(
         link=LinkConfig(url=url, sysid=getattr(args, "sysid", None),
                         heartbeat_timeout=getattr(args, "heartbeat_timeout", 10.0),
@@ -219,7 +219,7 @@ def load_mission(path: str, origin_text: str | None):
 def run(args) -> int:
     from ..bus import open_bus, shut
     from ..progress import ProgressSink
-    from ..session import StopSwitch, fly
+    from ..live.session import StopSwitch, fly
     from .zenoh_args import bus_options
 
     mission = load_mission(args.mission, args.origin)

@@ -1,10 +1,10 @@
 """``companion simulate``: one rover, one mission, closed loop in simulation (no MAVLink).
 
-Runs :func:`companion.batch.simulate` with the mission's reference anchored at a rover at rest at
+Runs :func:`companion.sim.batch.simulate` with the mission's reference anchored at a rover at rest at
 the origin facing north, and prints the paper's metrics f_cost and steady_rms (Section 5.3).
 
 Gains, first found wins: ``--gains FILE``; the mission's own gains; the shipped tuned gains for
-this rate, w_c and d_cen (:func:`companion.gains.find_tuned`); else :data:`FALLBACK`.
+this rate, w_c and d_cen (:func:`companion.sim.gains.find_tuned`); else :data:`FALLBACK`.
 The plant is the mission's [vehicle] (default the paper's, w_c 20 rad/s), with --w-c / --d-cen
 overriding it; the mission's [limits] clamp the commands.
 """
@@ -43,9 +43,9 @@ def register(subparsers) -> None:
 
 def choose_gains(mission, rate: float, w_c: float, d_cen: float, gains_file: str | None):
     """(FilterGains, PZCGains, where they came from)."""
-    from .. import gains as gains_mod
-    from ..filter import FilterGains
-    from ..pzc import PZCGains
+    from ..sim import gains as gains_mod
+    from ..core.filter import FilterGains
+    from ..core.pzc import PZCGains
     if gains_file is not None:
         tuned = gains_mod.load(gains_file)
         return tuned.filter, tuned.pzc, gains_file
@@ -82,9 +82,9 @@ class _Recorder:
 
 def run(args) -> int:
     from .. import mission as missions
-    from ..batch import SimConfig, simulate
-    from ..limits import Limits
-    from ..plant import RoverParams
+    from ..sim.batch import SimConfig, simulate
+    from ..core.limits import Limits
+    from ..sim.plant import RoverParams
     from .mission import parse_origin, print_warnings
 
     require_positive("--rate", args.rate)
@@ -108,14 +108,14 @@ def run(args) -> int:
 
     gains_note = ""
     if args.controller == "pzc":
-        from ..pzc import PZCTracker
+        from ..core.pzc import PZCTracker
         fg, pg, gains_note = choose_gains(mission, rate, params.w_c, params.d_cen, args.gains)
         tracker = PZCTracker(fg, pg, limits)
     elif args.controller == "pid":
-        from ..baselines import PIDGains, PIDTracker
+        from ..core.baselines import PIDGains, PIDTracker
         tracker, gains_note = PIDTracker(PIDGains(), limits), "paper's PID (k_P 3.5, k_I 0.5, k_D 0.5)"
     else:
-        from ..baselines import KanayamaGains, KanayamaTracker
+        from ..core.baselines import KanayamaGains, KanayamaTracker
         tracker, gains_note = KanayamaTracker(KanayamaGains(), limits), "Kanayama defaults"
     if args.plot:
         tracker = _Recorder(tracker)
@@ -125,7 +125,7 @@ def run(args) -> int:
     f_cost, steady = float(result.f_cost), float(result.steady_rms)
 
     if args.plot:
-        from ..mission_plot import plot_run
+        from ..mission.plot import plot_run
         plot_run(mission, tracker.log, args.plot,
                  f"{mission.name}: {args.controller} at {rate:g} Hz, steady RMS {steady:.3f} m")
     if args.json:

@@ -1,10 +1,10 @@
 """``companion tune``: search filter and PZC gains for a loop rate, actuator and limits.
 
-The search is :func:`companion.tuning.tune` (batch simulation of a population of gain sets on the
+The search is :func:`companion.sim.tuning.tune` (batch simulation of a population of gain sets on the
 paper's ellipse at several reference speeds at once). The result prints as a table, or as JSON
 with ``--json``, and ``--out FILE`` writes a tuned-gains file that ``companion run``, ``demo``,
 ``simulate`` and ``paper-table`` read (``--gains FILE``). Files named
-``companion/tuned/rate<HZ>_wc<W_C>.toml`` are picked up automatically for that rate and w_c.
+``companion/sim/tuned/rate<HZ>_wc<W_C>.toml`` are picked up automatically for that rate and w_c.
 """
 
 from __future__ import annotations
@@ -102,8 +102,8 @@ def _describe(result) -> dict:
 
 def run(args) -> int:
     f_r = check(args)
-    from ..limits import Limits
-    from ..tuning import TuneConfig, tune
+    from ..core.limits import Limits
+    from ..sim.tuning import TuneConfig, tune
 
     cfg = TuneConfig(rate_hz=args.rate, w_c=args.w_c, d_cen=args.d_cen, f_r=f_r,
                      duration=args.duration,

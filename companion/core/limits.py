@@ -33,7 +33,7 @@ def speed_from_up(m, speed_law: str, norm_up: Num, heading_error: Num) -> Num:
 
     ``norm_up`` is |u_p| and ``heading_error`` is phi_ref - phi with phi_ref = atan2(u_y, u_x), so
     the projection u_x cos(phi) + u_y sin(phi) equals |u_p| cos(heading_error): one cosine instead
-    of two trig calls. See :mod:`companion.pzc` for why the projection is the default.
+    of two trig calls. See :mod:`companion.core.pzc` for why the projection is the default.
     """
     if speed_law == "paper":
         return norm_up

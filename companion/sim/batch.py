@@ -1,6 +1,6 @@
 """Closed-loop simulation of one rover (floats) or thousands at once (numpy arrays).
 
-The plant (:mod:`companion.plant`) is integrated with RK4 on a fine fixed step (1 ms or finer);
+The plant (:mod:`companion.sim.plant`) is integrated with RK4 on a fine fixed step (1 ms or finer);
 the trackers run at their own rate (1 kHz down to 10 Hz or less) on the sampled pose, and their
 command is held (zero-order hold) until the next control step, as on a real autopilot link.
 The very same tracker objects run here and in the live MAVLink loop; ``n=None`` simulates one
@@ -20,8 +20,8 @@ from typing import Callable, Protocol, Sequence
 import numpy as np
 
 from .plant import RoverModel, RoverParams, RoverState
-from .signals import Command, Measurement, Num, Reference
-from .trajectory import Trajectory
+from ..core.signals import Command, Measurement, Num, Reference
+from ..core.trajectory import Trajectory
 
 
 class Tracker(Protocol):

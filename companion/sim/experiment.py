@@ -9,7 +9,7 @@ What the paper leaves unsaid, and we choose: actuator bandwidth w_c = 20 rad/s (
 rover starts at the origin at rest heading along +x, 60 s per run, no command limits (the paper's
 plant has none), plant integrated on a 1 ms grid (finer when the loop is faster).
 
-Controllers, all on the same plant and the same speed law (:mod:`companion.limits`):
+Controllers, all on the same plant and the same speed law (:mod:`companion.core.limits`):
 
     pzc        the paper's filter + PZC law and gains (k_df 1000, lambda_f 120, k_dc 5, lambda_c 12)
     pzc_tuned  the filter + PZC law with the tuner's gains for this rate and w_c
@@ -17,7 +17,7 @@ Controllers, all on the same plant and the same speed law (:mod:`companion.limit
     kanayama   Kanayama's kinematic tracking law
     pzc_literal  (optional) the paper's gains with the literal speed law v_ref = |u_p| of eq. (20)
 
-All 6 x 4 runs go through one vectorised :func:`companion.batch.simulate` call: each controller
+All 6 x 4 runs go through one vectorised :func:`companion.sim.batch.simulate` call: each controller
 owns a slice of 6 vehicles. Pure computation: no I/O, no clock.
 """
 
@@ -28,13 +28,13 @@ from typing import Callable
 
 import numpy as np
 
-from .baselines import KanayamaGains, KanayamaTracker, PIDGains, PIDTracker
+from ..core.baselines import KanayamaGains, KanayamaTracker, PIDGains, PIDTracker
 from .batch import SimConfig, simulate
-from .filter import FilterGains
-from .limits import Limits
+from ..core.filter import FilterGains
+from ..core.limits import Limits
 from .plant import RoverParams
-from .pzc import PZCGains, PZCTracker
-from .trajectory import Ellipse
+from ..core.pzc import PZCGains, PZCTracker
+from ..core.trajectory import Ellipse
 
 SCENARIOS: tuple[tuple[float, float], ...] = (
     (0.04, 0.0), (0.08, 0.0), (0.12, 0.0),      # Section 5.1: reference speed

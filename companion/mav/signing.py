@@ -19,8 +19,8 @@ from __future__ import annotations
 
 from typing import Any
 
-from .errors import UserError
-from .secretfile import read_private
+from ..errors import UserError
+from ..secretfile import read_private
 
 KEY_BYTES = 32
 # Sent unsigned by SiK radios themselves (ArduPilot accepts it unsigned for the same reason);

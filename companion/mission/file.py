@@ -1,7 +1,7 @@
 """Mission files: the reference trajectory a user asks for, checked before anything moves.
 
 A mission is a TOML file (or a QGroundControl ``.plan`` / ``QGC WPL 110`` ``.waypoints`` file,
-imported by :mod:`companion.plan_import`)::
+imported by :mod:`companion.mission.plan_import`)::
 
     name = "circle"
     description = "5 m circle at 1.5 m/s"
@@ -10,7 +10,7 @@ imported by :mod:`companion.plan_import`)::
     # origin = [lat, lon]    # only with frame = "geodetic"
     laps = 3                 # or duration = 60 (s); default: the motion's end, or one lap
     rate_hz = 40             # optional loop rate
-    # gains_file = "tuned.toml"   (or the tables [gains.filter] / [gains.pzc], as companion.gains)
+    # gains_file = "tuned.toml"   (or the tables [gains.filter] / [gains.pzc], as companion.sim.gains)
 
     [trajectory]
     kind = "circle"          # ellipse | circle | figure8 | line | polyline | waypoints | plan
@@ -22,7 +22,7 @@ imported by :mod:`companion.plan_import`)::
     max_speed = 2.0
     max_yaw_rate = 1.0
 
-    [vehicle]                # optional, for simulation: companion.plant.RoverParams fields
+    [vehicle]                # optional, for simulation: companion.sim.plant.RoverParams fields
     d_cen = 0.0
     w_c = 20.0
 
@@ -41,18 +41,18 @@ import tomllib
 from dataclasses import dataclass, replace
 from pathlib import Path
 
-from . import gains as _gains
+from ..sim import gains as _gains
 from . import paths
-from .errors import UserError
-from .filter import FilterGains
-from .limits import Limits
-from .plant import RoverParams
+from ..errors import UserError
+from ..core.filter import FilterGains
+from ..core.limits import Limits
+from ..sim.plant import RoverParams
 from .polyline import Polyline
 from .profile import MotionProfile, limit_problem, measure
-from .pzc import PZCGains
+from ..core.pzc import PZCGains
 from .schema import Table, check_rows, short
 from .spline import TimedWaypoints
-from .trajectory import Ellipse, Trajectory
+from ..core.trajectory import Ellipse, Trajectory
 
 FRAMES = ("start", "local", "geodetic")
 KINDS = ("ellipse", "circle", "figure8", "line", "polyline", "waypoints", "plan")
@@ -240,7 +240,7 @@ def _read_gains(top: Table, base: Path) -> tuple[FilterGains | None, PZCGains | 
     if table is None:
         return None, None
     data = dict(table.data)
-    # companion.gains.parse wants both sections; a mission may give either one alone, so a
+    # companion.sim.gains.parse wants both sections; a mission may give either one alone, so a
     # missing one gets placeholder values that are then dropped.
     have_filter, have_pzc = "filter" in data, "pzc" in data
     data.setdefault("filter", {"k_df": 1.0, "lambda_f": 1.0})

@@ -12,9 +12,9 @@ Kinds (coordinates are (north, east) metres, headings radians from north towards
 * :class:`Circle` (here): constant speed round a centre, clockwise or counter-clockwise seen
   from above.
 * :class:`FigureEight` (here): the 1:2 Lissajous figure x = L/2 sin(wt), y = W/2 sin(2wt), rotated.
-* :class:`companion.polyline.Polyline` (and a straight line, a polyline of two points): straight
+* :class:`companion.mission.polyline.Polyline` (and a straight line, a polyline of two points): straight
   sides joined by tangent circular arcs, raised-cosine speed ramps.
-* :class:`companion.spline.TimedWaypoints`: a quintic spline through (t_i, x_i, y_i).
+* :class:`companion.mission.spline.TimedWaypoints`: a quintic spline through (t_i, x_i, y_i).
 * :class:`Placed` (here): any trajectory turned by a yaw and shifted (a mission given relative to
   the start pose, anchored at the vehicle's actual pose).
 
@@ -26,7 +26,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from .signals import Reference
+from ..core.signals import Reference
 
 _TWO_PI = 2.0 * math.pi
 

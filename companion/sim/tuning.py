@@ -2,7 +2,7 @@
 
 Remark 6 tunes the four design parameters (k_df, lambda_f, k_dc, lambda_c) by "offline
 iterations"; the conclusion names an offline optimisation as future work. Here a population of
-candidate gain sets is simulated at once with :func:`companion.batch.simulate` on several
+candidate gain sets is simulated at once with :func:`companion.sim.batch.simulate` on several
 reference speeds (the paper's ellipse at f_r = 0.04, 0.08 and 0.12 Hz: gains that are stable on a
 fast reference can orbit a slow one, and the reverse), at the loop rate, actuator bandwidth and
 limits of the real vehicle, and the search keeps the set with the lowest objective
@@ -11,7 +11,7 @@ limits of the real vehicle, and the search keeps the set with the lowest objecti
 
 The search is a seeded random search followed by rounds of log-normal perturbation around the
 best sets (a simple evolution strategy): no gradient, no model, just the simulator. It also
-chooses the extensions of :mod:`companion.pzc` (separate yaw pair, velocity, heading-rate and
+chooses the extensions of :mod:`companion.core.pzc` (separate yaw pair, velocity, heading-rate and
 acceleration feed-forward, actuator lead) per candidate, so their worth is measured, not assumed.
 """
 
@@ -24,12 +24,12 @@ from typing import Callable
 import numpy as np
 
 from .batch import SimConfig, simulate
-from .filter import FilterGains
+from ..core.filter import FilterGains
 from .gains import TunedGains
-from .limits import Limits
+from ..core.limits import Limits
 from .plant import RoverParams
-from .pzc import PZCGains, PZCTracker
-from .trajectory import Ellipse
+from ..core.pzc import PZCGains, PZCTracker
+from ..core.trajectory import Ellipse
 
 # log-uniform search ranges: (low, high)
 RANGES = {

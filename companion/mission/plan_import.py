@@ -1,7 +1,7 @@
 """Read the mission files users already have: QGroundControl ``.plan`` and ``QGC WPL 110``.
 
 Both become an :class:`ImportedPlan`: the points of the path in local (north, east) metres,
-converted exactly as ArduPilot does (:mod:`companion.geo`) around the EKF origin, or around the
+converted exactly as ArduPilot does (:mod:`companion.mission.geo`) around the EKF origin, or around the
 plan's home when no origin is given (simulation). The path starts at home, where a rover sits
 when it starts a mission, and visits every ``MAV_CMD_NAV_WAYPOINT`` (16) in order;
 :mod:`companion.mission` rounds its corners and drives it at the cruise speed.
@@ -24,7 +24,7 @@ from pathlib import Path
 from typing import Any
 
 from . import geo
-from .errors import UserError
+from ..errors import UserError
 from .schema import check_number, fail, short
 
 NAV_WAYPOINT = 16

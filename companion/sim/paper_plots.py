@@ -1,4 +1,4 @@
-"""PNG equivalents of the paper's Figures 4-13 from a :class:`companion.experiment.TableResult`.
+"""PNG equivalents of the paper's Figures 4-13 from a :class:`companion.sim.experiment.TableResult`.
 
 Figures 4-9 use the three reference-speed scenarios (f_r = 0.04, 0.08, 0.12 Hz, d_cen = 0),
 Figures 10-12 the three d_cen scenarios (0, 0.3, 0.6 m at f_r = 0.12 Hz), Figure 13 the cost table.

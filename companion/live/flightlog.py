@@ -7,7 +7,7 @@
   signatures excluded, as pymavlink's own ``logfile`` does), outgoing ones from the send callback
   of pymavlink's ``MAVLink`` object, so both directions are in one file in the order they
   happened. Reading is pymavlink's too (``mavutil.mavlink_connection("x.tlog")``).
-* ``.csv``: one row per tracking cycle (:class:`companion.events.LoopRecord`) plus one row per
+* ``.csv``: one row per tracking cycle (:class:`companion.live.events.LoopRecord`) plus one row per
   life-cycle event (``event`` column set, the numeric columns empty).
 
 Crash safety: both files are buffered (a write per frame would cost a system call in the loop)
@@ -33,7 +33,7 @@ from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any, BinaryIO, Callable
 
-from .errors import UserError
+from ..errors import UserError
 from .events import LoopRecord, StatusEvent
 
 FLUSH_EVERY = 0.05     # wall s: a busy writer flushes at least this often
@@ -109,7 +109,7 @@ class Tlog(Flushing):
 
 
 class CsvLog:
-    """The control loop as CSV: a :class:`companion.events.Sink`."""
+    """The control loop as CSV: a :class:`companion.live.events.Sink`."""
 
     def __init__(self, path: str | Path, clock: Callable[[], float] = time.monotonic):
         self.out = Flushing(open(path, "wb", buffering=BUFFER), clock)

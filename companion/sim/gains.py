@@ -12,7 +12,7 @@ A small TOML file::
     k_df = 300.0
     lambda_f = 40.0
 
-    [pzc]                   # paper: k_{d,c}, lambda_c; the rest are extensions (see companion.pzc)
+    [pzc]                   # paper: k_{d,c}, lambda_c; the rest are extensions (see companion.core.pzc)
     k_dc = 4.0
     lambda_c = 2.0
     k_dc_yaw = 8.0
@@ -20,11 +20,11 @@ A small TOML file::
     velocity_ff = true
     heading_rate_ff = true
     accel_ff = 0.8          # s, reference-acceleration feed-forward (about 1 / w_c)
-    lead_tau = 0.8          # s, actuator lead (companion.lead): the actuator's 1 / w_c
+    lead_tau = 0.8          # s, actuator lead (companion.core.lead): the actuator's 1 / w_c
     lead_max_gain = 8.0
     speed_law = "projected"
 
-Files for the rates and actuators we ship with live in ``companion/tuned/``.
+Files for the rates and actuators we ship with live in ``companion/sim/tuned/``.
 """
 
 from __future__ import annotations
@@ -34,9 +34,9 @@ import tomllib
 from dataclasses import dataclass, fields
 from pathlib import Path
 
-from .errors import UserError
-from .filter import FilterGains
-from .pzc import PZCGains
+from ..errors import UserError
+from ..core.filter import FilterGains
+from ..core.pzc import PZCGains
 
 TUNED_DIR = Path(__file__).parent / "tuned"
 

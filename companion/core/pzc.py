@@ -35,7 +35,7 @@ chosen by ``companion tune``):
   p_ref'' has a centripetal part, it also turns phi_ref = atan2(u_p) ahead of the path, leading
   the (equally slow) yaw actuator;
 * actuator lead (``lead_tau`` = the actuator's time constant 1/w_c in seconds, ``lead_max_gain``):
-  cancels a slow actuator's pole, see :mod:`companion.lead`.
+  cancels a slow actuator's pole, see :mod:`companion.core.lead`.
 
 Limits: speed and yaw rate are clamped; while either output is clamped its integrator is held
 (conditional integration), so nothing winds up in saturation.

@@ -15,7 +15,7 @@ from dataclasses import dataclass, field
 from typing import Sequence
 
 from .paths import PathError
-from .signals import Reference
+from ..core.signals import Reference
 
 _TWO_PI = 2.0 * math.pi
 

@@ -1,14 +1,14 @@
 """One companion session: settings in, RunResult out (what ``companion run`` and ``demo`` share).
 
 Connect, wait for the vehicle, negotiate the telemetry rate, pick gains and limits for the rate
-the vehicle actually accepted, build the tracker, run the loop (:mod:`companion.runner`).
+the vehicle actually accepted, build the tracker, run the loop (:mod:`companion.live.runner`).
 
 Where each setting comes from, first found wins:
 
 * rate: ``--rate``; the mission's ``rate_hz``; the ``--gains`` file's ``rate_hz``; 40 Hz.
 * gains (filter and PZC parts separately): ``--k-df/--lambda-f/--k-dc/--lambda-c`` field by
   field over ``--gains FILE``; the mission's gains; the shipped tuned gains for the accepted
-  rate, the vehicle's w_c and d_cen (:func:`companion.gains.find_tuned`); the paper's gains.
+  rate, the vehicle's w_c and d_cen (:func:`companion.sim.gains.find_tuned`); the paper's gains.
 * limits: ``--max-speed/--max-yaw-rate``; the mission's [limits]; :data:`DEFAULT_LIMITS`.
 """
 
@@ -20,12 +20,12 @@ import time
 from dataclasses import asdict, dataclass, field, replace
 from typing import Any, Callable, Sequence
 
-from . import gains as gains_mod
-from .errors import UserError
+from ..sim import gains as gains_mod
+from ..errors import UserError
 from .events import ControlChannel, Sink
-from .filter import FilterGains
-from .limits import Limits
-from .pzc import PZCGains
+from ..core.filter import FilterGains
+from ..core.limits import Limits
+from ..core.pzc import PZCGains
 from .runner import Runner, RunnerConfig
 from .stats import RunResult
 
@@ -47,7 +47,7 @@ class GainFlags:
 
 @dataclass(frozen=True)
 class RunSettings:
-    link: Any                          # companion.link.LinkConfig
+    link: Any                          # companion.live.link.LinkConfig
     mission: Any                       # companion.mission.Mission
     runner: RunnerConfig = RunnerConfig()
     rate: float | None = None          # --rate
@@ -169,7 +169,7 @@ def fly(s: RunSettings, sinks: Sequence[Sink] = (), control: ControlChannel | No
         switch: StopSwitch | None = None) -> RunResult:
     """Run one session against a live vehicle; raises UserError for a user's problem."""
     from .link import HOLD_MODE, TRACK_MODE, Link
-    from .pzc import PZCTracker
+    from ..core.pzc import PZCTracker
 
     wall0 = time.perf_counter()
     if s.gains_file is not None:

@@ -25,7 +25,7 @@ def _array_clip(x, lo, hi):
 
 
 def _scalar_wrap(angle):
-    # See companion.angles.wrap: (-pi, pi], one float modulo.
+    # See companion.core.angles.wrap: (-pi, pi], one float modulo.
     return math.pi - (math.pi - angle) % TAU
 
 

@@ -14,7 +14,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from .limits import Limits
+from ..core.limits import Limits
 
 STANDSTILL = 0.05          # m/s
 MAX_SAMPLES = 20000        # per check: keeps `mission check` and the loader quick

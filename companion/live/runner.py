@@ -1,6 +1,6 @@
 """The live control loop: a state machine driven by the vehicle's telemetry.
 
-One thread. Each LOCAL_POSITION_NED that passes :mod:`companion.telemetry` is one cycle: while
+One thread. Each LOCAL_POSITION_NED that passes :mod:`companion.live.telemetry` is one cycle: while
 TRACKING it goes through the tracker (filter + PZC law) against ``trajectory.sample(mission
 time)`` and one setpoint goes out; in every other active state the cycle answers with a zero
 setpoint (the rover stands still, PX4 keeps its offboard stream, a lockstep plant keeps
@@ -23,7 +23,7 @@ It stops the rover itself (zero setpoint, then HOLD) at the mission's end, on a 
 command is checked right before encoding: a non-finite or out-of-limit one stops the rover.
 A gap of more than ``max_gap`` vehicle seconds between two tracked samples (a long dropout, a
 burst after a stall) starts a new segment with the filter and integrators reset, so no step
-integrates a huge dt; time going back never reaches the tracker (:mod:`companion.telemetry`).
+integrates a huge dt; time going back never reaches the tracker (:mod:`companion.live.telemetry`).
 Sinks get a LoopRecord per tracking cycle and a StatusEvent per life-cycle change; a
 ControlChannel, if given, is polled once per cycle.
 """
@@ -40,11 +40,11 @@ from pathlib import Path
 from typing import Any, Callable, Sequence
 
 from . import events as ev
-from .errors import UserError
+from ..errors import UserError
 from .events import ControlChannel, ControlRequest, LoopRecord, Sink, StatusEvent
-from .limits import Limits
+from ..core.limits import Limits
 from .link import HOLD_MODE, PX4, TRACK_MODE, Link
-from .signals import Command, Measurement
+from ..core.signals import Command, Measurement
 from .stats import TrackingStats
 from .telemetry import TelemetryCheck
 
@@ -548,7 +548,7 @@ class Runner:
         if self.state not in (State.WAITING, State.ENGAGING, State.READY, State.PAUSED):
             req.reply(False, f"cannot load a mission while {self.state.value}: pause first")
             return
-        from . import mission as missions
+        from .. import mission as missions
         text = req.payload.strip()
         try:
             path = Path(text)

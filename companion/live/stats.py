@@ -6,7 +6,7 @@ p = the measured position and t = mission time (vehicle clock):
     f_cost     = sqrt( sum over sample intervals of (e_k^2 + e_{k+1}^2) / 2 * dt_k )
     steady_rms = sqrt( mean of e_k^2 over samples with mission time >= duration / 2 )
 
-The trapezoidal sum is the integral of :mod:`companion.batch` sampled at the telemetry rate (at
+The trapezoidal sum is the integral of :mod:`companion.sim.batch` sampled at the telemetry rate (at
 40 Hz it differs from batch's 1 ms integration by about 0.2 % on the paper's ellipse; a
 rectangle sum would add 2-3 % from the large initial error). Intervals are only summed inside
 one tracking segment: a pause or a failsafe is not integrated over.

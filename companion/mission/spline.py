@@ -11,7 +11,7 @@ from typing import Sequence
 import numpy as np
 
 from .paths import PathError
-from .signals import Reference
+from ..core.signals import Reference
 
 
 @dataclass(frozen=True)

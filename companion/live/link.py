@@ -12,10 +12,10 @@ arm, and encode the tracker's command as SET_POSITION_TARGET_LOCAL_NED:
 Each setpoint carries the ``time_boot_ms`` of the telemetry sample it answers (ArduPilot and PX4
 ignore the field), so a log or a test can pair every setpoint with its sample.
 
-``LinkConfig.signing_key`` turns on MAVLink 2 signing (:mod:`companion.signing`: outgoing
+``LinkConfig.signing_key`` turns on MAVLink 2 signing (:mod:`companion.mav.signing`: outgoing
 signed, unsigned / wrong-key / replayed input refused and counted) and ``LinkConfig.tlog``
-records a .tlog of both directions (:mod:`companion.flightlog`), both through pymavlink's own
-support. A UDP socket gets a receive buffer of ``RECV_BUFFER`` bytes (the kernel's default holds
+records a .tlog of both directions (:mod:`companion.live.flightlog`), both through pymavlink's own
+support. A UDP socket gets a large receive buffer (:mod:`companion.mav.sockets`: the kernel's default holds
 about 256 small datagrams, and a burst beyond it is dropped silently).
 """
 
@@ -29,9 +29,10 @@ from typing import Any, Callable
 os.environ["MAVLINK20"] = "1"   # before pymavlink.mavutil is imported: MAVLink 2 frames
 from pymavlink import mavutil  # noqa: E402
 
-from . import signing  # noqa: E402
-from .errors import UserError  # noqa: E402
-from .signals import Command  # noqa: E402
+from ..mav import signing  # noqa: E402
+from ..mav.sockets import size_receive_buffer  # noqa: E402
+from ..errors import UserError  # noqa: E402
+from ..core.signals import Command  # noqa: E402
 
 mavlink = mavutil.mavlink
 
@@ -46,7 +47,6 @@ MASK_SPEED_YAW_RATE = 1511   # 0x05E7: ignore position, vz, acceleration, yaw
 MASK_VELOCITY = 3559         # 0x0DE7: ignore position, vz, acceleration, yaw, yaw rate
 ACCEPTED = mavlink.MAV_RESULT_ACCEPTED
 # Rates to fall back to, fastest first, when the vehicle refuses the one asked for.
-RECV_BUFFER = 4 << 20   # bytes asked for (Linux caps it at net.core.rmem_max, then doubles it)
 FALLBACK_RATES = (1000.0, 800.0, 500.0, 400.0, 250.0, 200.0, 100.0, 50.0, 40.0, 25.0, 20.0,
                   10.0, 5.0, 2.0, 1.0)
 
@@ -298,16 +298,3 @@ class Link:
 
 
 STOP = Command(0.0, 0.0, 0.0, 0.0)
-
-
-def size_receive_buffer(conn: Any, size: int = RECV_BUFFER) -> int | None:
-    """Ask for a ``size``-byte receive buffer on a UDP connection; the size granted, or None."""
-    import socket
-    sock = getattr(conn, "port", None)
-    if not isinstance(sock, socket.socket) or sock.type != socket.SOCK_DGRAM:
-        return None
-    try:
-        sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, size)
-        return sock.getsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF)
-    except OSError:
-        return None

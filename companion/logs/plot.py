@@ -1,6 +1,6 @@
-"""The paper's figures from a flight log (:class:`companion.logread.Flight`), as PNG files.
+"""The paper's figures from a flight log (:class:`companion.logs.logread.Flight`), as PNG files.
 
-Same style as :mod:`companion.mission_plot`: map view east to the right, north up, equal
+Same style as :mod:`companion.mission.plot`: map view east to the right, north up, equal
 scales; matplotlib on the Agg backend (files only).
 
 * ``path.png``: path against reference (map), and |p_ref - p| over time;
@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from .logread import Flight
-from .mission_plot import _pyplot
+from ..mission.plot import _pyplot
 
 
 def plot_flight(flight: Flight, out_dir: str | Path, title: str) -> list[str]:

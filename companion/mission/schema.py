@@ -1,6 +1,6 @@
 """Typed reading of parsed TOML / JSON tables, with one-line errors naming file, key path and value.
 
-Mission files (:mod:`companion.mission`) and QGroundControl plans (:mod:`companion.plan_import`)
+Mission files (:mod:`companion.mission`) and QGroundControl plans (:mod:`companion.mission.plan_import`)
 both arrive as nested dicts and lists. :class:`Table` wraps one table: every accessor checks the
 type and range of one key and raises :class:`~companion.errors.UserError` with a message such as
 
@@ -15,7 +15,7 @@ import difflib
 import math
 from typing import Any, Iterable
 
-from .errors import UserError
+from ..errors import UserError
 
 
 def fail(source: str, path: str, message: str) -> UserError:

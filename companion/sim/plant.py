@@ -24,8 +24,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, replace
 
-from . import ops as _ops
-from .signals import Measurement, Num
+from ..core import ops as _ops
+from ..core.signals import Measurement, Num
 
 
 @dataclass(frozen=True)

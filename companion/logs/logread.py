@@ -6,7 +6,7 @@ the log holds (reference, filtered pose, commands). The .tlog is read by pymavli
 mission (``mission=``) anchored, as the companion anchors it, at the first sample answered by a
 moving setpoint (mission time 0) -- right for a run without pauses or failsafes.
 
-Tracking metrics are the paper's, as :mod:`companion.stats` computes them live: f_cost =
+Tracking metrics are the paper's, as :mod:`companion.live.stats` computes them live: f_cost =
 sqrt(trapezoidal integral of |p_ref - p|^2 over mission time), steady RMS over the second half
 of the mission time logged.
 
@@ -26,8 +26,8 @@ from typing import Any
 
 import numpy as np
 
-from .errors import UserError
-from .flightlog import CSV_FIELDS
+from ..errors import UserError
+from ..live.flightlog import CSV_FIELDS
 
 _NUMERIC = CSV_FIELDS[:16]          # vehicle_time ... yaw_rate_cmd
 
@@ -151,7 +151,7 @@ def _differentiate(t, x, y, yaw) -> tuple[np.ndarray, np.ndarray]:
 
 
 def read_tlog(path: str | Path, mission: Any = None) -> Flight:
-    from .link import mavutil   # MAVLink 2 set up before pymavlink is imported
+    from ..live.link import mavutil  # MAVLink 2 set up before pymavlink is imported
     try:
         conn = mavutil.mavlink_connection(str(path), dialect="ardupilotmega")
     except Exception as exc:  # noqa: BLE001 - pymavlink raises anything on a bad file

@@ -1,0 +1,8 @@
+"""Missions: the mission file (TOML, QGroundControl .plan, .waypoints), trajectory kinds, geodesy, plots.
+
+May import: ``core``, ``sim`` (rover parameters, gains files), ``errors``; no MAVLink or Zenoh.
+"""
+
+from .file import Mission, load, loads, paper_ellipse
+
+__all__ = ["Mission", "load", "loads", "paper_ellipse"]

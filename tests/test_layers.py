@@ -1,0 +1,132 @@
+"""The tree is the architecture: imports run one way, down the layers each package's docstring names.
+
+Every ``import`` in ``companion/`` and ``sitl_plant/`` is read with ``ast`` (lazy imports inside
+functions included) and held against the table below; a new import that runs back up a layer, or
+an I/O module pulled into the mathematics, fails here with the file and line.
+"""
+
+from __future__ import annotations
+
+import ast
+import importlib
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parent.parent
+PACKAGE = ROOT / "companion"
+
+# layer -> the companion layers it may import (itself always allowed).
+ALLOWED: dict[str, set[str]] = {
+    "core": set(),
+    "sim": {"core", "errors"},
+    "mission": {"core", "sim", "errors"},
+    "mav": {"errors", "secretfile"},
+    "live": {"core", "sim", "mission", "mav", "errors"},
+    "bus": {"live", "errors", "secretfile"},
+    "logs": {"core", "live", "mission", "errors"},
+    "errors": set(),
+    "secretfile": {"errors"},
+    "progress": {"live"},
+    "cli": {"__init__", "errors", "commands"},
+    "__main__": {"cli"},
+    "__init__": set(),
+    "commands": {"core", "sim", "mission", "mav", "live", "bus", "logs", "errors", "progress",
+                 "secretfile", "__init__"},
+}
+SITL_PLANT_ALLOWED = {"core", "sim", "mav", "errors"}
+# The mathematics touches no file, socket, clock, process or thread.
+IO_MODULES = {"os", "sys", "time", "socket", "threading", "subprocess", "pathlib", "io", "signal",
+              "pymavlink", "zenoh", "tomllib", "json", "csv", "matplotlib", "tqdm", "random"}
+
+
+def layer_of(path: Path) -> str:
+    rel = path.relative_to(PACKAGE)
+    return rel.parts[0] if len(rel.parts) > 1 else rel.stem
+
+
+def imports(path: Path, package: str) -> list[tuple[int, str]]:
+    """(line, absolute module) of every import in the file, relative ones resolved."""
+    tree = ast.parse(path.read_text(), filename=str(path))
+    out = []
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            out += [(node.lineno, alias.name) for alias in node.names]
+        elif isinstance(node, ast.ImportFrom):
+            if node.level:
+                base = package.split(".")[: len(package.split(".")) - node.level + 1]
+                mod = ".".join(base + ([node.module] if node.module else []))
+                if node.module is None:   # from . import a, b: each name may be a module
+                    out += [(node.lineno, f"{mod}.{alias.name}" if is_module(f"{mod}.{alias.name}")
+                             else mod) for alias in node.names]
+                    continue
+                out.append((node.lineno, mod))
+            else:
+                out.append((node.lineno, node.module or ""))
+    return out
+
+
+def is_module(dotted: str) -> bool:
+    path = ROOT.joinpath(*dotted.split("."))
+    return path.with_suffix(".py").is_file() or (path / "__init__.py").is_file()
+
+
+def companion_layer(module: str) -> str | None:
+    parts = module.split(".")
+    if parts[0] != "companion":
+        return None
+    if len(parts) == 1:
+        return "__init__"
+    return parts[1]
+
+
+def module_files(root: Path):
+    return sorted(p for p in root.rglob("*.py") if "__pycache__" not in p.parts)
+
+
+def package_of(path: Path) -> str:
+    """The package a file's relative imports start from (an ``__init__`` is its own package)."""
+    return ".".join(path.relative_to(ROOT).with_suffix("").parts[:-1])
+
+
+@pytest.mark.parametrize("path", module_files(PACKAGE), ids=lambda p: str(p.relative_to(ROOT)))
+def test_companion_imports_run_down_the_layers(path):
+    layer = layer_of(path)
+    assert layer in ALLOWED, f"{path.relative_to(ROOT)}: layer {layer!r} is not in the table"
+    bad = []
+    for line, module in imports(path, package_of(path)):
+        target = companion_layer(module)
+        if target is not None and target != layer and target not in ALLOWED[layer]:
+            bad.append(f"{path.relative_to(ROOT)}:{line}: {layer} imports {module}")
+        if layer == "core" and module.split(".")[0] in IO_MODULES:
+            bad.append(f"{path.relative_to(ROOT)}:{line}: the mathematics imports {module}")
+    assert not bad, "\n".join(bad)
+
+
+@pytest.mark.parametrize("path", module_files(ROOT / "sitl_plant"), ids=lambda p: p.name)
+def test_sitl_plant_imports_only_the_mathematics_and_the_plant(path):
+    bad = [f"sitl_plant/{path.name}:{line}: imports {module}"
+           for line, module in imports(path, "sitl_plant")
+           if companion_layer(module) not in (None, *SITL_PLANT_ALLOWED)]
+    assert not bad, "\n".join(bad)
+
+
+def test_every_subpackage_says_what_lives_there_and_what_it_may_import():
+    for init in sorted(PACKAGE.glob("*/__init__.py")):
+        if init.parent.name == "commands":
+            continue
+        doc = ast.get_docstring(ast.parse(init.read_text())) or ""
+        lines = [line for line in doc.splitlines() if line.strip()]
+        assert len(lines) == 2 and lines[1].startswith("May import"), (
+            f"{init.relative_to(ROOT)}: two lines, what lives here and 'May import: ...'")
+        assert init.parent.name in ALLOWED, f"{init.parent.name} missing from the layer table"
+
+
+def test_documented_python_names_still_work():
+    mission = importlib.import_module("companion.mission")
+    bus = importlib.import_module("companion.bus")
+    for name in ("load", "loads", "paper_ellipse", "Mission"):
+        assert callable(getattr(mission, name))
+    assert callable(bus.control_request)
+    m = mission.paper_ellipse(0.04, 10.0)
+    assert m.duration == 10.0
