@@ -22,17 +22,117 @@ from companion.core.trajectory import Ellipse
 
 
 def test_exact_plant_step_agrees_with_fine_rk4():
-    # The exact-actuator step (Simpson on closed forms) against RK4 with an (inactive) accel limit.
-    exact = RoverModel(RoverParams(d_cen=0.3, w_c=5.0))
-    rk4 = RoverModel(RoverParams(d_cen=0.3, w_c=5.0, max_accel=1e9))
+    # The exact-actuator step (Simpson on closed forms) against the RK4 reference integrator.
+    model = RoverModel(RoverParams(d_cen=0.3, w_c=5.0))
     a = b = RoverState(0.0, 0.0, 0.2, 0.5, -0.3)
     for k in range(2000):
         u, w = 1.0 + math.sin(0.01 * k), 0.8 * math.cos(0.013 * k)
-        a = exact.step(a, u, w, 1e-3)
+        a = model.step(a, u, w, 1e-3)
         for _ in range(10):
-            b = rk4.step(b, u, w, 1e-4)
+            b = model.step_rk4(b, u, w, 1e-4)
     for key in ("x", "y", "yaw", "v", "omega"):
         assert getattr(a, key) == pytest.approx(getattr(b, key), abs=1e-8)
+
+
+ARDUPILOT_LIKE = RoverParams(d_cen=0.2, w_c=3.0, w_c_yaw=8.0, max_speed=4.0, max_yaw_rate=2.1,
+                             max_accel=1.0, max_yaw_accel=2.0, turn_speed_coupling=0.4)
+
+
+def test_rate_limited_step_is_exact_against_fine_rk4():
+    # Ramp-then-exponential closed forms per channel, through speed reversals, turn-rate
+    # reversals at the limit and coupling, against RK4 at a 20x finer step.
+    model = RoverModel(ARDUPILOT_LIKE)
+    a = b = RoverState(0.0, 0.0, 0.3, 0.5, -0.2)
+    for k in range(6000):
+        u, w = 3.0 * math.sin(0.002 * k) + 1.0, 2.0 * math.cos(0.003 * k)
+        a = model.step(a, u, w, 1e-3)
+        uc, wc = model.clamp_command(u, w, b.omega)
+        for _ in range(20):
+            b = model.step_rk4(b, uc, wc, 5e-5)
+    for key in ("x", "y", "yaw", "v", "omega"):
+        assert getattr(a, key) == pytest.approx(getattr(b, key), abs=1e-7)
+
+
+def test_rate_limits_ramp_and_decel_differs_from_accel():
+    model = RoverModel(RoverParams(w_c=50.0, max_accel=1.0, max_decel=2.0,
+                                   max_yaw_accel=2.0, w_c_yaw=50.0))
+    s = RoverState()
+    for _ in range(1000):                        # 1 s at +1 m/s^2, +2 rad/s^2 from rest
+        s = model.step(s, 5.0, 5.0, 1e-3)
+    assert s.v == pytest.approx(1.0, abs=1e-9) and s.omega == pytest.approx(2.0, abs=1e-9)
+    for _ in range(250):                         # braking at 2 m/s^2 while |v| shrinks
+        s = model.step(s, 0.0, 2.0, 1e-3)
+    assert s.v == pytest.approx(0.5, abs=1e-9)
+
+
+def test_pure_delay_shifts_the_response_by_exactly_the_delay():
+    plain = RoverModel(RoverParams(w_c=4.0))
+    late = RoverModel(RoverParams(w_c=4.0, speed_delay=0.1, yaw_delay=0.05))
+    a, b = RoverState(), RoverState()
+    va, vb, wb = [], [], []
+    for _ in range(1000):
+        a, b = plain.step(a, 1.0, 1.0, 1e-3), late.step(b, 1.0, 1.0, 1e-3)
+        va.append(a.v)
+        vb.append(b.v)
+        wb.append(b.omega)
+    assert vb[:100] == [0.0] * 100 and wb[:50] == [0.0] * 50
+    assert vb[100:] == pytest.approx(va[:900], abs=1e-12)
+    assert wb[50:] == pytest.approx([x for x in va[:950]], abs=1e-12)   # same bandwidth
+    with pytest.raises(ValueError, match="fixed step"):
+        late.step(b, 1.0, 1.0, 2e-3)
+
+
+def test_skid_steer_coupling_takes_speed_while_turning():
+    model = RoverModel(RoverParams(w_c=20.0, max_speed=4.0, max_yaw_rate=2.0,
+                                   turn_speed_coupling=0.5))
+    s = RoverState()
+    for _ in range(3000):
+        s = model.step(s, 10.0, 2.0, 1e-3)       # full turn rate: half the top speed is left
+    assert s.omega == pytest.approx(2.0) and s.v == pytest.approx(2.0, abs=1e-6)
+    for _ in range(3000):
+        s = model.step(s, 10.0, 1.0, 1e-3)       # half the turn rate: three quarters
+    assert s.v == pytest.approx(3.0, abs=1e-6)
+
+
+def test_batch_vehicle_model_equals_one_vehicle_each():
+    # Per-vehicle delays, limits and coupling in one batch give each vehicle's own answer.
+    d_cen, w_c = np.array([0.0, 0.2, 0.3]), np.array([3.0, 3.0, 5.0])
+    accel, delay = np.array([1.0, 1.0, 2.0]), np.array([0.0, 0.05, 0.1])
+    common = dict(max_speed=4.0, max_yaw_rate=2.1, max_yaw_accel=2.0, yaw_delay=0.04,
+                  turn_speed_coupling=0.4)
+    batch = RoverModel(RoverParams(d_cen=d_cen, w_c=w_c, max_accel=accel, speed_delay=delay,
+                                   **common), 3)
+    singles = [RoverModel(RoverParams(d_cen=float(d_cen[i]), w_c=float(w_c[i]),
+                                      max_accel=float(accel[i]), speed_delay=float(delay[i]),
+                                      **common)) for i in range(3)]
+    z = np.zeros(3)
+    sb, ss = RoverState(z, z, z, z, z), [RoverState() for _ in range(3)]
+    for k in range(3000):
+        u, w = 3.0 * math.sin(0.002 * k) + 1.0, 2.0 * math.cos(0.003 * k)
+        sb = batch.step(sb, u + z, w + z, 1e-3)
+        ss = [m.step(s, u, w, 1e-3) for m, s in zip(singles, ss)]
+    for key in ("x", "y", "yaw", "v", "omega"):
+        assert getattr(sb, key) == pytest.approx([getattr(s, key) for s in ss], abs=1e-12)
+
+
+def test_channel_response_is_the_full_models():
+    from companion.sim.response import respond
+    params = ARDUPILOT_LIKE.with_(speed_delay=0.05, yaw_delay=0.02)
+    t = np.arange(0.0, 20.0, 0.025)
+    u = np.where(t % 10 < 5, 2.0, -1.0)
+    w = np.where(t % 7 < 3, 1.5, -1.5)
+    v, om = respond(params, t, u, w, n=2, dt=0.005)
+    model, s, k = RoverModel(params), RoverState(), 0
+    vs, ws = [], []
+    for i in range(int(20.0 / 0.005) + 1):
+        while k + 1 < len(t) and t[k + 1] <= i * 0.005 + 1e-12:
+            k += 1
+        vs.append(s.v)
+        ws.append(s.omega)
+        s = model.step(s, u[k], w[k], 0.005)
+    idx = np.minimum((t / 0.005 + 1e-9).astype(int), len(vs) - 1)
+    assert v[:, 1] == pytest.approx(np.array(vs)[idx], abs=1e-12)
+    assert om[:, 0] == pytest.approx(np.array(ws)[idx], abs=1e-12)
 
 
 def test_d_cen_moves_the_tracked_point_sideways_when_turning():

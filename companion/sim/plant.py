@@ -1,28 +1,39 @@
-"""The rover the paper simulates (Section 5): eqs. (1)-(2) with first-order actuators.
+"""The rover: the paper's eqs. (1)-(2) (Section 5) behind the inner loops a real autopilot has.
 
     x'   = v cos(phi) - d_cen omega sin(phi)          eq. (1), p = [x, y]
     y'   = v sin(phi) + d_cen omega cos(phi)
     phi' = omega                                      eq. (2)
-    v'     = w_c     (v_ref - v)       (clipped to +-max_accel)
-    omega' = w_c_yaw (omega_ref - omega)
+    v'     = clip(w_c     (u_v - v),         -decel, +accel)         speed channel
+    omega' = clip(w_c_yaw (u_omega - omega), -yaw_decel, +yaw_accel) turn-rate channel
+
+Each channel's input is the command after a pure delay, clamped to the vehicle's top speed and
+turn rate, and (skid-steer mixing, ``turn_speed_coupling`` c) the speed clamp shrinks while the
+rover turns: ``|u_v| <= max_speed (1 - c |omega| / max_yaw_rate)``. Without delays, rate limits
+or coupling this is the paper's plant (first-order actuators at ``w_c``); with them it is what a
+setpoint meets inside ArduPilot Rover (a rate-limited target, a lag, a delay, shared motor range;
+the "accel" limit applies while ``|v|`` grows, the "decel" one while it shrinks).
 
 ``d_cen`` is the paper's distance between the centre of mass (the tracked point p) and the wheel
 axle; ``w_c`` the paper's actuator bandwidth omega_c (k_c). The commands are clamped to the
 vehicle's top speed and turn rate and held over each step. Works on floats (one rover, e.g. the
 bundled MAVLink plant) or arrays (batch simulation).
 
-Integration. Without an acceleration limit the actuators are linear first-order systems with a
+Integration. Without rate limits the actuators are linear first-order systems with a
 held input, so v, omega and phi have exact closed forms over a step, and x, y are the integrals of
 known functions of time, taken with Simpson's rule: this *is* RK4 for a right-hand side that
 depends on time only, with v, omega, phi exact instead of approximated, and it needs the heading's
 sine and cosine at two points per step (mid and end; the start is the previous end) instead of
-four. With an acceleration limit (a non-smooth clip) classic RK4 on all five states is used.
+four. With rate limits each channel is still exact over a step (a ramp at the limit until the
+error is small enough, then the exponential; its integral gives the heading), and x, y again
+use Simpson's rule. Delays need a fixed step (the commands in flight sit in a ring buffer).
 """
 
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass, replace
+
+import numpy as np
 
 from ..core import ops as _ops
 from ..core.signals import Measurement, Num
@@ -35,13 +46,39 @@ class RoverParams:
     d_cen: Num = 0.0
     w_c: Num = 20.0
     w_c_yaw: Num | None = None          # None: same bandwidth as the speed loop (the paper)
-    max_speed: float = math.inf
-    max_yaw_rate: float = math.inf
-    max_accel: float = math.inf
+    max_speed: Num = math.inf
+    max_yaw_rate: Num = math.inf
+    max_accel: Num = math.inf             # m/s^2 while |v| grows (ATC_ACCEL_MAX)
+    max_decel: Num | None = None          # m/s^2 while |v| shrinks; None: max_accel (ATC_DECEL_MAX)
+    max_yaw_accel: Num = math.inf         # rad/s^2 while |omega| grows (ATC_STR_ACC_MAX)
+    max_yaw_decel: Num | None = None      # rad/s^2 while |omega| shrinks; None: max_yaw_accel
+    speed_delay: Num = 0.0                # s of pure delay before the speed channel
+    yaw_delay: Num = 0.0                  # s of pure delay before the turn-rate channel
+    turn_speed_coupling: Num = 0.0        # c: share of top speed lost at full turn rate
 
     @property
     def yaw_bandwidth(self) -> Num:
         return self.w_c if self.w_c_yaw is None else self.w_c_yaw
+
+    @property
+    def decel(self) -> Num:
+        return self.max_accel if self.max_decel is None else self.max_decel
+
+    @property
+    def yaw_decel(self) -> Num:
+        return self.max_yaw_accel if self.max_yaw_decel is None else self.max_yaw_decel
+
+    @property
+    def is_paper(self) -> bool:
+        """No rate limit, delay or coupling anywhere: the paper's linear actuators (exact step)."""
+        return not any(_any_finite(v) for v in (self.max_accel, self.decel, self.max_yaw_accel,
+                                                 self.yaw_decel)) \
+            and not any(_any_positive(v) for v in (self.speed_delay, self.yaw_delay,
+                                                   self.turn_speed_coupling))
+
+    @property
+    def has_delay(self) -> bool:
+        return _any_positive(self.speed_delay) or _any_positive(self.yaw_delay)
 
     @classmethod
     def paper(cls, d_cen: float = 0.0, w_c: float = 20.0) -> "RoverParams":
@@ -59,6 +96,14 @@ class RoverParams:
         return replace(self, **changes)
 
 
+def _any_finite(value) -> bool:
+    return bool(np.any(np.isfinite(value)))
+
+
+def _any_positive(value) -> bool:
+    return bool(np.any(np.asarray(value) > 0))
+
+
 @dataclass(slots=True)
 class RoverState:
     """Pose of the tracked point (x, y, yaw) and actuator outputs (speed v, yaw rate omega)."""
@@ -71,13 +116,16 @@ class RoverState:
 
 
 class RoverModel:
-    """Eqs. (1)-(2) plus actuators, integrated with RK4. Stateless: ``step`` returns a new state."""
+    """Eqs. (1)-(2) plus the inner loops. ``step`` returns a new state; the one thing the model
+    itself holds is the commands still in flight through a pure delay (:class:`CommandDelay`)."""
 
     def __init__(self, params: RoverParams = RoverParams(), n: int | None = None):
         self.params = params
         self.n = n
         self._m = _ops.for_size(n)
-        self._accel_limited = math.isfinite(params.max_accel)
+        self._paper = params.is_paper
+        self._coupled = _any_positive(params.turn_speed_coupling)
+        self.delay = CommandDelay(params.speed_delay, params.yaw_delay, n) if params.has_delay else None
         self._trig_yaw = None
         self._trig_cs = None
         self._decay_h = None
@@ -102,25 +150,49 @@ class RoverModel:
         return Measurement(s.x, s.y, s.yaw, vx, vy, s.omega)
 
     def _deriv(self, yaw, v, omega, v_cmd, w_cmd):
+        """The right-hand side (for the RK4 reference integrator the tests hold the steps to)."""
         m, p = self._m, self.params
         c, sn = m.cos(yaw), m.sin(yaw)
         lat = p.d_cen * omega
-        dv = p.w_c * (v_cmd - v)
-        if self._accel_limited:
-            dv = m.clip(dv, -p.max_accel, p.max_accel)
-        return v * c - lat * sn, v * sn + lat * c, omega, dv, p.yaw_bandwidth * (w_cmd - omega)
+        dv = m.clip(p.w_c * (v_cmd - v), *_rate_bounds(m, v, p.max_accel, p.decel))
+        dw = m.clip(p.yaw_bandwidth * (w_cmd - omega),
+                    *_rate_bounds(m, omega, p.max_yaw_accel, p.yaw_decel))
+        return v * c - lat * sn, v * sn + lat * c, omega, dv, dw
 
-    def clamp_command(self, speed: Num, yaw_rate: Num) -> tuple[Num, Num]:
+    def clamp_command(self, speed: Num, yaw_rate: Num, omega: Num = 0.0) -> tuple[Num, Num]:
+        """Top speed and turn rate; with coupling, the speed range the turn rate ``omega`` leaves."""
         m, p = self._m, self.params
-        return (m.clip(speed, -p.max_speed, p.max_speed),
-                m.clip(yaw_rate, -p.max_yaw_rate, p.max_yaw_rate))
+        top = p.max_speed
+        if self._coupled:
+            share = m.minimum(abs(omega) / p.max_yaw_rate, 1.0)
+            top = top * (1.0 - p.turn_speed_coupling * share)
+        return m.clip(speed, -top, top), m.clip(yaw_rate, -p.max_yaw_rate, p.max_yaw_rate)
 
     def step(self, s: RoverState, speed_cmd: Num, yaw_rate_cmd: Num, dt: float) -> RoverState:
-        """Advance ``dt`` seconds with the commands (v_ref, omega_ref) held."""
-        u, w = self.clamp_command(speed_cmd, yaw_rate_cmd)
-        if self._accel_limited:
-            return self._step_rk4(s, u, w, dt)
-        return self._step_exact(s, u, w, dt)
+        """Advance ``dt`` seconds with the commands (v_ref, omega_ref) held (after the delay)."""
+        if self.delay is not None:
+            speed_cmd, yaw_rate_cmd = self.delay.push(speed_cmd, yaw_rate_cmd, dt)
+        u, w = self.clamp_command(speed_cmd, yaw_rate_cmd, s.omega)
+        if self._paper:
+            return self._step_exact(s, u, w, dt)
+        return self._step_limited(s, u, w, dt)
+
+    def _step_limited(self, s: RoverState, u: Num, w: Num, h: float) -> RoverState:
+        """Rate-limited channels, exact per channel (:func:`_channel`), Simpson for x and y."""
+        m, p = self._m, self.params
+        v_mid, v_end, _, _ = _channel(m, s.v, u, p.w_c, p.max_accel, p.decel, h)
+        w_mid, w_end, i_mid, i_end = _channel(m, s.omega, w, p.yaw_bandwidth, p.max_yaw_accel,
+                                              p.yaw_decel, h)
+        yaw_mid, yaw_end = s.yaw + i_mid, s.yaw + i_end
+        c0, s0 = self._trig(s.yaw)
+        c1, s1 = m.cos(yaw_mid), m.sin(yaw_mid)
+        c2, s2 = self._trig(yaw_end)
+        d = p.d_cen
+        lat0, lat1, lat2 = d * s.omega, d * w_mid, d * w_end
+        h6 = h / 6.0
+        x = s.x + h6 * ((s.v * c0 - lat0 * s0) + 4.0 * (v_mid * c1 - lat1 * s1) + (v_end * c2 - lat2 * s2))
+        y = s.y + h6 * ((s.v * s0 + lat0 * c0) + 4.0 * (v_mid * s1 + lat1 * c1) + (v_end * s2 + lat2 * c2))
+        return RoverState(x, y, yaw_end, v_end, w_end)
 
     def _decays(self, h: float):
         """e^{-w_c h/2}, e^{-w_c h} and the yaw-loop equivalents, cached for the step size."""
@@ -150,7 +222,8 @@ class RoverModel:
         y = s.y + h6 * ((s.v * s0 + lat0 * c0) + 4.0 * (v_mid * s1 + lat1 * c1) + (v_end * s2 + lat2 * c2))
         return RoverState(x, y, yaw_end, v_end, w_end)
 
-    def _step_rk4(self, s: RoverState, u: Num, w: Num, dt: float) -> RoverState:
+    def step_rk4(self, s: RoverState, u: Num, w: Num, dt: float) -> RoverState:
+        """Classic RK4 on all five states with (u, w) already delayed and clamped: a reference."""
         h2, h6 = 0.5 * dt, dt / 6.0
         d = self._deriv
         k1 = d(s.yaw, s.v, s.omega, u, w)
@@ -164,3 +237,82 @@ class RoverModel:
             s.v + h6 * (k1[3] + 2.0 * (k2[3] + k3[3]) + k4[3]),
             s.omega + h6 * (k1[4] + 2.0 * (k2[4] + k3[4]) + k4[4]),
         )
+
+
+def _rate_bounds(m, x, up, down):
+    """(lowest, highest) rate of change for a channel at ``x``: ``up`` while |x| grows, ``down``
+    while it shrinks (at x = 0 both directions grow)."""
+    lo = m.where(x > 0, -down, -up)
+    hi = m.where(x < 0, down, up)
+    return lo, hi
+
+
+def _channel(m, x0, u, b, up, down, h, both=True):
+    """One channel over a step with its input ``u`` held: x' = clip(b (u - x), rate bounds).
+
+    Exact: x ramps at the limit L (``up`` or ``down``, by the direction of travel at the start)
+    for t1 = (|e0| - L / b) / L while the lag would ask more than L, then decays as
+    u - e1 exp(-b (t - t1)) with |e1| = L / b. Returns x(h/2), x(h) and their integrals from 0
+    (``both=False``: x(h) only, the rest None).
+    (A ramp that crosses zero keeps the limit it started with: a step is a millisecond or so.)
+    """
+    e0 = u - x0
+    shrinking = e0 * x0 < 0
+    limit = m.where(shrinking, down, up)
+    mag = abs(e0)
+    knee = limit / b                                  # |error| below which the lag is unclipped
+    t1 = m.maximum(mag / limit - 1.0 / b, 0.0)        # = (mag - knee) / L; 0 with no limit
+    sign = m.where(e0 < 0, -1.0, 1.0)
+    e1 = sign * m.minimum(mag, knee)
+    ramp_rate = sign * m.where(t1 > 0, limit, 0.0)    # 0 avoids inf * 0 with no limit
+    out = []
+    for t in ((0.5 * h, h) if both else (h,)):
+        tr = m.minimum(t, t1)                          # time spent ramping
+        te = t - tr                                    # then decaying
+        decay = m.exp(-b * te)
+        x_ramp = x0 + ramp_rate * tr
+        x = m.where(te > 0, u - e1 * decay, x_ramp)
+        integral = x0 * tr + 0.5 * ramp_rate * tr * tr + (u * te - e1 * (1.0 - decay) / b)
+        out += [x, integral]
+    if not both:
+        return None, out[0], None, None
+    return out[0], out[2], out[1], out[3]
+
+
+class CommandDelay:
+    """Commands in flight through a pure delay (per channel, per vehicle), on a fixed step.
+
+    ``push(speed, yaw_rate, h)`` stores the commands given now and returns those given
+    ``round(delay / h)`` steps ago (zero before any). The step ``h`` is fixed by the first push.
+    """
+
+    def __init__(self, speed_delay: Num, yaw_delay: Num, n: int | None = None):
+        self.speed_delay, self.yaw_delay, self.n = speed_delay, yaw_delay, n
+        self.h: float | None = None
+
+    def _setup(self, h: float) -> None:
+        self.h = h
+        shape = () if self.n is None else (self.n,)
+        self._lag = [np.broadcast_to(np.rint(np.asarray(d, dtype=float) / h).astype(int), shape)
+                     for d in (self.speed_delay, self.yaw_delay)]
+        self._size = int(max(lag.max(initial=0) for lag in self._lag)) + 1
+        self._buf = [np.zeros((self._size,) + shape) for _ in range(2)]
+        self._cols = None if self.n is None else np.arange(self.n)
+        self._k = 0
+
+    def push(self, speed: Num, yaw_rate: Num, h: float) -> tuple[Num, Num]:
+        if self.h is None:
+            self._setup(h)
+        elif abs(h - self.h) > 1e-12:
+            raise ValueError(f"a delayed plant needs a fixed step: {self.h} s, then {h} s")
+        k, size = self._k, self._size
+        self._k = k + 1
+        out = []
+        for buf, lag, value in zip(self._buf, self._lag, (speed, yaw_rate)):
+            buf[k % size] = value
+            idx = (k - lag) % size
+            if self._cols is None:
+                out.append(float(buf[idx]))
+            else:
+                out.append(buf[idx, self._cols])
+        return out[0], out[1]

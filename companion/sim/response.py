@@ -1,0 +1,56 @@
+"""The inner loops alone: speed and turn rate answering a sequence of setpoints, many models at once.
+
+What identification fits and what the plant's tests check: given the setpoints an autopilot was
+sent (speed ``v_ref``, turn rate ``omega_ref``, held between samples) this runs only the two
+channels of :class:`companion.sim.plant.RoverModel` (delay -> clamp with coupling -> rate limit ->
+lag), without the pose, for ``n`` parameter sets side by side (any :class:`RoverParams` field may
+be an array of length ``n``). The same channel solution (:func:`companion.sim.plant._channel`) and
+delay line as the full model, so a fitted model is the model the simulations run.
+"""
+
+from __future__ import annotations
+
+from typing import Sequence
+
+import numpy as np
+
+from .plant import CommandDelay, RoverModel, RoverParams, _channel
+
+
+def respond(params: RoverParams, t: Sequence[float], speed_cmd: Sequence[float],
+            yaw_rate_cmd: Sequence[float], n: int, dt: float = 0.01,
+            v0: float = 0.0, omega0: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+    """Speed and turn rate at the times ``t`` (s, increasing) for ``n`` models.
+
+    ``speed_cmd[k]`` / ``yaw_rate_cmd[k]`` is the setpoint given at ``t[k]`` and held until
+    ``t[k+1]``. The channels are stepped on a ``dt`` grid from ``t[0]``; each sample is read at
+    the grid point at or just before its time. Returns two arrays of shape ``(len(t), n)``.
+    """
+    t = np.asarray(t, dtype=float)
+    u_in = np.asarray(speed_cmd, dtype=float)
+    w_in = np.asarray(yaw_rate_cmd, dtype=float)
+    if not (t.shape == u_in.shape == w_in.shape) or t.ndim != 1 or len(t) < 2:
+        raise ValueError("t, speed_cmd and yaw_rate_cmd must be 1-D and of one length >= 2")
+    if np.any(np.diff(t) < 0):
+        raise ValueError("t must not decrease")
+    model = RoverModel(params.with_(speed_delay=0.0, yaw_delay=0.0), n)   # clamp + coupling
+    p = params
+    delay = CommandDelay(p.speed_delay, p.yaw_delay, n) if p.has_delay else None
+    m = model._m
+    steps = int(np.floor((t[-1] - t[0]) / dt)) + 1
+    grid = t[0] + dt * np.arange(steps)
+    held = np.searchsorted(t, grid, side="right") - 1        # the setpoint in force at each step
+    sample_step = np.minimum(((t - t[0]) / dt + 1e-9).astype(int), steps - 1)
+    v = np.full(n, float(v0))
+    w = np.full(n, float(omega0))
+    v_out = np.empty((steps, n))
+    w_out = np.empty((steps, n))
+    for k in range(steps):
+        v_out[k], w_out[k] = v, w
+        u_k, w_k = u_in[held[k]], w_in[held[k]]
+        if delay is not None:
+            u_k, w_k = delay.push(u_k + np.zeros(n), w_k + np.zeros(n), dt)
+        u_k, w_k = model.clamp_command(u_k, w_k, w)
+        _, v, _, _ = _channel(m, v, u_k, p.w_c, p.max_accel, p.decel, dt, both=False)
+        _, w, _, _ = _channel(m, w, w_k, p.yaw_bandwidth, p.max_yaw_accel, p.yaw_decel, dt, both=False)
+    return v_out[sample_step], w_out[sample_step]

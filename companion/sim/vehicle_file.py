@@ -1,0 +1,170 @@
+"""Vehicle files: the identified inner loops of one rover, as ``companion identify`` writes them.
+
+A small TOML file, units in the key names, a header saying how it was made::
+
+    # pzc-rover vehicle file, written by `companion identify sitl.tlog --out vehicle.toml`
+    schema = "pzc-rover/vehicle/1"
+    name = "ardupilot-skid"
+    d_cen_m = 0.0
+
+    [speed]                       # the speed channel: delay -> clamp -> rate limit -> lag
+    delay_s = 0.06
+    lag_s = 0.30                  # time constant (1 / w_c)
+    max_m_s = 4.0
+    accel_max_m_s2 = 1.0          # while |v| grows
+    decel_max_m_s2 = 1.0          # while |v| shrinks
+
+    [turn_rate]
+    delay_s = 0.04
+    lag_s = 0.05
+    max_rad_s = 2.094
+    accel_max_rad_s2 = 2.09
+    decel_max_rad_s2 = 2.09
+
+    [coupling]
+    turn_speed = 0.3              # share of top speed lost at full turn rate (skid-steer mixing)
+
+    [fit]                         # optional: how well the model reproduced the log
+    speed_rms_m_s = 0.05
+    yaw_rate_rms_rad_s = 0.04
+
+Every key but ``schema`` has a default (the paper's plant: no delay, 0.05 s lag, no limits), so
+the paper's rover is the file with nothing in it. ``[fit]`` and ``[source]`` are free-form
+records (numbers and strings) kept for people. :class:`companion.sim.plant.RoverParams` is what
+the simulation uses; :func:`to_params` / :func:`from_params` convert.
+"""
+
+from __future__ import annotations
+
+import math
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from ..errors import UserError
+from .plant import RoverParams
+
+SCHEMA = "pzc-rover/vehicle/1"
+MIN_LAG = 1e-3          # s: a lag shorter than a plant step is no lag
+
+# section -> key -> (RoverParams field, kind); kinds: "lag" (s -> bandwidth), "limit" (> 0, may
+# be inf as "inf"), "delay" (>= 0), "share" (0..1), "length" (any finite).
+_CHANNELS: dict[str, dict[str, tuple[str, str]]] = {
+    "speed": {"delay_s": ("speed_delay", "delay"), "lag_s": ("w_c", "lag"),
+              "max_m_s": ("max_speed", "limit"), "accel_max_m_s2": ("max_accel", "limit"),
+              "decel_max_m_s2": ("max_decel", "limit")},
+    "turn_rate": {"delay_s": ("yaw_delay", "delay"), "lag_s": ("w_c_yaw", "lag"),
+                  "max_rad_s": ("max_yaw_rate", "limit"),
+                  "accel_max_rad_s2": ("max_yaw_accel", "limit"),
+                  "decel_max_rad_s2": ("max_yaw_decel", "limit")},
+    "coupling": {"turn_speed": ("turn_speed_coupling", "share")},
+}
+_RECORDS = ("fit", "source")
+
+
+@dataclass(frozen=True)
+class VehicleFile:
+    params: RoverParams
+    name: str = ""
+    header: str = ""                                   # comment lines, without the '# '
+    fit: dict[str, Any] = field(default_factory=dict)
+    source: dict[str, Any] = field(default_factory=dict)
+    path: str = ""
+
+
+def _value(where: str, key: str, value: Any, kind: str) -> float:
+    if kind == "limit" and value == "inf":
+        return math.inf
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+        raise UserError(f"{where}.{key}: must be a finite number, not {value!r}")
+    value = float(value)
+    bad = {"lag": value < 0, "limit": value <= 0, "delay": value < 0 or value > 5.0,
+           "share": not 0.0 <= value <= 1.0, "length": False}[kind]
+    if bad:
+        want = {"lag": ">= 0", "limit": "> 0 (or \"inf\")", "delay": "between 0 and 5 s",
+                "share": "between 0 and 1", "length": ""}[kind]
+        raise UserError(f"{where}.{key}: must be {want}, not {value!r}")
+    return value
+
+
+def parse(data: dict[str, Any], where: str) -> VehicleFile:
+    """A parsed vehicle table to a :class:`VehicleFile`; one-line UserError naming the key."""
+    if data.get("schema") != SCHEMA:
+        raise UserError(f"{where}: schema: must be \"{SCHEMA}\", not {data.get('schema')!r}")
+    known = {"schema", "name", "d_cen_m", *_CHANNELS, *_RECORDS}
+    for key in data:
+        if key not in known:
+            raise UserError(f"{where}: unknown key '{key}'")
+    kwargs: dict[str, float] = {}
+    if "d_cen_m" in data:
+        kwargs["d_cen"] = _value(where, "d_cen_m", data["d_cen_m"], "length")
+    for section, keys in _CHANNELS.items():
+        table = data.get(section, {})
+        if not isinstance(table, dict):
+            raise UserError(f"{where}: '{section}' must be a table")
+        for key, value in table.items():
+            if key not in keys:
+                raise UserError(f"{where}: unknown key '{section}.{key}'")
+            name, kind = keys[key]
+            number = _value(f"{where}: {section}", key, value, kind)
+            kwargs[name] = 1.0 / max(number, MIN_LAG) if kind == "lag" else number
+    for section in _RECORDS:
+        if not isinstance(data.get(section, {}), dict):
+            raise UserError(f"{where}: '{section}' must be a table")
+    name = data.get("name", "")
+    if not isinstance(name, str):
+        raise UserError(f"{where}: name: must be a string, not {name!r}")
+    defaults = RoverParams(w_c=1.0 / 0.05)
+    return VehicleFile(params=defaults.with_(**kwargs), name=name, fit=dict(data.get("fit", {})),
+                       source=dict(data.get("source", {})), path=where)
+
+
+def load(path: str | Path) -> VehicleFile:
+    """Read a vehicle file; any problem is one line naming the file and the key."""
+    path = Path(path)
+    try:
+        data = tomllib.loads(path.read_text())
+    except FileNotFoundError:
+        raise UserError(f"{path}: no such vehicle file") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise UserError(f"{path}: cannot read: {exc}") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise UserError(f"{path}: not valid TOML: {exc}") from None
+    return parse(data, str(path))
+
+
+def _fmt(value: Any) -> str:
+    if isinstance(value, str):
+        return '"' + value.replace("\\", "\\\\").replace('"', '\\"') + '"'
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    value = float(value)
+    return '"inf"' if math.isinf(value) else f"{value:.6g}"
+
+
+def dumps(vehicle: VehicleFile) -> str:
+    """The TOML text of a vehicle file (what :func:`load` reads back to the same parameters)."""
+    p = vehicle.params
+    lines = [f"# {line}" for line in (vehicle.header or "pzc-rover vehicle file").splitlines()]
+    lines += [f'schema = "{SCHEMA}"', f"name = {_fmt(vehicle.name)}", f"d_cen_m = {_fmt(p.d_cen)}"]
+    values = {"speed_delay": p.speed_delay, "w_c": 1.0 / p.w_c, "max_speed": p.max_speed,
+              "max_accel": p.max_accel, "max_decel": p.decel, "yaw_delay": p.yaw_delay,
+              "w_c_yaw": 1.0 / p.yaw_bandwidth, "max_yaw_rate": p.max_yaw_rate,
+              "max_yaw_accel": p.max_yaw_accel, "max_yaw_decel": p.yaw_decel,
+              "turn_speed_coupling": p.turn_speed_coupling}
+    for section, keys in _CHANNELS.items():
+        lines += ["", f"[{section}]"]
+        lines += [f"{key} = {_fmt(values[name])}" for key, (name, _) in keys.items()]
+    for section in _RECORDS:
+        record = getattr(vehicle, section)
+        if record:
+            lines += ["", f"[{section}]"] + [f"{k} = {_fmt(v)}" for k, v in record.items()]
+    return "\n".join(lines) + "\n"
+
+
+def save(vehicle: VehicleFile, path: str | Path) -> None:
+    try:
+        Path(path).write_text(dumps(vehicle))
+    except OSError as exc:
+        raise UserError(f"{path}: cannot write: {exc}") from None

@@ -1,0 +1,65 @@
+"""Vehicle files: read back to the same model, the paper's plant as the empty file, one-line errors."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+
+from companion.errors import UserError
+from companion.sim import vehicle_file
+from companion.sim.plant import RoverParams
+
+FULL = RoverParams(d_cen=0.1, w_c=1 / 0.3, w_c_yaw=1 / 0.05, max_speed=4.0, max_yaw_rate=2.0944,
+                   max_accel=1.0, max_decel=1.5, max_yaw_accel=2.09, max_yaw_decel=2.5,
+                   speed_delay=0.06, yaw_delay=0.04, turn_speed_coupling=0.3)
+
+
+def test_round_trip_keeps_every_parameter(tmp_path):
+    path = tmp_path / "v.toml"
+    vehicle_file.save(vehicle_file.VehicleFile(FULL, name="skid", header="made by a test\nline 2",
+                                               fit={"speed_rms_m_s": 0.05}), path)
+    text = path.read_text()
+    assert text.startswith("# made by a test\n# line 2\n")
+    back = vehicle_file.load(path)
+    assert back.name == "skid" and back.fit == {"speed_rms_m_s": 0.05}
+    for name in ("d_cen", "w_c", "w_c_yaw", "max_speed", "max_yaw_rate", "max_accel", "decel",
+                 "max_yaw_accel", "yaw_decel", "speed_delay", "yaw_delay", "turn_speed_coupling"):
+        assert getattr(back.params, name) == pytest.approx(getattr(FULL, name), rel=1e-5), name
+
+
+def test_the_empty_file_is_the_papers_plant(tmp_path):
+    path = tmp_path / "paper.toml"
+    path.write_text('schema = "pzc-rover/vehicle/1"\n')
+    params = vehicle_file.load(path).params
+    assert params.is_paper and params.w_c == pytest.approx(20.0)
+    assert math.isinf(params.max_speed)
+    unlimited = vehicle_file.VehicleFile(RoverParams.paper())
+    path.write_text(vehicle_file.dumps(unlimited))
+    assert 'max_m_s = "inf"' in path.read_text() and vehicle_file.load(path).params.is_paper
+
+
+@pytest.mark.parametrize("body, message", [
+    ('schema = "other"', "schema: must be"),
+    ('schema = "pzc-rover/vehicle/1"\nspeed = 3', "'speed' must be a table"),
+    ('schema = "pzc-rover/vehicle/1"\n[speed]\nlag_s = -1', "speed.lag_s: must be >= 0"),
+    ('schema = "pzc-rover/vehicle/1"\n[speed]\nmax_m_s = 0', "speed.max_m_s: must be > 0"),
+    ('schema = "pzc-rover/vehicle/1"\n[turn_rate]\ndelay_s = 9', "turn_rate.delay_s: must be between"),
+    ('schema = "pzc-rover/vehicle/1"\n[coupling]\nturn_speed = 1.5', "coupling.turn_speed"),
+    ('schema = "pzc-rover/vehicle/1"\n[speed]\nmax_speed = 3', "unknown key 'speed.max_speed'"),
+    ('schema = "pzc-rover/vehicle/1"\nwheels = 4', "unknown key 'wheels'"),
+    ('schema = "pzc-rover/vehicle/1"\n[speed]\nlag_s = "fast"', "speed.lag_s: must be a finite"),
+    ("schema = [", "not valid TOML"),
+])
+def test_bad_files_are_one_line_errors_naming_the_key(tmp_path, body, message):
+    path = tmp_path / "bad.toml"
+    path.write_text(body)
+    with pytest.raises(UserError) as err:
+        vehicle_file.load(path)
+    assert message in str(err.value) and str(path) in str(err.value)
+    assert "\n" not in str(err.value)
+
+
+def test_missing_file(tmp_path):
+    with pytest.raises(UserError, match="no such vehicle file"):
+        vehicle_file.load(tmp_path / "nope.toml")
