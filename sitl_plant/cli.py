@@ -13,14 +13,14 @@ import signal
 import socket
 import sys
 
-from companion.sim.plant import RoverParams
+from companion.sim.vehicle_file import PRESETS, preset
+from companion.sim.vehicle_file import load as load_vehicle
 
 from .config import DEFAULT_URL, PlantConfig
 from .modes import Autopilot
 from .telemetry import TelemetryConfig
 from .vehicle import VehicleConfig
 
-PRESETS = {"paper": RoverParams.paper, "stock": RoverParams.stock_rover}
 
 
 class _Parser(argparse.ArgumentParser):
@@ -74,6 +74,9 @@ def build_parser() -> argparse.ArgumentParser:
                       help="personality (default ardupilot)")
     link.add_argument("--loop-rate", type=_positive, default=50.0, metavar="HZ",
                       help="scheduler rate; message rates above 0.8x are refused (default 50)")
+    link.add_argument("--tick-aligned", action=argparse.BooleanOptionalAction, default=None,
+                      help="send telemetry on the scheduler's ticks as ArduPilot does (40 Hz on "
+                           "50 Hz: 20/20/20/40 ms); default on with --preset ardupilot-skid")
     link.add_argument("--arm-delay", type=_non_negative, default=0.0, metavar="S",
                       help="arming refused for the first S s of vehicle time (default 0)")
     clock = p.add_argument_group("clock")
@@ -88,14 +91,24 @@ def build_parser() -> argparse.ArgumentParser:
     clock.add_argument("--duration", type=_positive, default=None, metavar="S",
                        help="exit after S s of vehicle time (default: run until a signal)")
     veh = p.add_argument_group("vehicle")
-    veh.add_argument("--preset", choices=sorted(PRESETS), default="paper",
-                     help="paper: the paper's plant; stock: a stock ArduPilot skid-steer rover")
+    veh.add_argument("--preset", choices=PRESETS, default="paper",
+                     help="paper: the paper's plant; stock: a stock ArduPilot skid-steer rover "
+                          "as a linear lag; ardupilot-skid: SITL rover-skid as identified "
+                          "(delays, rate limits, coupling; implies --tick-aligned)")
+    veh.add_argument("--vehicle", metavar="FILE",
+                     help="a vehicle file (companion identify); the flags below override it")
     veh.add_argument("--d-cen", type=_non_negative, metavar="M", help="axle to tracked point")
     veh.add_argument("--w-c", type=_positive, metavar="RAD_S", help="speed-loop bandwidth")
     veh.add_argument("--w-c-yaw", type=_positive, metavar="RAD_S", help="turn-rate bandwidth")
     veh.add_argument("--max-speed", type=_positive_or_inf, metavar="M_S")
     veh.add_argument("--max-yaw-rate", type=_positive_or_inf, metavar="RAD_S")
     veh.add_argument("--max-accel", type=_positive_or_inf, metavar="M_S2")
+    veh.add_argument("--max-decel", type=_positive_or_inf, metavar="M_S2")
+    veh.add_argument("--max-yaw-accel", type=_positive_or_inf, metavar="RAD_S2")
+    veh.add_argument("--speed-delay", type=_non_negative, metavar="S")
+    veh.add_argument("--yaw-delay", type=_non_negative, metavar="S")
+    veh.add_argument("--turn-speed-coupling", type=_probability, metavar="C",
+                     help="share of top speed lost at full turn rate (skid-steer mixing)")
     veh.add_argument("--start", type=_finite, nargs=3, metavar=("X", "Y", "YAW"),
                      default=(0.0, 0.0, 0.0), help="start pose: north m, east m, yaw rad")
     tel = p.add_argument_group("telemetry")
@@ -123,9 +136,10 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def config_from_args(args: argparse.Namespace) -> PlantConfig:
-    params = PRESETS[args.preset]()
+    params = load_vehicle(args.vehicle).params if args.vehicle else preset(args.preset)
     overrides = {name: getattr(args, name) for name in
-                 ("d_cen", "w_c", "w_c_yaw", "max_speed", "max_yaw_rate", "max_accel")
+                 ("d_cen", "w_c", "w_c_yaw", "max_speed", "max_yaw_rate", "max_accel", "max_decel",
+                  "max_yaw_accel", "speed_delay", "yaw_delay", "turn_speed_coupling")
                  if getattr(args, name) is not None}
     params = params.with_(**overrides)
     vehicle = VehicleConfig(params=params, autopilot=Autopilot(args.autopilot),
@@ -142,6 +156,8 @@ def config_from_args(args: argparse.Namespace) -> PlantConfig:
                        speedup=args.speedup, lockstep=args.lockstep,
                        lockstep_timeout=args.lockstep_timeout, physics_dt=args.physics_dt,
                        duration=args.duration, preset=args.preset, vehicle=vehicle,
+                       tick_aligned=(args.tick_aligned if args.tick_aligned is not None
+                                     else args.preset == "ardupilot-skid"),
                        telemetry=telemetry, takeover_at=args.takeover_at, signing_key=key)
 
 

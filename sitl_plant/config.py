@@ -22,6 +22,7 @@ class PlantConfig:
     physics_dt: float = 0.001        # s of vehicle time per integration step
     duration: float | None = None    # s of vehicle time, None: until a signal
     preset: str = "paper"
+    tick_aligned: bool = False       # telemetry on scheduler ticks (ArduPilot's 20/20/20/40 ms)
     vehicle: VehicleConfig = field(default_factory=VehicleConfig)
     telemetry: TelemetryConfig = field(default_factory=TelemetryConfig)
     takeover_at: float | None = None  # vehicle s at which a "pilot" switches to HOLD

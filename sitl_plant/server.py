@@ -47,7 +47,7 @@ class PlantServer:
         self.link = link
         self.vehicle = vehicle or Vehicle(config.vehicle)
         self.wall = wall
-        self.streams = streams.StreamSchedule(config.loop_rate)
+        self.streams = streams.StreamSchedule(config.loop_rate, tick_aligned=config.tick_aligned)
         self.telemetry = TelemetryPipe(config.telemetry)
         self.pacer = Pacer(config.speedup)
         self.gate = LockstepGate(config.lockstep_timeout)

@@ -6,6 +6,9 @@ MAV_RESULT_DENIED and the old rate stays. Due times sit on multiples of each int
 clock, so streams at the same (or commensurate) rates fall on the same ticks: ATTITUDE and
 LOCAL_POSITION_NED at one rate always share a tick and a time_boot_ms.
 
+With ``tick_aligned`` a message due between two scheduler ticks goes out on the next tick, as
+ArduPilot's scheduler sends it: 40 Hz on a 50 Hz loop arrives at 20, 20, 20, 40 ms intervals.
+
 Times are integer microseconds, so long runs do not drift.
 """
 
@@ -35,8 +38,10 @@ class IntervalReply:
 
 
 class StreamSchedule:
-    def __init__(self, loop_rate_hz: float, defaults: dict[int, int] | None = None):
+    def __init__(self, loop_rate_hz: float, defaults: dict[int, int] | None = None,
+                 tick_aligned: bool = False):
         self.loop_rate_hz = loop_rate_hz
+        self._tick = max(1, int(round(1e6 / loop_rate_hz))) if tick_aligned else 1
         self._defaults = dict(DEFAULT_INTERVAL_US if defaults is None else defaults)
         self._interval: dict[int, int | None] = dict(self._defaults)
         self._next: dict[int, int] = {m: 0 for m in self._interval}
@@ -71,8 +76,12 @@ class StreamSchedule:
         self._next[mid] = (now_us // new + 1) * new
         return IntervalReply(ACCEPTED)
 
+    def _slot(self, due_us: int) -> int:
+        """When a message due at ``due_us`` goes out: then, or on the next scheduler tick."""
+        return -(-due_us // self._tick) * self._tick
+
     def next_due_us(self) -> int | None:
-        dues = [self._next[m] for m, i in self._interval.items() if i is not None]
+        dues = [self._slot(self._next[m]) for m, i in self._interval.items() if i is not None]
         return min(dues) if dues else None
 
     def due(self, now_us: int) -> list[int]:
@@ -80,7 +89,7 @@ class StreamSchedule:
         out = []
         for mid in STREAM_ORDER:
             interval = self._interval[mid]
-            if interval is None or self._next[mid] > now_us:
+            if interval is None or self._slot(self._next[mid]) > now_us:
                 continue
             out.append(mid)
             self._next[mid] = (now_us // interval + 1) * interval

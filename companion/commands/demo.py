@@ -36,8 +36,11 @@ def register(subparsers) -> None:
     p.add_argument("--mission", metavar="FILE",
                    help="mission file (default: the paper's ellipse, f_r 0.12 Hz, 60 s)")
     p.add_argument("--duration", type=positive, metavar="S", help="track only S seconds")
-    p.add_argument("--preset", choices=("paper", "stock"), default="paper",
-                   help="plant: the paper's rover (default) or a stock ArduPilot skid-steer")
+    p.add_argument("--preset", choices=("paper", "stock", "ardupilot-skid"), default="paper",
+                   help="plant: the paper's rover (default), a stock ArduPilot skid-steer as a "
+                        "linear lag, or SITL rover-skid as identified (ardupilot-skid)")
+    p.add_argument("--vehicle", metavar="FILE",
+                   help="plant: a vehicle file (companion identify) instead of a preset")
     p.add_argument("--d-cen", type=non_negative, dest="d_cen", default=DEFAULT_D_CEN, metavar="M",
                    help=f"plant's axle-to-tracked-point distance (default {DEFAULT_D_CEN:g})")
     p.add_argument("--autopilot", choices=("ardupilot", "px4"), default="ardupilot")
@@ -79,6 +82,8 @@ def plant_argv(args, port: int, rate: float) -> list[str]:
     argv = [sys.executable, "-m", "sitl_plant", "--connect", f"udpout:127.0.0.1:{port}",
             "--preset", args.preset, "--d-cen", repr(args.d_cen), "--autopilot", args.autopilot,
             "--loop-rate", f"{loop_rate:g}"]
+    if args.vehicle:
+        argv += ["--vehicle", args.vehicle]
     if lockstep:
         argv.append("--lockstep")
     if args.speedup is not None:
@@ -102,13 +107,13 @@ def _stop(proc: subprocess.Popen) -> int | None:
 def run(args) -> int:
     from ..bus import open_bus, shut
     from ..live.link import LinkConfig
-    from ..sim.plant import RoverParams
+    from ..sim import vehicle_file
     from ..progress import ProgressSink, TraceSink
     from ..live.runner import RunnerConfig
     from ..live.session import DEFAULT_LIMITS, GainFlags, RunSettings, StopSwitch, fly, requested_rate
 
     mission = _mission(args)
-    params = (RoverParams.paper if args.preset == "paper" else RoverParams.stock_rover)()
+    params = vehicle_file.load(args.vehicle).params if args.vehicle else vehicle_file.preset(args.preset)
     # The companion's limits: the flags, else the mission's, else the plant's own (so the
     # anti-windup knows where the vehicle saturates), else the default ceiling.
     base = mission.limits or DEFAULT_LIMITS

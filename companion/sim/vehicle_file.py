@@ -168,3 +168,20 @@ def save(vehicle: VehicleFile, path: str | Path) -> None:
         Path(path).write_text(dumps(vehicle))
     except OSError as exc:
         raise UserError(f"{path}: cannot write: {exc}") from None
+
+
+VEHICLES_DIR = Path(__file__).parent / "vehicles"
+# Named vehicles: the paper's rover, the linear stock-rover approximation, and identified files
+# shipped in ``companion/sim/vehicles/`` (a name maps to ``<name with _>.toml``).
+PRESETS = ("paper", "stock", "ardupilot-skid")
+
+
+def preset(name: str) -> RoverParams:
+    """The parameters of a named vehicle (:data:`PRESETS`)."""
+    if name == "paper":
+        return RoverParams.paper()
+    if name == "stock":
+        return RoverParams.stock_rover()
+    if name in PRESETS:
+        return load(VEHICLES_DIR / f"{name.replace('-', '_')}.toml").params
+    raise UserError(f"unknown vehicle preset {name!r} (known: {', '.join(PRESETS)})")
