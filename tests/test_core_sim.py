@@ -219,3 +219,37 @@ def test_single_vehicle_trace_records():
     result = simulate(PZCTracker(), RoverParams.paper(), Ellipse.paper(0.12), None,
                       SimConfig(duration=1.0, control_rate=100.0, trace_every=0.1))
     assert result.trace["x"].shape == (10,) and np.all(np.isfinite(result.trace["ex"]))
+
+
+def test_tick_aligned_schedule_is_ardupilots_20_20_20_40_ms():
+    config = SimConfig(duration=2.0, control_rate=40.0, tick=0.02, max_plant_dt=0.005)
+    times, substeps, h = config.schedule()
+    gaps = np.round(np.diff(times) * 1000).astype(int)
+    assert set(gaps) == {20, 40} and len(times) == 80
+    assert h == pytest.approx(0.005) and sum(substeps) * h == pytest.approx(2.0)
+
+
+class _Bang:
+    """A tracker that slams the yaw rate from one limit to the other every step (a relay)."""
+
+    def __init__(self, amplitude: float):
+        self.amplitude, self.sign = amplitude, 1.0
+
+    def reset(self):
+        self.sign = 1.0
+
+    def step(self, t, meas, ref):
+        from companion.core.signals import Command
+        self.sign = -self.sign
+        return Command(1.0, self.sign * self.amplitude, 0.0, 0.0)
+
+
+def test_chatter_metrics_see_a_relay_and_not_a_steady_command():
+    params = RoverParams(w_c=5.0, max_speed=4.0, max_yaw_rate=2.0)
+    config = SimConfig(duration=4.0, control_rate=40.0)
+    relay = simulate(_Bang(2.0), params, Ellipse.paper(0.04), None, config)
+    assert relay.yaw_at_limit == pytest.approx(1.0)
+    assert relay.yaw_rate_tv == pytest.approx(4.0 * 40.0, rel=0.02)    # 4 rad/s per step
+    assert relay.speed_tv == 0.0
+    calm = simulate(_Bang(0.5), params, Ellipse.paper(0.04), None, config)
+    assert calm.yaw_at_limit == 0.0

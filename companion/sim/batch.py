@@ -9,6 +9,13 @@ vehicle on Python floats, ``n=k`` simulates k vehicles on arrays, each tracker o
 Metrics (Section 5.3), per vehicle, integrated on the plant step:
     f_cost     = sqrt( int_0^T |p_ref - p|^2 dt )
     steady_rms = sqrt( mean over t in [T/2, T] of |p_ref - p|^2 )
+and what a real vehicle's inner loops feel of the commands (the chatter a limit cycle shows):
+    speed_tv, yaw_rate_tv = total variation of the speed / yaw-rate commands per second
+    yaw_at_limit          = share of control steps in [T/2, T] with |omega_ref| at the limit
+
+``SimConfig.tick`` reproduces how an autopilot delivers telemetry: each sample leaves on the
+first scheduler tick at or after its due time, so 40 Hz on ArduPilot's 50 Hz loop comes at
+20, 20, 20, 40 ms intervals and the tracker steps on those instants.
 """
 
 from __future__ import annotations
@@ -39,6 +46,8 @@ class SimConfig:
     noise_pos: float = 0.0          # m, std of white position noise on the measurement
     noise_yaw: float = 0.0          # rad
     seed: int = 0
+    tick: float | None = None       # s, scheduler tick the samples are aligned to (ArduPilot: 0.02)
+    yaw_rate_limit: float | None = None   # rad/s for yaw_at_limit; None: the vehicle's max_yaw_rate
 
     def __post_init__(self):
         for name in ("duration", "control_rate", "max_plant_dt"):
@@ -54,12 +63,31 @@ class SimConfig:
     def substeps(self) -> int:
         return max(1, math.ceil(self.control_period / self.max_plant_dt - 1e-9))
 
+    def schedule(self) -> tuple[list[float], list[int], float]:
+        """Control instants, plant substeps after each, and the plant step h."""
+        n_control = int(round(self.duration * self.control_rate))
+        if self.tick is None:
+            h = self.control_period / self.substeps
+            return [k * self.control_period for k in range(n_control)], \
+                [self.substeps] * n_control, h
+        tick_us = int(round(self.tick * 1e6))
+        per_tick = max(1, math.ceil(self.tick / self.max_plant_dt - 1e-9))
+        due_us = [int(round(k * self.control_period * 1e6)) for k in range(n_control)]
+        sent = sorted({-(-d // tick_us) * tick_us for d in due_us})
+        end_us = int(round(self.duration * 1e6))
+        sent = [u for u in sent if u < end_us]
+        ticks = [(b - a) // tick_us for a, b in zip(sent, sent[1:] + [end_us])]
+        return [u * 1e-6 for u in sent], [per_tick * t for t in ticks], self.tick / per_tick
+
 
 @dataclass
 class SimResult:
     f_cost: Num
     steady_rms: Num
     trace: dict[str, np.ndarray] = field(default_factory=dict)
+    speed_tv: Num = 0.0             # m/s per s: total variation of the speed commands
+    yaw_rate_tv: Num = 0.0          # rad/s per s
+    yaw_at_limit: Num = 0.0         # share of the second half's control steps at the limit
 
 
 def _take(obj, sl):
@@ -86,10 +114,13 @@ def simulate(trackers: Tracker | Sequence[tuple[Tracker, slice]], params: RoverP
     rng = np.random.default_rng(config.seed)
     noisy = config.noise_pos > 0 or config.noise_yaw > 0
 
-    substeps = config.substeps
-    h = config.control_period / substeps
-    n_control = int(round(config.duration * config.control_rate))
-    half = n_control * substeps // 2
+    times, substeps_after, h = config.schedule()
+    n_control = len(times)
+    half = sum(substeps_after) // 2
+    limit = config.yaw_rate_limit if config.yaw_rate_limit is not None else params.max_yaw_rate
+    at_limit_from = 0.98 * np.asarray(limit, dtype=float) if _ops_finite(limit) else None
+    tv_speed = tv_yaw = at_limit = zero
+    at_limit_steps = 0
     cost = zero
     steady = zero
     trace_stride = None if config.trace_every is None else max(1, round(config.trace_every / h))
@@ -99,7 +130,8 @@ def simulate(trackers: Tracker | Sequence[tuple[Tracker, slice]], params: RoverP
     step_index = 0
 
     for k in range(n_control):
-        t = k * config.control_period
+        t = times[k]
+        substeps = substeps_after[k]
         ref = reference.sample(t)
         meas = model.measure(state)
         if noisy:
@@ -115,6 +147,13 @@ def simulate(trackers: Tracker | Sequence[tuple[Tracker, slice]], params: RoverP
             for tracker, sl in groups:
                 cmd = tracker.step(t, _take(meas, sl), _take(ref, sl))
                 speed_cmd[sl], yaw_rate_cmd[sl] = cmd.speed, cmd.yaw_rate
+        if k:
+            tv_speed = tv_speed + abs(speed_cmd - last_speed)
+            tv_yaw = tv_yaw + abs(yaw_rate_cmd - last_yaw_rate)
+        last_speed, last_yaw_rate = speed_cmd, yaw_rate_cmd
+        if at_limit_from is not None and step_index >= half:
+            at_limit = at_limit + (abs(yaw_rate_cmd) >= at_limit_from)
+            at_limit_steps += 1
 
         for j in range(substeps):
             if j:
@@ -134,10 +173,18 @@ def simulate(trackers: Tracker | Sequence[tuple[Tracker, slice]], params: RoverP
     steady_count = step_index - half
     result = SimResult(f_cost=np.sqrt(cost) if n is not None else math.sqrt(cost),
                        steady_rms=(np.sqrt(steady / steady_count) if n is not None
-                                   else math.sqrt(steady / steady_count)))
+                                   else math.sqrt(steady / steady_count)),
+                       speed_tv=tv_speed / config.duration, yaw_rate_tv=tv_yaw / config.duration,
+                       yaw_at_limit=(at_limit / at_limit_steps if at_limit_steps else zero))
+    if n is None:
+        result.yaw_at_limit = float(result.yaw_at_limit)
     if trace:
         result.trace = {key: np.asarray(values) for key, values in trace.items()}
     return result
+
+
+def _ops_finite(value) -> bool:
+    return bool(np.all(np.isfinite(value)))
 
 
 def _record(trace, t, state, ref, speed_cmd, yaw_rate_cmd, meas, groups, n):

@@ -180,7 +180,7 @@ class RoverModel:
     def _step_limited(self, s: RoverState, u: Num, w: Num, h: float) -> RoverState:
         """Rate-limited channels, exact per channel (:func:`_channel`), Simpson for x and y."""
         m, p = self._m, self.params
-        v_mid, v_end, _, _ = _channel(m, s.v, u, p.w_c, p.max_accel, p.decel, h)
+        v_mid, v_end, _, _ = _channel(m, s.v, u, p.w_c, p.max_accel, p.decel, h, integrals=False)
         w_mid, w_end, i_mid, i_end = _channel(m, s.omega, w, p.yaw_bandwidth, p.max_yaw_accel,
                                               p.yaw_decel, h)
         yaw_mid, yaw_end = s.yaw + i_mid, s.yaw + i_end
@@ -247,35 +247,32 @@ def _rate_bounds(m, x, up, down):
     return lo, hi
 
 
-def _channel(m, x0, u, b, up, down, h, both=True):
+def _channel(m, x0, u, b, up, down, h, both=True, integrals=True):
     """One channel over a step with its input ``u`` held: x' = clip(b (u - x), rate bounds).
 
     Exact: x ramps at the limit L (``up`` or ``down``, by the direction of travel at the start)
     for t1 = (|e0| - L / b) / L while the lag would ask more than L, then decays as
     u - e1 exp(-b (t - t1)) with |e1| = L / b. Returns x(h/2), x(h) and their integrals from 0
-    (``both=False``: x(h) only, the rest None).
+    (``both=False``: x(h) only, the others None; ``integrals=False``: no integrals).
     (A ramp that crosses zero keeps the limit it started with: a step is a millisecond or so.)
     """
     e0 = u - x0
-    shrinking = e0 * x0 < 0
-    limit = m.where(shrinking, down, up)
-    mag = abs(e0)
+    limit = up if down is up else m.where(e0 * x0 < 0, down, up)
     knee = limit / b                                  # |error| below which the lag is unclipped
-    t1 = m.maximum(mag / limit - 1.0 / b, 0.0)        # = (mag - knee) / L; 0 with no limit
-    sign = m.where(e0 < 0, -1.0, 1.0)
-    e1 = sign * m.minimum(mag, knee)
-    ramp_rate = sign * m.where(t1 > 0, limit, 0.0)    # 0 avoids inf * 0 with no limit
+    t1 = m.maximum(abs(e0) / limit - 1.0 / b, 0.0)    # = (|e0| - knee) / L; 0 with no limit
+    e1 = m.clip(e0, -knee, knee)                      # the error when the ramp ends
+    ramp = m.where(t1 > 0, m.where(e0 < 0, -limit, limit), 0.0)   # 0: no inf * 0
     out = []
     for t in ((0.5 * h, h) if both else (h,)):
         tr = m.minimum(t, t1)                          # time spent ramping
         te = t - tr                                    # then decaying
         decay = m.exp(-b * te)
-        x_ramp = x0 + ramp_rate * tr
-        x = m.where(te > 0, u - e1 * decay, x_ramp)
-        integral = x0 * tr + 0.5 * ramp_rate * tr * tr + (u * te - e1 * (1.0 - decay) / b)
+        x = m.where(te > 0, u - e1 * decay, x0 + ramp * tr)
+        integral = (x0 * tr + 0.5 * ramp * tr * tr + (u * te - e1 * (1.0 - decay) / b)
+                    if integrals else None)
         out += [x, integral]
     if not both:
-        return None, out[0], None, None
+        return None, out[0], None, out[1]
     return out[0], out[2], out[1], out[3]
 
 
@@ -298,6 +295,10 @@ class CommandDelay:
         self._size = int(max(lag.max(initial=0) for lag in self._lag)) + 1
         self._buf = [np.zeros((self._size,) + shape) for _ in range(2)]
         self._cols = None if self.n is None else np.arange(self.n)
+        self._flat = [buf.reshape(-1) for buf in self._buf]
+        # one delay for every vehicle (the usual case) reads a whole row, no gather
+        self._uniform = [int(lag.flat[0]) if lag.size and np.all(lag == lag.flat[0]) else None
+                         for lag in self._lag]
         self._k = 0
 
     def push(self, speed: Num, yaw_rate: Num, h: float) -> tuple[Num, Num]:
@@ -308,11 +309,12 @@ class CommandDelay:
         k, size = self._k, self._size
         self._k = k + 1
         out = []
-        for buf, lag, value in zip(self._buf, self._lag, (speed, yaw_rate)):
+        for buf, flat, lag, uniform, value in zip(self._buf, self._flat, self._lag, self._uniform,
+                                                  (speed, yaw_rate)):
             buf[k % size] = value
-            idx = (k - lag) % size
-            if self._cols is None:
-                out.append(float(buf[idx]))
+            if uniform is not None:
+                row = buf[(k - uniform) % size]
+                out.append(float(row) if self._cols is None else row.copy())
             else:
-                out.append(buf[idx, self._cols])
+                out.append(flat.take(((k - lag) % size) * self.n + self._cols))
         return out[0], out[1]
