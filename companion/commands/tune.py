@@ -1,5 +1,11 @@
 """``companion tune``: search filter and PZC gains for a loop rate, actuator and limits.
 
+With ``--vehicle FILE`` (a vehicle file from ``companion identify``) the search is robust
+(:func:`companion.sim.robust.tune`): the identified inner loops and an ensemble of neighbours, the
+autopilot's telemetry timing, the missions given (``--mission``, repeatable) or the paper's
+ellipse at four speeds; a gain set whose worst neighbour limit-cycles is rejected. The gains file
+records the vehicle file (name and SHA-256), the ensemble and the command line.
+
 The search is :func:`companion.sim.tuning.tune` (batch simulation of a population of gain sets on the
 paper's ellipse at several reference speeds at once). The result prints as a table, or as JSON
 with ``--json``, and ``--out FILE`` writes a tuned-gains file that ``companion run``, ``demo``,
@@ -23,7 +29,15 @@ def register(subparsers) -> None:
         description="Search k_df, lambda_f, k_dc, lambda_c (and the optional yaw pair and "
                     "feed-forward extensions) by batch simulation for the lowest mean f_cost "
                     "over several reference speeds.")
-    p.add_argument("--rate", type=float, required=True, metavar="HZ", help="controller rate")
+    p.add_argument("--rate", type=float, metavar="HZ",
+                   help="controller rate (required without --vehicle; with it, default 40)")
+    p.add_argument("--vehicle", metavar="FILE",
+                   help="tune robustly for this identified vehicle (companion identify)")
+    p.add_argument("--mission", action="append", default=[], metavar="FILE",
+                   help="with --vehicle: tune on this mission's trajectory (repeatable; "
+                        "default the paper's ellipse at 0.02, 0.04, 0.08, 0.12 Hz)")
+    p.add_argument("--neighbours", type=int, default=6, metavar="N",
+                   help="with --vehicle: perturbed neighbours besides the vehicle (default 6)")
     p.add_argument("--w-c", type=float, default=20.0, dest="w_c", metavar="RAD_S",
                    help="actuator bandwidth of the rover (default 20; a stock rover is about 1.2)")
     p.add_argument("--d-cen", type=float, default=0.0, dest="d_cen", metavar="M",
@@ -80,7 +94,14 @@ def check(args) -> tuple[float, ...]:
 
 
 def _describe(result) -> dict:
-    g = result.gains
+    return {**_describe_gains(result.gains),
+            "f_r": list(result.f_r),
+            "f_cost": result.cost_per_reference,
+            "steady_rms": result.steady_rms_per_reference,
+            "evaluated": result.evaluated}
+
+
+def _describe_gains(g) -> dict:
     pzc = g.pzc
     return {
         "rate_hz": g.rate_hz, "w_c": g.w_c, "d_cen": g.d_cen,
@@ -93,14 +114,16 @@ def _describe(result) -> dict:
                 "lead_tau": float(pzc.lead_tau), "lead_max_gain": float(pzc.lead_max_gain),
                 "speed_law": pzc.speed_law},
         "cost": g.cost,
-        "f_r": list(result.f_r),
-        "f_cost": result.cost_per_reference,
-        "steady_rms": result.steady_rms_per_reference,
-        "evaluated": result.evaluated,
     }
 
 
 def run(args) -> int:
+    if args.vehicle:
+        return run_robust(args)
+    if args.mission:
+        raise UserError("--mission needs --vehicle (the linear tuner uses the paper's ellipse)")
+    if args.rate is None:
+        raise UserError("--rate is required (or --vehicle FILE for a robust tune)")
     f_r = check(args)
     from ..core.limits import Limits
     from ..sim.tuning import TuneConfig, tune
@@ -110,15 +133,7 @@ def run(args) -> int:
                      limits=Limits(max_speed=args.max_speed, max_yaw_rate=args.max_yaw_rate),
                      max_accel=args.max_accel, population=args.population, rounds=args.rounds,
                      seed=args.seed)
-    bar = None
-    if not args.no_progress:
-        from tqdm import tqdm
-        bar = tqdm(total=100, desc=f"tune {args.rate:g} Hz", file=sys.stderr, mininterval=0.5,
-                   bar_format="{desc} {percentage:3.0f}%|{bar}| {elapsed}<{remaining}")
-
-    def progress(frac: float) -> None:
-        if bar is not None and 100 * frac > bar.n:
-            bar.update(round(100 * frac - bar.n, 1))
+    bar, progress = _progress_bar(f"tune {args.rate:g} Hz", not args.no_progress)
     try:
         result = tune(cfg, progress)
     finally:
@@ -133,10 +148,20 @@ def run(args) -> int:
             d["out"] = args.out
         print(json.dumps(d))
         return 0
-    p = d["pzc"]
     print(f"tuned for {args.rate:g} Hz, w_c {args.w_c:g} rad/s, d_cen {args.d_cen:g} m, "
           f"limits {args.max_speed:g} m/s, {args.max_yaw_rate:g} rad/s "
           f"({result.evaluated} gain sets simulated)")
+    _print_gains(d)
+    for fr, cost, rms in zip(d["f_r"], d["f_cost"], d["steady_rms"]):
+        print(f"  f_r {fr:5.2f} Hz: f_cost {cost:7.3f}  steady RMS {rms:6.3f} m")
+    print(f"cost (mean f_cost) {d['cost']:.4f}")
+    if args.out:
+        print(f"written to {args.out}")
+    return 0
+
+
+def _print_gains(d: dict) -> None:
+    p = d["pzc"]
     print(f"filter  k_df {d['filter']['k_df']:.4g}  lambda_f {d['filter']['lambda_f']:.4g}")
     yaw = ("same as position" if p["k_dc_yaw"] is None
            else f"k_dc_yaw {p['k_dc_yaw']:.4g}  lambda_c_yaw {p['lambda_c_yaw']:.4g}")
@@ -145,9 +170,116 @@ def run(args) -> int:
           f"accel_ff {p['accel_ff']:.3g} s  speed_law {p['speed_law']}")
     print("        actuator lead: " + ("off" if p["lead_tau"] == 0 else
                                         f"tau {p['lead_tau']:.3g} s, max gain {p['lead_max_gain']:.3g}"))
-    for fr, cost, rms in zip(d["f_r"], d["f_cost"], d["steady_rms"]):
-        print(f"  f_r {fr:5.2f} Hz: f_cost {cost:7.3f}  steady RMS {rms:6.3f} m")
-    print(f"cost (mean f_cost) {d['cost']:.4f}")
+
+
+def _progress_bar(label: str, enabled: bool):
+    """A tqdm bar on stderr and a ``progress(fraction)`` that moves it (or no bar)."""
+    if not enabled:
+        return None, None
+    from tqdm import tqdm
+    bar = tqdm(total=100, desc=label, file=sys.stderr, mininterval=0.5,
+               bar_format="{desc} {percentage:3.0f}%|{bar}| {elapsed}<{remaining}")
+
+    def progress(frac: float) -> None:
+        if 100 * frac > bar.n:
+            bar.update(round(100 * frac - bar.n, 1))
+    return bar, progress
+
+
+def robust_config(vehicle_path: str, missions: list[str], rate: float, population: int,
+                  rounds: int, neighbours: int, seed: int, max_speed: float | None = None,
+                  max_yaw_rate: float | None = None):
+    """The robust tuner's configuration for a vehicle file and missions (shared with
+    ``companion run --vehicle`` and ``calibrate``, which tune on the spot)."""
+    from .. import mission as missions_mod
+    from ..core.limits import Limits
+    from ..mission.paths import Placed
+    from ..sim import vehicle_file
+    from ..sim.robust import RobustConfig
+
+    vehicle = vehicle_file.load(vehicle_path).params
+    refs, duration = [], 60.0
+    for path in missions:
+        m = missions_mod.load(path)
+        traj = m.trajectory
+        if m.frame != "start":      # start the simulated rover on the path's first point
+            first = traj.sample(0.0)
+            traj = Placed(traj, -float(first.x), -float(first.y), 0.0)
+        refs.append((m.name or path, traj))
+        duration = max(duration, min(m.duration, 120.0)) if len(refs) > 1 else min(m.duration, 120.0)
+    limits = Limits(max_speed=min(max_speed or 6.0, float(vehicle.max_speed)),
+                    max_yaw_rate=min(max_yaw_rate or 6.0, float(vehicle.max_yaw_rate)))
+    return vehicle, RobustConfig(vehicle=vehicle, rate_hz=rate, tick=0.02 if rate < 50 else None,
+                                 references=tuple(refs), duration=duration, limits=limits,
+                                 neighbours=neighbours, population=population, rounds=rounds,
+                                 seed=seed)
+
+
+def robust_gains(result, cfg, vehicle_path: str, command: str):
+    """The tuned gains with their record: vehicle file, its hash, the ensemble, the command."""
+    import hashlib
+    from dataclasses import replace
+    digest = hashlib.sha256(Path(vehicle_path).read_bytes()).hexdigest()
+    lines = [f"robust tune for the vehicle file {vehicle_path} (sha256 {digest[:16]}...)",
+             f"command: {command}",
+             f"references: {', '.join(result.references)}; {cfg.duration:g} s each; telemetry "
+             f"{cfg.rate_hz:g} Hz" + (f" on {cfg.tick * 1000:g} ms ticks" if cfg.tick else ""),
+             f"ensemble: the vehicle and {len(result.vehicles) - 1} neighbours (lags x1+-"
+             f"{cfg.spread.lag:g}, rate limits x1+-{cfg.spread.limit:g}, delays +"
+             f"{cfg.spread.delay_samples:g} samples, coupling +-{cfg.spread.coupling:g}), seed "
+             f"{cfg.seed}",
+             "steady RMS (m) on the vehicle / worst neighbour: " + ", ".join(
+                 f"{a:.3f}/{b:.3f}" for a, b in zip(result.nominal_steady_rms,
+                                                    result.worst_steady_rms))]
+    return replace(result.gains, header="\n".join(lines),
+                   vehicle_file=Path(vehicle_path).name, vehicle_sha256=digest)
+
+
+def run_robust(args) -> int:
+    from ..sim.robust import tune as robust_tune
+    rate = 40.0 if args.rate is None else args.rate
+    require_positive("--rate", rate)
+    if args.population < 8:
+        raise UserError(f"--population must be at least 8, not {args.population}")
+    if args.rounds < 1:
+        raise UserError(f"--rounds must be at least 1, not {args.rounds}")
+    if not 0 <= args.neighbours <= 64:
+        raise UserError(f"--neighbours must be 0..64, not {args.neighbours}")
+    if args.out and not Path(args.out).resolve().parent.is_dir():
+        raise UserError(f"--out {args.out}: directory {Path(args.out).resolve().parent} does not exist")
+    vehicle, cfg = robust_config(args.vehicle, args.mission, rate, args.population, args.rounds,
+                                 args.neighbours, args.seed)
+    bar, progress = _progress_bar(f"robust tune {rate:g} Hz", not args.no_progress)
+    try:
+        result = robust_tune(cfg, progress)
+    except RuntimeError as exc:
+        raise UserError(str(exc)) from None
+    finally:
+        if bar is not None:
+            bar.close()
+    command = "companion tune " + " ".join(sys.argv[2:]) if sys.argv[1:2] == ["tune"] else \
+        f"companion tune --vehicle {args.vehicle}"
+    gains = robust_gains(result, cfg, args.vehicle, command)
+    if args.out:
+        gains.save(args.out)
+    d = {**{k: v for k, v in _describe_gains(gains).items()},
+         "vehicle": args.vehicle, "references": result.references,
+         "steady_rms": result.nominal_steady_rms, "worst_steady_rms": result.worst_steady_rms,
+         "f_cost": result.nominal_f_cost, "worst_yaw_at_limit": result.worst_yaw_at_limit,
+         "ensemble": len(result.vehicles), "evaluated": result.evaluated,
+         "rejected": result.rejected}
+    if args.json:
+        if args.out:
+            d["out"] = args.out
+        print(json.dumps(d))
+        return 0
+    print(f"robust tune for {args.vehicle} at {rate:g} Hz: the vehicle and "
+          f"{len(result.vehicles) - 1} neighbours, {result.evaluated} gain sets simulated "
+          f"({result.rejected['limit cycle']} limit-cycled, {result.rejected['diverged']} diverged)")
+    _print_gains(d)
+    for label, a, b, c in zip(result.references, result.nominal_steady_rms,
+                              result.worst_steady_rms, result.nominal_f_cost):
+        print(f"  {label:24s} steady RMS {a:6.3f} m (worst neighbour {b:6.3f})  f_cost {c:7.3f}")
     if args.out:
         print(f"written to {args.out}")
     return 0

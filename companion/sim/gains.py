@@ -29,6 +29,7 @@ Files for the rates and actuators we ship with live in ``companion/sim/tuned/``.
 
 from __future__ import annotations
 
+import json
 import math
 import tomllib
 from dataclasses import dataclass, fields
@@ -50,12 +51,19 @@ class TunedGains:
     d_cen: float = 0.0
     cost: float | None = None
     source: str = ""
+    header: str = ""                   # comment lines: how the gains were made
+    vehicle_file: str | None = None    # the vehicle file they were tuned for (companion tune --vehicle)
+    vehicle_sha256: str | None = None  # of that file's bytes: gains follow the vehicle they fit
 
     def to_toml(self) -> str:
-        lines = ["# written by `companion tune`",
-                 f"rate_hz = {self.rate_hz!r}", f"w_c = {self.w_c!r}", f"d_cen = {self.d_cen!r}"]
+        lines = ["# written by `companion tune`"]
+        lines += [f"# {line}" for line in self.header.splitlines()]
+        lines += [f"rate_hz = {self.rate_hz!r}", f"w_c = {self.w_c!r}", f"d_cen = {self.d_cen!r}"]
         if self.cost is not None:
             lines.append(f"cost = {self.cost!r}")
+        if self.vehicle_file is not None:
+            lines.append("vehicle_file = " + json.dumps(self.vehicle_file))
+            lines.append(f'vehicle_sha256 = "{self.vehicle_sha256}"')
         lines += ["", "[filter]", f"k_df = {float(self.filter.k_df)!r}",
                   f"lambda_f = {float(self.filter.lambda_f)!r}", "", "[pzc]"]
         for f in fields(PZCGains):
@@ -87,7 +95,8 @@ def _number(table: dict, key: str, where: str, positive: bool = True) -> float:
 
 def parse(data: dict, where: str) -> TunedGains:
     """Validate a parsed gains table (also used for a mission file's gains section)."""
-    known_top = {"rate_hz", "w_c", "d_cen", "cost", "filter", "pzc"}
+    known_top = {"rate_hz", "w_c", "d_cen", "cost", "filter", "pzc", "vehicle_file",
+                 "vehicle_sha256"}
     for key in data:
         if key not in known_top:
             raise UserError(f"{where}: unknown key '{key}'")
@@ -135,7 +144,16 @@ def parse(data: dict, where: str) -> TunedGains:
         w_c=_number(data, "w_c", where) if "w_c" in data else math.nan,
         d_cen=_number(data, "d_cen", where, positive=False) if "d_cen" in data else 0.0,
         cost=_number(data, "cost", where, positive=False) if "cost" in data else None,
-        source=where)
+        source=where, vehicle_file=_text(data, "vehicle_file", where),
+        vehicle_sha256=_text(data, "vehicle_sha256", where))
+
+
+def _text(table: dict, key: str, where: str) -> str | None:
+    if key not in table:
+        return None
+    if not isinstance(table[key], str):
+        raise UserError(f"{where}: '{key}' must be a string, not {table[key]!r}")
+    return table[key]
 
 
 def load(path: str | Path) -> TunedGains:

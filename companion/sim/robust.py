@@ -1,0 +1,276 @@
+"""Robust tuning: gains that hold on an identified vehicle and on its plausible neighbours.
+
+:mod:`companion.sim.tuning` finds the best gains for one linear model; on a real autopilot (rate
+limits, delay, coupling) gains that exploit that model's exact form meet the limits as a relay
+and limit-cycle. Here every candidate gain set is simulated, in one batch, on
+
+* an **ensemble**: the identified vehicle (:mod:`companion.sim.vehicle_file`) and neighbours with
+  each identified parameter perturbed (lags and rate limits by tens of percent, delays by one or
+  two telemetry samples, the skid-steer coupling), deterministic for a seed;
+* the **telemetry as the autopilot delivers it**: samples on the scheduler's ticks (ArduPilot's
+  20 / 20 / 20 / 40 ms at 40 Hz) with EKF-like noise;
+* **references**: the missions given, else the paper's ellipse at 0.04, 0.08 and 0.12 Hz plus a
+  slower one (0.02 Hz), so gains that suit a fast reference cannot orbit a slow one.
+
+The objective rewards steady tracking on every reference (log of the ensemble-mean steady RMS,
+so a 5 cm and a 50 cm reference count alike, plus a smaller share of f_cost for the approach)
+and penalises command chatter (total variation of the setpoints per second). A candidate whose
+**worst** neighbour limit-cycles (yaw-rate setpoint at its limit more than 5 % of the second
+half) or diverges on any reference is rejected outright.
+
+The search is :mod:`companion.sim.tuning`'s (seeded random search, then rounds of perturbation
+around the elite) over the same gain space, with the actuator lead left out: a lead's gain is
+what turns a rate limit into a relay.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Callable, Sequence
+
+import numpy as np
+
+from ..core.filter import FilterGains
+from ..core.limits import Limits
+from ..core.pzc import PZCGains, PZCTracker
+from ..core.signals import Reference
+from ..core.trajectory import Ellipse, Trajectory
+from .batch import SimConfig, simulate
+from .gains import TunedGains
+from .plant import RoverParams
+from .tuning import Candidates, perturb, random_candidates
+
+PAPER_F_R = (0.02, 0.04, 0.08, 0.12)
+LIMIT_CYCLE_SHARE = 0.05     # yaw-rate setpoint at its limit in more of the second half: rejected
+
+
+@dataclass(frozen=True)
+class Spread:
+    """How far the neighbours stray from the identified vehicle."""
+
+    lag: float = 0.3          # lags x (1 +- lag)
+    limit: float = 0.15       # rate limits x (1 +- limit)
+    delay_samples: float = 1  # delays + up to this many telemetry samples (never below 0)
+    coupling: float = 0.15    # coupling +- this (clipped to [0, 1])
+
+
+@dataclass(frozen=True)
+class RobustConfig:
+    vehicle: RoverParams
+    rate_hz: float = 40.0
+    tick: float | None = 0.02          # s, autopilot scheduler tick (ArduPilot: 1 / 50 Hz)
+    references: tuple[tuple[str, Trajectory], ...] = ()   # (label, trajectory); () = paper's
+    duration: float = 60.0
+    limits: Limits = Limits()
+    neighbours: int = 6                # besides the identified vehicle itself
+    spread: Spread = Spread()
+    noise_pos: float = 0.005           # m, EKF-like white noise on the position samples
+    noise_yaw: float = 0.002           # rad
+    population: int = 160
+    rounds: int = 5
+    elite: int = 12
+    chatter_weight: float = 0.05       # objective per (m/s + rad/s) per s of setpoint variation
+    plant_dt: float = 0.01             # s; the channels are exact, 10 ms keeps Simpson's x, y fine
+    seed: int = 1
+
+    def reference_list(self) -> tuple[tuple[str, Trajectory], ...]:
+        if self.references:
+            return self.references
+        return tuple((f"ellipse {f:g} Hz", Ellipse.paper(f)) for f in PAPER_F_R)
+
+
+def ensemble(vehicle: RoverParams, count: int, spread: Spread, sample_period: float,
+             seed: int) -> list[RoverParams]:
+    """The identified vehicle first, then ``count`` neighbours: the slow corner (longer lags,
+    lower limits, later) always among them, the rest drawn at random within ``spread``."""
+    rng = np.random.default_rng(seed)
+    out = [vehicle]
+    for i in range(count):
+        if i == 0:
+            lag_k, lim_k, extra, dc = 1 + spread.lag, 1 - spread.limit, spread.delay_samples, 0.0
+        elif i == 1:
+            lag_k, lim_k, extra, dc = 1 - spread.lag / 2, 1 + spread.limit, 0.0, -spread.coupling
+        else:
+            lag_k = 1 + spread.lag * rng.uniform(-0.5, 1.0)
+            lim_k = 1 + spread.limit * rng.uniform(-1.0, 1.0)
+            extra = float(rng.integers(-1, int(spread.delay_samples) + 1))
+            dc = spread.coupling * rng.uniform(-1.0, 1.0)
+        delay = extra * sample_period
+        out.append(vehicle.with_(
+            w_c=vehicle.w_c / lag_k, w_c_yaw=vehicle.yaw_bandwidth / lag_k,
+            max_accel=vehicle.max_accel * lim_k, max_decel=vehicle.decel * lim_k,
+            max_yaw_accel=vehicle.max_yaw_accel * lim_k, max_yaw_decel=vehicle.yaw_decel * lim_k,
+            speed_delay=max(0.0, vehicle.speed_delay + delay),
+            yaw_delay=max(0.0, vehicle.yaw_delay + delay),
+            turn_speed_coupling=float(np.clip(vehicle.turn_speed_coupling + dc, 0.0, 1.0))))
+    return out
+
+
+def _stack_params(vehicles: Sequence[RoverParams], repeat: int, tile: int) -> RoverParams:
+    """One RoverParams of arrays: each vehicle's values ``repeat`` times in a row, the whole
+    sequence ``tile`` times (vehicle order: candidate, then vehicle, then reference)."""
+    values = {k: [float(getattr(v, k)) for v in vehicles] for k in
+              ("d_cen", "w_c", "max_speed", "max_yaw_rate", "max_accel", "max_yaw_accel",
+               "speed_delay", "yaw_delay", "turn_speed_coupling")}
+    values["w_c_yaw"] = [float(v.yaw_bandwidth) for v in vehicles]
+    values["max_decel"] = [float(v.decel) for v in vehicles]
+    values["max_yaw_decel"] = [float(v.yaw_decel) for v in vehicles]
+    return RoverParams(**{k: np.tile(np.repeat(v, repeat), tile) for k, v in values.items()})
+
+
+class StackedReference:
+    """Several trajectories side by side: vehicle i follows ``trajs[which[i]]`` (one batch)."""
+
+    def __init__(self, trajs: Sequence[Trajectory], which: np.ndarray):
+        self.trajs, self.which = list(trajs), np.asarray(which)
+        self.duration = None
+
+    def sample(self, t: float) -> Reference:
+        samples = [tr.sample(t) for tr in self.trajs]
+        fields = ("x", "y", "vx", "vy", "ax", "ay")
+        table = {f: np.array([float(getattr(s, f)) for s in samples]) for f in fields}
+        return Reference(*(table[f][self.which] for f in fields))
+
+
+def _reference(refs: Sequence[Trajectory], n_cand: int, n_veh: int) -> Trajectory:
+    """Vehicle order: candidate-major, then vehicle, then reference."""
+    which = np.tile(np.arange(len(refs)), n_cand * n_veh)
+    if all(isinstance(r, Ellipse) and r.duration is None and
+           (r.ax, r.bx, r.ay, r.by, r.cx, r.cy) == (6.0, -1.0, 2.0, 3.0, 0.0, 0.0) for r in refs):
+        return Ellipse.paper(np.array([float(r.f_r) for r in refs])[which])
+    return StackedReference(refs, which)
+
+
+@dataclass
+class Evaluation:
+    objective: np.ndarray              # per candidate (inf: rejected)
+    steady_rms: np.ndarray             # [candidate, vehicle, reference]
+    f_cost: np.ndarray
+    yaw_at_limit: np.ndarray
+    chatter: np.ndarray                # speed TV + yaw-rate TV, per s
+    rejected: np.ndarray               # per candidate: why ("" if kept)
+
+
+def _tracker(cands: Candidates, repeat: int, limits: Limits) -> PZCTracker:
+    p, f = cands.params, cands.flags
+    rep = lambda a: np.repeat(a, repeat)  # noqa: E731
+    separate = f["separate_yaw"] > 0.5
+    return PZCTracker(
+        FilterGains(rep(p["k_df"]), rep(p["lambda_f"])),
+        PZCGains(rep(p["k_dc"]), rep(p["lambda_c"]),
+                 k_dc_yaw=rep(np.where(separate, p["k_dc_yaw"], p["k_dc"])),
+                 lambda_c_yaw=rep(np.where(separate, p["lambda_c_yaw"], p["lambda_c"])),
+                 velocity_ff=rep(f["velocity_ff"]), heading_rate_ff=rep(f["heading_rate_ff"]),
+                 accel_ff=rep(np.where(f["use_accel_ff"] > 0.5, p["accel_ff"], 0.0))),
+        limits, n=len(cands) * repeat)
+
+
+def evaluate(cands: Candidates, cfg: RobustConfig, vehicles: Sequence[RoverParams],
+             progress: Callable[[float], None] | None = None) -> Evaluation:
+    refs = [tr for _, tr in cfg.reference_list()]
+    n_c, n_v, n_r = len(cands), len(vehicles), len(refs)
+    n = n_c * n_v * n_r
+    params = _stack_params(vehicles, n_r, n_c)
+    sim = SimConfig(duration=cfg.duration, control_rate=cfg.rate_hz, max_plant_dt=cfg.plant_dt,
+                    tick=cfg.tick, noise_pos=cfg.noise_pos, noise_yaw=cfg.noise_yaw,
+                    seed=cfg.seed, yaw_rate_limit=min(cfg.limits.max_yaw_rate,
+                                                      float(np.min(params.max_yaw_rate))))
+    with np.errstate(all="ignore"):
+        result = simulate(_tracker(cands, n_v * n_r, cfg.limits), params,
+                          _reference(refs, n_c, n_v), n, sim, progress)
+    shape = (n_c, n_v, n_r)
+    rms = np.asarray(result.steady_rms).reshape(shape)
+    cost = np.asarray(result.f_cost).reshape(shape)
+    at_limit = np.asarray(result.yaw_at_limit).reshape(shape)
+    chatter = (np.asarray(result.speed_tv) + np.asarray(result.yaw_rate_tv)).reshape(shape)
+    finite = np.isfinite(rms) & np.isfinite(cost) & (rms < 1e3)
+    rms_mean = np.where(finite, rms, np.inf).mean(axis=1)            # [cand, ref]
+    cost_mean = np.where(finite, cost, np.inf).mean(axis=1)
+    objective = (np.log(rms_mean + 0.005).mean(axis=1) + 0.25 * np.log(cost_mean).mean(axis=1)
+                 + cfg.chatter_weight * np.where(finite, chatter, np.inf).mean(axis=(1, 2)))
+    rejected = np.full(n_c, "", dtype=object)
+    cycling = (at_limit > LIMIT_CYCLE_SHARE).any(axis=(1, 2))
+    diverged = ~finite.all(axis=(1, 2))
+    rejected[cycling] = "limit cycle"
+    rejected[diverged] = "diverged"
+    objective = np.where(cycling | diverged | ~np.isfinite(objective), np.inf, objective)
+    return Evaluation(objective, rms, cost, at_limit, chatter, rejected)
+
+
+def seeds() -> Candidates:
+    """Generic starting points (vehicle-independent): gentle PI gains with both feed-forwards,
+    a few bandwidths apart, with and without acceleration feed-forward, and the paper's own
+    gains. No lead."""
+    rows = []
+    for k_dc, lambda_c in ((0.2, 0.3), (0.4, 0.8), (1.0, 1.0), (2.0, 2.0)):
+        for k_yaw, l_yaw in ((1.0, 1.0), (2.0, 2.0)):
+            rows.append((500, 40, k_dc, lambda_c, k_yaw, l_yaw, 0.05, 0.05, 1, 1, 1, 1, 0, 0))
+            rows.append((500, 40, k_dc, lambda_c, k_yaw, l_yaw, 0.3, 0.05, 1, 1, 1, 1, 1, 0))
+    rows.append((1000, 120, 5, 12, 5, 12, 0.05, 0.05, 1, 0, 0, 0, 0, 0))
+    a = np.array(rows, dtype=float)
+    names = ("k_df", "lambda_f", "k_dc", "lambda_c", "k_dc_yaw", "lambda_c_yaw", "accel_ff",
+             "lead_tau", "lead_max_gain")
+    flags = ("velocity_ff", "heading_rate_ff", "separate_yaw", "use_accel_ff", "use_lead")
+    return Candidates({k: a[:, i] for i, k in enumerate(names)},
+                      {k: a[:, len(names) + i] for i, k in enumerate(flags)})
+
+
+def _no_lead(c: Candidates) -> Candidates:
+    c.flags["use_lead"] = np.zeros(len(c))
+    return c
+
+
+@dataclass
+class RobustResult:
+    gains: TunedGains
+    objective: float
+    references: list[str]
+    nominal_steady_rms: list[float]            # the identified vehicle, per reference
+    worst_steady_rms: list[float]              # the worst neighbour, per reference
+    nominal_f_cost: list[float]
+    worst_yaw_at_limit: float
+    vehicles: list[RoverParams]
+    evaluated: int
+    rejected: dict[str, int] = field(default_factory=dict)
+
+
+def tune(cfg: RobustConfig, progress: Callable[[float], None] | None = None) -> RobustResult:
+    """Search the gains for ``cfg.vehicle`` and its ensemble; ``progress(fraction)``."""
+    rng = np.random.default_rng(cfg.seed)
+    period = 1.0 / cfg.rate_hz
+    vehicles = ensemble(cfg.vehicle, cfg.neighbours, cfg.spread, period, cfg.seed)
+    start = seeds()
+    population = Candidates.concat(
+        [start, _no_lead(random_candidates(rng, max(1, cfg.population - len(start))))])
+    best, best_obj = None, np.array([])
+    evaluated, rejected = 0, {"limit cycle": 0, "diverged": 0}
+    total = cfg.rounds + 1
+    for r in range(cfg.rounds):
+        ev = evaluate(population, cfg, vehicles,
+                      None if progress is None else (lambda f, r=r: progress((r + f) / total)))
+        evaluated += len(population)
+        for why in rejected:
+            rejected[why] += int(np.sum(ev.rejected == why))
+        pool = population if best is None else Candidates.concat([best, population])
+        pool_obj = ev.objective if best is None else np.concatenate([best_obj, ev.objective])
+        order = np.argsort(pool_obj)[:cfg.elite]
+        best, best_obj = pool.take(order), pool_obj[order]
+        population = _no_lead(perturb(rng, best, cfg.population, 0.5 * 0.6 ** r))
+    winner = best.take(np.array([0]))
+    ev = evaluate(winner, cfg, vehicles,
+                  None if progress is None else (lambda f: progress((cfg.rounds + f) / total)))
+    fg, pg = winner.gains(0)
+    labels = [label for label, _ in cfg.reference_list()]
+    if not math.isfinite(float(ev.objective[0])):
+        raise RuntimeError("no gain set held on every neighbour: widen the search "
+                           "(--population, --rounds) or check the vehicle file")
+    return RobustResult(
+        TunedGains(fg, pg, rate_hz=cfg.rate_hz, w_c=float(np.mean(cfg.vehicle.w_c)),
+                   d_cen=float(np.mean(cfg.vehicle.d_cen)), cost=float(ev.objective[0])),
+        objective=float(ev.objective[0]), references=labels,
+        nominal_steady_rms=[float(v) for v in ev.steady_rms[0, 0]],
+        worst_steady_rms=[float(v) for v in ev.steady_rms[0].max(axis=0)],
+        nominal_f_cost=[float(v) for v in ev.f_cost[0, 0]],
+        worst_yaw_at_limit=float(ev.yaw_at_limit[0].max()), vehicles=vehicles,
+        evaluated=evaluated, rejected=rejected)
