@@ -239,6 +239,7 @@ class Runner:
         """Samples resume after a gap: forget the filter and integrators (no huge-dt step)."""
         self.tracker.reset()
         self.tracker_resets += 1
+        self.stats.lost(gap)
         self._segment_t0 = None
         self.log(f"{gap:.3f} s of vehicle time without a sample: filter and integrators reset")
 
