@@ -3,7 +3,7 @@ PYTHON ?= python3
 VENV ?= .venv
 BIN = $(VENV)/bin
 
-.PHONY: demo test bench paper-table clean
+.PHONY: demo test sitl-test bench paper-table clean
 
 $(BIN)/.installed: pyproject.toml
 	@echo "setting up $(VENV) (first run, or pyproject.toml changed)" >&2
@@ -17,6 +17,10 @@ demo: $(BIN)/.installed
 
 test: $(BIN)/.installed
 	$(BIN)/python -m pytest $(ARGS)
+
+# Only the tests against ArduPilot Rover SITL (skipped unless ARDUPILOT_SITL or ARDUPILOT_DIR is set)
+sitl-test: $(BIN)/.installed
+	$(BIN)/python -m pytest -m sitl $(ARGS)
 
 paper-table: $(BIN)/.installed
 	@$(BIN)/companion paper-table $(ARGS)

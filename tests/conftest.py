@@ -12,6 +12,8 @@ import os
 import tempfile
 from pathlib import Path
 
+import pytest
+
 ISOLATED_ZENOH = """{
   mode: "peer",
   scouting: { multicast: { enabled: false } },
@@ -31,3 +33,13 @@ def pytest_configure(config):
 
 def pytest_unconfigure(config):
     _PATH.unlink(missing_ok=True)
+
+
+@pytest.fixture
+def ardupilot(tmp_path):
+    """Start ArduPilot Rover SITL: ``ardupilot(speedup=5, params={"NAME": value})`` returns a
+    running ``ardupilot_harness.ArduPilotSITL``; every one is stopped after the test. Skips when
+    neither ARDUPILOT_SITL nor ARDUPILOT_DIR is set."""
+    from ardupilot_harness import sitl_factory
+    with sitl_factory(tmp_path) as start:
+        yield start
