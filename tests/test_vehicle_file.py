@@ -63,3 +63,29 @@ def test_bad_files_are_one_line_errors_naming_the_key(tmp_path, body, message):
 def test_missing_file(tmp_path):
     with pytest.raises(UserError, match="no such vehicle file"):
         vehicle_file.load(tmp_path / "nope.toml")
+
+
+MISSION = """name = "m"
+duration = 20
+[trajectory]
+kind = "circle"
+radius = 5.0
+speed = 1.0
+[vehicle]
+{vehicle}
+"""
+
+
+def test_a_mission_names_its_vehicle_file(tmp_path):
+    from companion import mission
+    vehicle_file.save(vehicle_file.VehicleFile(FULL, name="skid"), tmp_path / "rover.toml")
+    path = tmp_path / "m.toml"
+    path.write_text(MISSION.format(vehicle='file = "rover.toml"\nd_cen = 0.25'))
+    m = mission.load(path)
+    assert m.vehicle_file == str(tmp_path / "rover.toml")
+    assert m.vehicle.max_accel == pytest.approx(1.0) and m.vehicle.speed_delay == pytest.approx(0.06)
+    assert m.vehicle.d_cen == pytest.approx(0.25)            # the mission's key wins
+    path.write_text(MISSION.format(vehicle='file = "missing.toml"'))
+    with pytest.raises(UserError) as err:
+        mission.load(path)
+    assert "vehicle.file" in str(err.value) and "no such vehicle file" in str(err.value)

@@ -42,6 +42,7 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 
 from ..sim import gains as _gains
+from ..sim import vehicle_file as _vehicle_file
 from . import paths
 from ..errors import UserError
 from ..core.filter import FilterGains
@@ -82,6 +83,7 @@ class Mission:
     period: float | None = None       # s per lap for periodic trajectories
     profile: MotionProfile | None = None   # length and peaks over the mission
     warnings: tuple[str, ...] = ()    # one line per imported item that is not followed
+    vehicle_file: str | None = None   # [vehicle] file: the identified vehicle (companion identify)
 
     def anchored(self, x0: float, y0: float, yaw0: float) -> Trajectory:
         """The trajectory in the vehicle's local NED frame for a start pose (identity for frame
@@ -183,7 +185,7 @@ def _from_table(top: Table, base: Path, origin: tuple[float, float] | None) -> M
         raise top.error("laps", f"give duration or laps, not both (duration = {duration:g})")
     filter_gains, pzc_gains = _read_gains(top, base)
     limits = _read_limits(top.table("limits"))
-    vehicle = _read_vehicle(top.table("vehicle"))
+    vehicle, vehicle_file = _read_vehicle(top.table("vehicle"), base)
     spec = top.table("trajectory", required=True)
     traj, warnings = _build_trajectory(spec, base, laps, origin)
     top.done()
@@ -211,7 +213,7 @@ def _from_table(top: Table, base: Path, origin: tuple[float, float] | None) -> M
                    rate_hz=rate_hz, filter_gains=filter_gains, pzc_gains=pzc_gains,
                    limits=limits, vehicle=vehicle, frame=frame, source=src,
                    kind=_kind_name(traj), period=period, profile=profile,
-                   warnings=tuple(warnings))
+                   warnings=tuple(warnings), vehicle_file=vehicle_file)
 
 
 def _latlon(table: Table, key: str, required: bool = False) -> tuple[float, float] | None:
@@ -258,18 +260,26 @@ def _read_limits(table: Table | None) -> Limits | None:
     return limits
 
 
-def _read_vehicle(table: Table | None) -> RoverParams | None:
+def _read_vehicle(table: Table | None, base: Path) -> tuple[RoverParams | None, str | None]:
+    """``[vehicle]``: a vehicle file (``file = "rover.toml"``, from ``companion identify``)
+    and / or the simple model's keys, which override the file's values."""
     if table is None:
-        return None
-    params = RoverParams(
-        d_cen=table.number("d_cen", 0.0, minimum=0.0, maximum=100.0),
-        w_c=table.number("w_c", 20.0, positive=True, maximum=1e4),
-        w_c_yaw=table.number("w_c_yaw", None, positive=True, maximum=1e4),
-        max_speed=table.number("max_speed", math.inf, positive=True),
-        max_yaw_rate=table.number("max_yaw_rate", math.inf, positive=True),
-        max_accel=table.number("max_accel", math.inf, positive=True))
+        return None, None
+    base_params, path = RoverParams(), None
+    name = table.string("file")
+    if name is not None:
+        path = _file_key(table, "file", name, base)
+        try:
+            base_params = _vehicle_file.load(path).params
+        except UserError as err:   # name the mission file and key too, still on one line
+            raise table.error("file", str(err)) from None
+    keys = {"d_cen": dict(minimum=0.0, maximum=100.0), "w_c": dict(positive=True, maximum=1e4),
+            "w_c_yaw": dict(positive=True, maximum=1e4), "max_speed": dict(positive=True),
+            "max_yaw_rate": dict(positive=True), "max_accel": dict(positive=True)}
+    given = {k: table.number(k, None, **kw) for k, kw in keys.items()}
     table.done()
-    return params
+    params = base_params.with_(**{k: v for k, v in given.items() if v is not None})
+    return params, (str(path) if path is not None else None)
 
 
 def _build_trajectory(spec: Table, base: Path, laps: float | None,
