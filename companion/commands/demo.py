@@ -83,7 +83,9 @@ def plant_argv(args, port: int, rate: float) -> list[str]:
             "--preset", args.preset, "--d-cen", repr(args.d_cen), "--autopilot", args.autopilot,
             "--loop-rate", f"{loop_rate:g}"]
     if args.vehicle:
-        argv += ["--vehicle", args.vehicle]
+        # an identified vehicle is a real one: its autopilot sends on scheduler ticks
+        argv += ["--vehicle", args.vehicle] + (["--tick-aligned"] if args.autopilot == "ardupilot"
+                                               else [])
     if lockstep:
         argv.append("--lockstep")
     if args.speedup is not None:
