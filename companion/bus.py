@@ -42,8 +42,10 @@ as the query's *attachment*, and for ``load-mission`` the mission's TOML text as
 ``pzc-rover/control-reply/1`` object ``{"ok", "verb", "message"}`` (``status`` adds
 ``"status": {..}``): a normal reply when the loop did it, an *error* reply (``reply_err``) for a
 refusal (no or wrong secret, unknown verb, bad payload, or the loop said no), which changes
-nothing. The secret travels in clear over TCP: on an untrusted network use Zenoh's TLS
-endpoints or its access control as well. :func:`control_request` is the client side.
+nothing. Over plain TCP the secret travels in clear; with ``--zenoh-tls DIR/NAME`` every link
+is mutual TLS and Zenoh's access control enforces the certificate's role (only operators may
+query, a rover publishes only under its own name; :mod:`companion.security`), and the secret
+stays as a second factor. :func:`control_request` is the client side.
 
 Publishing never blocks the loop: publishers use ``CongestionControl.DROP`` (a full queue drops
 the sample instead of waiting), and the loop's only work is one ``json.dumps`` (~15 us) and one
@@ -64,14 +66,17 @@ import signal
 import threading
 import time
 from contextlib import contextmanager
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import Any, Callable
+from typing import TYPE_CHECKING, Any, Callable
 
 from .live import events as ev
 from .errors import UserError
 from .live.events import ControlChannel, LoopRecord, StatusEvent
 from .secretfile import read_private
+
+if TYPE_CHECKING:       # loads the cryptography library: only sessions with TLS need it
+    from .security.identity import Identity
 
 STATE_SCHEMA = "pzc-rover/state/1"
 STATUS_SCHEMA = "pzc-rover/status/1"
@@ -112,6 +117,16 @@ class BusOptions:
     vehicle_id: str | None = None        # None: rover<sysid>
     state_every: int = 1
     control_secret: str | None = None    # path; None: no control queryable
+    tls: str | None = None               # --zenoh-tls DIR/NAME: mutual TLS + access control
+    roles: tuple[str, ...] = ()          # certificate roles this command accepts (() any)
+
+
+@dataclass(frozen=True)
+class Prepared:
+    """A session's config, checked, and the fleet identity it carries (None: no TLS)."""
+
+    config: Any                          # zenoh.Config
+    identity: Identity | None = None
 
 
 def _zerror(exc: Exception) -> str:
@@ -130,6 +145,11 @@ def check_vehicle_id(text: str) -> str:
 
 def make_config(opts: BusOptions, default_mode: str = "peer"):
     """A zenoh.Config from the options: the file (if any), then the flags over it."""
+    return prepare(opts, default_mode).config
+
+
+def prepare(opts: BusOptions, default_mode: str = "peer") -> Prepared:
+    """The config (file, then flags over it) and, with mutual TLS, the checked identity."""
     import zenoh
     path = opts.config_file or os.environ.get("ZENOH_CONFIG") or None
     flag = "--zenoh-config" if opts.config_file else "$ZENOH_CONFIG"
@@ -160,15 +180,67 @@ def make_config(opts: BusOptions, default_mode: str = "peer"):
             config.insert_json5(key, value)
         except Exception as exc:  # noqa: BLE001
             raise UserError(f"{what}: {_zerror(exc)}") from None
-    return config
+    identity = _secure(config, opts, f"{flag} {path}" if path else None)
+    return Prepared(config, identity)
 
 
-def open_session(opts: BusOptions, default_mode: str = "peer"):
+def _get(config, key: str) -> Any:
+    return json.loads(config.get_json(key))
+
+
+def _put(config, key: str, value: Any, what: str) -> None:
+    try:
+        config.insert_json5(key, json.dumps(value))
+    except Exception as exc:  # noqa: BLE001  (zenoh raises ZError for every problem)
+        raise UserError(f"{what}: Zenoh refused {key}: {_zerror(exc)}") from None
+
+
+def _secure(config, opts: BusOptions, file: str | None) -> Identity | None:
+    """Mutual TLS and role access control, from ``--zenoh-tls DIR/NAME`` or from the config
+    file's own TLS certificate (the same checks either way); None when neither asks for it.
+
+    Zenoh does the TLS and the access control; this writes its settings, after checking
+    what Zenoh would only report as a failed handshake."""
+    import zenoh
+    from .security import tls
+    own = _get(config, tls.TLS_KEY) or {}
+    cert = own.get("connect_certificate") or own.get("listen_certificate")
+    key = own.get("connect_private_key") or own.get("listen_private_key")
+    if opts.tls is None and not (own.get("root_ca_certificate") and cert and key):
+        return None
+    from .security import acl, identity as ids
+    if opts.tls is not None:
+        me = ids.from_spec(opts.tls, opts.roles)
+    else:
+        me = ids.load(Path(own["root_ca_certificate"]), Path(cert), Path(key), opts.roles,
+                      where=f"{file} (transport/link/tls)", key_flag=f"{file}: key")
+    mode = _get(config, "mode") or "peer"
+    # Zenoh's default listener (a peer's tcp/[::]:0, a router's tcp/[::]:7447) is in clear:
+    # listen only where the flags or the file say.
+    if not opts.listen and _get(config, "listen/endpoints") == _get(zenoh.Config(),
+                                                                   "listen/endpoints"):
+        _put(config, "listen/endpoints", [], "mutual TLS")
+    for setting, given, flag in (("listen/endpoints", opts.listen, "--zenoh-listen"),
+                                 ("connect/endpoints", opts.connect, "--zenoh-connect")):
+        where = flag if given else f"{file or 'Zenoh default'}: {setting}"
+        tls.check_endpoints(tls.endpoints_for(_get(config, setting), mode), where)
+    _put(config, tls.TLS_KEY, tls.settings(me), "mutual TLS")
+    # A file that writes its own access control keeps it (its author chose); else the roles'.
+    if not (_get(config, "access_control") or {}).get("enabled"):
+        _put(config, "access_control", acl.access_control(me.role, me.name, me.roster),
+             "access control")
+    return me
+
+
+def open_session(opts: BusOptions, default_mode: str = "peer", prepared: Prepared | None = None,
+                 log: Callable[[str], None] | None = None):
     """Open a Zenoh session (remembered for :func:`close_all`); UserError when it cannot."""
     import zenoh
-    config = make_config(opts, default_mode)
+    prepared = prepared or prepare(opts, default_mode)
+    if log is not None and prepared.identity is not None:
+        log(prepared.identity.describe())
     try:
-        session = zenoh.open(config)
+        session = zenoh.open(prepared.config)
     except Exception as exc:  # noqa: BLE001
         where = []
         if opts.connect:
@@ -177,6 +249,10 @@ def open_session(opts: BusOptions, default_mode: str = "peer"):
             where.append("--zenoh-listen " + " ".join(opts.listen))
         if opts.config_file:
             where.append(f"--zenoh-config {opts.config_file}")
+        if prepared.identity is not None:
+            where.append(f"as {prepared.identity.role} {prepared.identity.name!r} over mutual "
+                         "TLS: is the peer's certificate from the same CA, and named for the "
+                         "host dialled?")
         raise UserError(f"cannot open the Zenoh session ({', '.join(where) or 'defaults'}): "
                         f"{_zerror(exc)}") from None
     with _sessions_lock:
@@ -202,7 +278,8 @@ def close_all() -> None:
 
 
 @contextmanager
-def session_until_signal(opts: BusOptions, default_mode: str = "peer"):
+def session_until_signal(opts: BusOptions, default_mode: str = "peer",
+                         log: Callable[[str], None] | None = None):
     """A session and an Event that SIGTERM / SIGINT set, for processes that serve until told.
 
     On every way out the session closes first (Zenoh's callback threads would keep the process
@@ -213,7 +290,7 @@ def session_until_signal(opts: BusOptions, default_mode: str = "peer"):
            for s in (signal.SIGTERM, signal.SIGINT)}
     session = None
     try:
-        session = open_session(opts, default_mode=default_mode)
+        session = open_session(opts, default_mode=default_mode, log=log)
         yield session, stop
     finally:
         if session is not None:
@@ -490,7 +567,16 @@ def open_bus(opts: BusOptions, log: Callable[[str], None] = lambda text: None) -
     if opts.state_every < 1:
         raise UserError(f"--state-every {opts.state_every}: must be >= 1")
     secret = read_secret(opts.control_secret) if opts.control_secret else None
-    session = open_session(opts)
+    prepared = prepare(opts)
+    me = prepared.identity
+    if me is not None:
+        # The router lets a rover publish only under its certificate's name: that is its id.
+        if opts.vehicle_id is not None and opts.vehicle_id != me.name:
+            raise UserError(f"--vehicle-id {opts.vehicle_id}: the certificate {me.cert} is "
+                            f"{me.name}'s, and a rover publishes only under its own name "
+                            "(drop --vehicle-id, or issue a certificate for that name)")
+        opts = replace(opts, vehicle_id=me.name)
+    session = open_session(opts, prepared=prepared, log=log)
     return Bus(session, opts, secret, log)
 
 

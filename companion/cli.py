@@ -26,6 +26,7 @@ COMMANDS = [
     "control",
     "router",
     "plot",
+    "pki",
 ]
 
 

@@ -23,7 +23,8 @@ ALLOWED: dict[str, set[str]] = {
     "mission": {"core", "sim", "errors"},
     "mav": {"errors", "secretfile"},
     "live": {"core", "sim", "mission", "mav", "errors"},
-    "bus": {"live", "errors", "secretfile"},
+    "bus": {"live", "security", "errors", "secretfile"},
+    "security": {"errors", "secretfile"},
     "logs": {"core", "live", "mission", "errors"},
     "errors": set(),
     "secretfile": {"errors"},
@@ -31,8 +32,8 @@ ALLOWED: dict[str, set[str]] = {
     "cli": {"__init__", "errors", "commands"},
     "__main__": {"cli"},
     "__init__": set(),
-    "commands": {"core", "sim", "mission", "mav", "live", "bus", "logs", "errors", "progress",
-                 "secretfile", "__init__"},
+    "commands": {"core", "sim", "mission", "mav", "live", "bus", "security", "logs", "errors",
+                 "progress", "secretfile", "__init__"},
 }
 SITL_PLANT_ALLOWED = {"core", "sim", "mav", "errors"}
 # The mathematics touches no file, socket, clock, process or thread.

@@ -1,6 +1,7 @@
 """Helpers for tests with real Zenoh sessions on loopback: isolated configs (multicast scouting
 off, explicit endpoints, free ports), a subscriber that keeps what it hears, and process helpers
-that always stop what they start."""
+that always stop what they start; for mutual TLS, a fleet's certificates, TLS session configs
+and a TCP proxy that records every byte it relays."""
 
 from __future__ import annotations
 
@@ -36,24 +37,139 @@ def endpoint(port: int) -> str:
     return f"tcp/127.0.0.1:{port}"
 
 
+def tls_endpoint(port: int) -> str:
+    return f"tls/127.0.0.1:{port}"
+
+
 def config(mode: str = "peer", listen: list[str] | None = None,
-           connect: list[str] | None = None) -> zenoh.Config:
+           connect: list[str] | None = None, tls: tuple[Path, str] | None = None
+           ) -> zenoh.Config:
+    """``tls=(DIR, NAME)``: mutual TLS with DIR/NAME.pem / .key and DIR/ca.pem, written here
+    by hand (no access control): a session the project's code did not configure."""
     c = zenoh.Config()
     c.insert_json5("mode", json.dumps(mode))
     c.insert_json5("scouting/multicast/enabled", "false")
     c.insert_json5("listen/endpoints", json.dumps(listen or []))
     c.insert_json5("connect/endpoints", json.dumps(connect or []))
+    if tls is not None:
+        d, name = tls
+        c.insert_json5("transport/link/tls", json.dumps({
+            "root_ca_certificate": str(d / "ca.pem"), "enable_mtls": True,
+            "verify_name_on_connect": True,
+            "listen_certificate": str(d / f"{name}.pem"),
+            "listen_private_key": str(d / f"{name}.key"),
+            "connect_certificate": str(d / f"{name}.pem"),
+            "connect_private_key": str(d / f"{name}.key")}))
     return c
 
 
 @contextlib.contextmanager
-def session(**kwargs) -> Iterator[zenoh.Session]:
+def session(config_: zenoh.Config | None = None, **kwargs) -> Iterator[zenoh.Session]:
     """A session that is closed on every path out (callbacks would otherwise hang the exit)."""
-    s = zenoh.open(config(**kwargs))
+    s = zenoh.open(config_ if config_ is not None else config(**kwargs))
     try:
         yield s
     finally:
         s.close()
+
+
+# --------------------------------------------------------------------------- mutual TLS
+
+# What conftest's $ZENOH_CONFIG is for plain sessions, for TLS ones: no listener unless a flag
+# says (the plain file's tcp listener would be refused: nothing in clear).
+TLS_ISOLATED = """{
+  scouting: { multicast: { enabled: false } },
+  listen: { endpoints: [] },
+  connect: { endpoints: [] },
+}
+"""
+
+
+def tls_isolated(tmp: Path) -> Path:
+    path = tmp / "tls-isolated.json5"
+    path.write_text(TLS_ISOLATED)
+    return path
+
+
+def make_pki(d: Path, members: dict[str, str], ca_since=None) -> Path:
+    """A CA in ``d`` (valid from ``ca_since``, default now) and a certificate per
+    ``{name: role}``: the library ``companion pki`` calls; the command is tested on its own."""
+    from companion.security import pki
+    pki.init_ca(d, now=ca_since)
+    for name, role in members.items():
+        pki.issue(d, name, role)
+    return d
+
+
+class WireRecorder:
+    """A TCP proxy on a free loopback port to ``target``: relays every connection both ways
+    and keeps every byte it relays, to check what crosses the wire."""
+
+    def __init__(self, target_port: int):
+        self.target = ("127.0.0.1", target_port)
+        self.port = free_tcp_port()
+        self._lock = threading.Lock()
+        self._data = bytearray()
+        self._socks: list[socket.socket] = []
+        self._server = socket.create_server(("127.0.0.1", self.port))
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._accept, daemon=True)
+
+    @property
+    def data(self) -> bytes:
+        with self._lock:
+            return bytes(self._data)
+
+    def __enter__(self) -> "WireRecorder":
+        self._thread.start()
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self._stop.set()
+        self._server.close()
+        with self._lock:
+            socks = list(self._socks)
+        for sock in socks:
+            try:
+                sock.shutdown(socket.SHUT_RDWR)
+            except OSError:
+                pass
+            sock.close()
+        self._thread.join(2.0)
+
+    def _accept(self) -> None:
+        while not self._stop.is_set():
+            try:
+                down, _ = self._server.accept()
+            except OSError:
+                return
+            try:
+                up = socket.create_connection(self.target, timeout=5.0)
+            except OSError:
+                down.close()
+                continue
+            up.settimeout(None)
+            with self._lock:
+                self._socks += [down, up]
+            for a, b in ((down, up), (up, down)):
+                threading.Thread(target=self._pump, args=(a, b), daemon=True).start()
+
+    def _pump(self, src: socket.socket, dst: socket.socket) -> None:
+        while True:
+            try:
+                chunk = src.recv(65536)
+                if not chunk:
+                    break
+                with self._lock:
+                    self._data += chunk
+                dst.sendall(chunk)
+            except OSError:
+                break
+        for sock in (src, dst):
+            try:
+                sock.shutdown(socket.SHUT_RDWR)
+            except OSError:
+                pass
 
 
 @dataclass
@@ -102,8 +218,9 @@ class Collector:
 
 
 class Proc:
-    """``python -m companion ARGS`` (stdout/stderr to files) for a ``with`` block; killed on
-    exit whatever happened."""
+    """``python -m companion ARGS`` (stdout/stderr to files) for a ``with`` block; stopped on
+    exit whatever happened: SIGTERM first (a demo then stops the plant it started, which a
+    SIGKILL would leave running), SIGKILL after 3 s."""
 
     def __init__(self, *args: str, tmp: Path, name: str):
         self.argv = [sys.executable, "-m", "companion", *args]
@@ -118,8 +235,12 @@ class Proc:
 
     def __exit__(self, *exc) -> None:
         if self.proc is not None and self.proc.poll() is None:
-            self.proc.kill()
-            self.proc.wait()
+            self.proc.terminate()
+            try:
+                self.proc.wait(3.0)
+            except subprocess.TimeoutExpired:
+                self.proc.kill()
+                self.proc.wait()
         self._out.close()
         self._err.close()
 
@@ -203,24 +324,37 @@ def _popen(argv: list[str], log: Path) -> subprocess.Popen:
 
 
 def run_fleet(n: int, tmp: Path, rate: float = 20.0, duration: float = 10.0,
-              arm_delay: float | None = None, timeout: float = 120.0) -> FleetRun:
+              arm_delay: float | None = None, timeout: float = 120.0,
+              tls: bool = False) -> FleetRun:
     """One router, ``n`` sitl-plant + ``companion run`` pairs in real time at ``rate`` Hz, all
     publishing through the router (client mode), and one ``companion monitor --once --json
     --record``. Plants refuse arming for ``arm_delay`` s so every pair starts tracking after all
-    the processes are up. Every process is killed on the way out, whatever happened."""
+    the processes are up. ``tls``: every link mutual TLS, each process with its own certificate
+    (router, mon, rover1..n) and the access control of its role. Every process is killed on the
+    way out, whatever happened."""
     from sitl_plant.testing import free_udp_port
     t0 = time.monotonic()
     arm_delay = arm_delay if arm_delay is not None else 4.0 + 0.5 * n
     mission = mission_file(tmp / "fleet.toml", duration)
     router_port = free_tcp_port()
-    router_ep = endpoint(router_port)
-    zenoh_client = ["--zenoh-mode", "client", "--zenoh-connect", router_ep, *ISOLATED]
+    router_ep = tls_endpoint(router_port) if tls else endpoint(router_port)
     record = tmp / "fleet.jsonl"
+    if tls:
+        pki_dir = make_pki(tmp / "pki", {"router": "router", "mon": "monitor",
+                                         **{f"rover{i}": "rover" for i in range(1, n + 1)}})
+        isolated = ["--zenoh-config", str(tls_isolated(tmp))]
+
+        def who(name: str) -> list[str]:
+            return ["--zenoh-tls", str(pki_dir / name), *isolated]
+    else:
+        def who(name: str) -> list[str]:
+            return list(ISOLATED)
+    zenoh_client = ["--zenoh-mode", "client", "--zenoh-connect", router_ep]
     procs: list[subprocess.Popen] = []
     companions: list[subprocess.Popen] = []
     try:
         router = _popen([sys.executable, "-m", "companion", "router", "--zenoh-listen",
-                         router_ep, *ISOLATED], tmp / "router.log")
+                         router_ep, *who("router")], tmp / "router.log")
         procs.append(router)
         deadline = time.monotonic() + 15.0
         while "routing" not in (tmp / "router.log").read_text():
@@ -228,8 +362,8 @@ def run_fleet(n: int, tmp: Path, rate: float = 20.0, duration: float = 10.0,
                 (tmp / "router.log").read_text()
             time.sleep(0.05)
         monitor = _popen([sys.executable, "-m", "companion", "monitor", "--once", "--json",
-                          "--wait", str(timeout), "--record", str(record), *zenoh_client],
-                         tmp / "monitor.out")
+                          "--wait", str(timeout), "--record", str(record), *zenoh_client,
+                          *who("mon")], tmp / "monitor.out")
         procs.append(monitor)
         loop_rate = max(50.0, rate / 0.8 + 1)
         for i in range(1, n + 1):
@@ -242,7 +376,7 @@ def run_fleet(n: int, tmp: Path, rate: float = 20.0, duration: float = 10.0,
             c = _popen([sys.executable, "-m", "companion", "run", "--connect",
                         f"udpin:127.0.0.1:{port}", "--sysid", str(i), "--mission", str(mission),
                         "--arm", "--arm-timeout", "120", "--json", "-q", "--rate", f"{rate:g}",
-                        *zenoh_client], tmp / f"companion{i}.out")
+                        *zenoh_client, *who(f"rover{i}")], tmp / f"companion{i}.out")
             procs.append(c)
             companions.append(c)
         deadline = t0 + timeout

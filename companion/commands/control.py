@@ -1,6 +1,8 @@
 """``companion control``: send one control request to a rover over Zenoh and print the reply.
 
 The rover must run with ``--control-secret FILE``; pass the same secret with ``--secret FILE``.
+With ``--zenoh-tls DIR/NAME`` the certificate must be an operator's (the secret stays a second
+factor).
 Exit code 0 when the rover did it, 1 when it refused (the reply says why), 2 for a user error or
 no reply.
 """
@@ -29,7 +31,7 @@ def register(subparsers) -> None:
                    help="file holding the rover's shared secret (chmod 600)")
     p.add_argument("--mission", metavar="FILE", help="for load-mission: the TOML mission file")
     p.add_argument("--timeout", type=positive, default=5.0, metavar="S")
-    add_zenoh_arguments(p, vehicle=False)
+    add_zenoh_arguments(p, vehicle=False, roles=("operator",))
     p.set_defaults(func=run)
 
 

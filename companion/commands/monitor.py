@@ -43,7 +43,8 @@ def register(subparsers) -> None:
     p.add_argument("--record", metavar="FILE", help="save every message as JSON lines")
     p.add_argument("--key", default="rover/*", metavar="KEYEXPR",
                    help="vehicles to watch (default rover/*)")
-    add_zenoh_arguments(p, vehicle=False)
+    # An operator watches what it steers: its certificate may monitor too.
+    add_zenoh_arguments(p, vehicle=False, roles=("monitor", "operator"))
     p.set_defaults(func=run)
 
 

@@ -1,4 +1,4 @@
-"""The ``--zenoh-*`` flags shared by ``companion run``, ``demo``, ``monitor`` and ``router``."""
+"""The ``--zenoh-*`` flags shared by ``companion run``, ``demo``, ``monitor``, ``control`` and ``router``."""
 
 from __future__ import annotations
 
@@ -16,7 +16,11 @@ def _at_least_one(text: str) -> int:
 
 
 def add_zenoh_arguments(p: argparse.ArgumentParser, vehicle: bool = True,
-                        modes: tuple[str, ...] = ("peer", "client")) -> None:
+                        modes: tuple[str, ...] = ("peer", "client"),
+                        roles: tuple[str, ...] | None = None) -> None:
+    """``roles``: the certificate roles the command accepts with --zenoh-tls (a vehicle's
+    command: rover)."""
+    p.set_defaults(zenoh_roles=roles if roles is not None else (("rover",) if vehicle else ()))
     g = p.add_argument_group(
         "zenoh (live telemetry and remote control)",
         "By default an embedded Zenoh peer (no router needed) with Zenoh's default discovery. "
@@ -35,6 +39,10 @@ def add_zenoh_arguments(p: argparse.ArgumentParser, vehicle: bool = True,
                             "given with --zenoh-connect)")
     g.add_argument("--zenoh-scouting", action=argparse.BooleanOptionalAction, default=None,
                    help="multicast scouting (finding peers on the LAN); default: Zenoh's (on)")
+    g.add_argument("--zenoh-tls", metavar="DIR/NAME",
+                   help="mutual TLS with DIR/NAME.pem and DIR/NAME.key, issued by the CA "
+                        "DIR/ca.pem (companion pki); every endpoint must then be "
+                        "tls/HOST:PORT, and access control enforces the certificate's role")
     if vehicle:
         g.add_argument("--vehicle-id", metavar="ID",
                        help="the <vehicle_id> in rover/<vehicle_id>/... (default rover<sysid>)")
@@ -54,4 +62,5 @@ def bus_options(args: argparse.Namespace, mode: str | None = None):
         config_file=args.zenoh_config, scouting=args.zenoh_scouting,
         vehicle_id=getattr(args, "vehicle_id", None),
         state_every=getattr(args, "state_every", 1),
-        control_secret=getattr(args, "control_secret", None))
+        control_secret=getattr(args, "control_secret", None),
+        tls=getattr(args, "zenoh_tls", None), roles=tuple(getattr(args, "zenoh_roles", ())))
