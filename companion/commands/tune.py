@@ -186,53 +186,21 @@ def _progress_bar(label: str, enabled: bool):
     return bar, progress
 
 
-def robust_config(vehicle_path: str, missions: list[str], rate: float, population: int,
-                  rounds: int, neighbours: int, seed: int, max_speed: float | None = None,
-                  max_yaw_rate: float | None = None):
-    """The robust tuner's configuration for a vehicle file and missions (shared with
-    ``companion run --vehicle`` and ``calibrate``, which tune on the spot)."""
+def mission_references(paths: list[str]) -> tuple[list[tuple[str, object]], float]:
+    """Missions as the robust tuner's references (``start`` frame at the simulated rover's
+    pose; other frames moved so the path begins there) and the duration to simulate."""
     from .. import mission as missions_mod
-    from ..core.limits import Limits
     from ..mission.paths import Placed
-    from ..sim import vehicle_file
-    from ..sim.robust import RobustConfig
-
-    vehicle = vehicle_file.load(vehicle_path).params
-    refs, duration = [], 60.0
-    for path in missions:
+    refs, durations = [], []
+    for path in paths:
         m = missions_mod.load(path)
         traj = m.trajectory
-        if m.frame != "start":      # start the simulated rover on the path's first point
+        if m.frame != "start":
             first = traj.sample(0.0)
             traj = Placed(traj, -float(first.x), -float(first.y), 0.0)
         refs.append((m.name or path, traj))
-        duration = max(duration, min(m.duration, 120.0)) if len(refs) > 1 else min(m.duration, 120.0)
-    limits = Limits(max_speed=min(max_speed or 6.0, float(vehicle.max_speed)),
-                    max_yaw_rate=min(max_yaw_rate or 6.0, float(vehicle.max_yaw_rate)))
-    return vehicle, RobustConfig(vehicle=vehicle, rate_hz=rate, tick=0.02 if rate < 50 else None,
-                                 references=tuple(refs), duration=duration, limits=limits,
-                                 neighbours=neighbours, population=population, rounds=rounds,
-                                 seed=seed)
-
-
-def robust_gains(result, cfg, vehicle_path: str, command: str):
-    """The tuned gains with their record: vehicle file, its hash, the ensemble, the command."""
-    import hashlib
-    from dataclasses import replace
-    digest = hashlib.sha256(Path(vehicle_path).read_bytes()).hexdigest()
-    lines = [f"robust tune for the vehicle file {vehicle_path} (sha256 {digest[:16]}...)",
-             f"command: {command}",
-             f"references: {', '.join(result.references)}; {cfg.duration:g} s each; telemetry "
-             f"{cfg.rate_hz:g} Hz" + (f" on {cfg.tick * 1000:g} ms ticks" if cfg.tick else ""),
-             f"ensemble: the vehicle and {len(result.vehicles) - 1} neighbours (lags x1+-"
-             f"{cfg.spread.lag:g}, rate limits x1+-{cfg.spread.limit:g}, delays +"
-             f"{cfg.spread.delay_samples:g} samples, coupling +-{cfg.spread.coupling:g}), seed "
-             f"{cfg.seed}",
-             "steady RMS (m) on the vehicle / worst neighbour: " + ", ".join(
-                 f"{a:.3f}/{b:.3f}" for a, b in zip(result.nominal_steady_rms,
-                                                    result.worst_steady_rms))]
-    return replace(result.gains, header="\n".join(lines),
-                   vehicle_file=Path(vehicle_path).name, vehicle_sha256=digest)
+        durations.append(min(m.duration, 120.0))
+    return refs, (max(durations) if durations else 60.0)
 
 
 def run_robust(args) -> int:
@@ -247,8 +215,10 @@ def run_robust(args) -> int:
         raise UserError(f"--neighbours must be 0..64, not {args.neighbours}")
     if args.out and not Path(args.out).resolve().parent.is_dir():
         raise UserError(f"--out {args.out}: directory {Path(args.out).resolve().parent} does not exist")
-    vehicle, cfg = robust_config(args.vehicle, args.mission, rate, args.population, args.rounds,
-                                 args.neighbours, args.seed)
+    from ..sim.vehicle_gains import config_for, record
+    refs, duration = mission_references(args.mission)
+    cfg = config_for(args.vehicle, rate, refs, duration, population=args.population,
+                     rounds=args.rounds, neighbours=args.neighbours, seed=args.seed)
     bar, progress = _progress_bar(f"robust tune {rate:g} Hz", not args.no_progress)
     try:
         result = robust_tune(cfg, progress)
@@ -259,7 +229,7 @@ def run_robust(args) -> int:
             bar.close()
     command = "companion tune " + " ".join(sys.argv[2:]) if sys.argv[1:2] == ["tune"] else \
         f"companion tune --vehicle {args.vehicle}"
-    gains = robust_gains(result, cfg, args.vehicle, command)
+    gains = record(result, cfg, args.vehicle, command)
     if args.out:
         gains.save(args.out)
     d = {**{k: v for k, v in _describe_gains(gains).items()},
