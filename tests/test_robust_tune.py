@@ -110,3 +110,31 @@ def test_tune_errors_are_one_line(argv, message):
     p = subprocess.run([sys.executable, "-m", "companion", "tune", *argv, "--no-progress"],
                        capture_output=True, text=True, timeout=60)
     assert p.returncode == 2 and message in p.stderr and "Traceback" not in p.stderr
+
+
+def test_gains_are_found_beside_their_vehicle_or_tuned_and_stored_there(tmp_path):
+    from companion.sim import vehicle_gains
+    vpath = tmp_path / "vehicle.toml"
+    vehicle_file.save(vehicle_file.VehicleFile(ROVER, name="rover"), vpath)
+    assert vehicle_gains.find_beside(vpath, 40.0) is None
+    logs = []
+    tuned = vehicle_gains.gains_for(vpath, 40.0, "test", log=logs.append, population=8,
+                                    rounds=1, neighbours=1)
+    stored = tmp_path / "gains.toml"
+    assert tuned.source == str(stored) and stored.exists()
+    again = vehicle_gains.find_beside(vpath, 40.0)
+    assert again is not None and again.vehicle_sha256 == tuned.vehicle_sha256
+    assert again.filter == tuned.filter
+    assert vehicle_gains.find_beside(vpath, 20.0) is None            # another rate
+    # a re-identified vehicle (other bytes) no longer matches the old gains
+    vehicle_file.save(vehicle_file.VehicleFile(ROVER.with_(max_accel=0.5), name="rover"), vpath)
+    assert vehicle_gains.find_beside(vpath, 40.0) is None
+    assert vehicle_gains.path_beside(vpath, 40.0).name == "vehicle.gains-40hz.toml"
+    assert any("tuning them now" in line for line in logs)
+
+
+def test_vehicle_limits_are_the_companions_ceiling():
+    from companion.sim.vehicle_gains import vehicle_limits
+    assert vehicle_limits(ROVER) == Limits(4.0, 2.0944)
+    assert vehicle_limits(ROVER, max_speed=2.0) == Limits(2.0, 2.0944)
+    assert vehicle_limits(RoverParams()) == Limits(6.0, 6.0)
