@@ -6,6 +6,7 @@ and a TCP proxy that records every byte it relays."""
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import json
 import math
 import os
@@ -312,6 +313,16 @@ class FleetRun:
     counts: dict[str, int]
     wall_s: float
     exit_s: dict[str, float]           # monitor / router: seconds from SIGTERM to exit
+    cpu_s: dict[str, float] = dataclasses.field(default_factory=dict)   # monitor / router CPU
+
+
+def cpu_seconds(pid: int) -> float:
+    """User + system CPU seconds a running process has used so far (Linux /proc; else NaN)."""
+    try:
+        fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    except OSError:
+        return math.nan
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
 
 
 def _popen(argv: list[str], log: Path) -> subprocess.Popen:
@@ -382,8 +393,9 @@ def run_fleet(n: int, tmp: Path, rate: float = 20.0, duration: float = 10.0,
         deadline = t0 + timeout
         for c in companions:
             c.wait(max(0.1, deadline - time.monotonic()))
-        exit_s = {}
+        exit_s, cpu_s = {}, {}
         for name, p in (("monitor", monitor), ("router", router)):
+            cpu_s[name] = cpu_seconds(p.pid)
             # --once: SIGTERM ends the monitor's wait and it prints the snapshot.
             t_sig = time.monotonic()
             p.send_signal(signal.SIGTERM)
@@ -422,4 +434,4 @@ def run_fleet(n: int, tmp: Path, rate: float = 20.0, duration: float = 10.0,
         if vid in last:
             gaps[vid] = max(gaps.get(vid, 0.0), (r["rx"] - last[vid]) * 1e3)
         last[vid] = r["rx"]
-    return FleetRun(n, snap, results, codes, gaps, counts, time.monotonic() - t0, exit_s)
+    return FleetRun(n, snap, results, codes, gaps, counts, time.monotonic() - t0, exit_s, cpu_s)
