@@ -9,6 +9,7 @@ p~' = -lambda_c p~ + q, with the excitation q = p~' + lambda_c p~ decaying at k_
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -164,3 +165,265 @@ def test_wrap_is_half_open_and_the_same_for_floats_and_arrays():
         assert -math.pi < s <= math.pi
         assert s == pytest.approx(wrap(float(v)), abs=1e-12)
         assert math.cos(a - s) == pytest.approx(1.0) and abs(a - s) < 1e-9
+
+
+# --- Extensions for rate-limited, delayed inner loops (issue 12, item 4) --------------------
+#
+# Each is off by default and must then be the law as it was, bit for bit; on, each must do on
+# the model of the identified ArduPilot rover what pzc.py's docstring claims.
+
+from companion.core import ops as _ops  # noqa: E402
+from companion.core.limits import clamp, keep_if, speed_from_up  # noqa: E402
+from companion.core.pzc import braking_p  # noqa: E402
+
+
+class _LawBefore:
+    """PZCLaw.step as it was before the extensions (frozen copy), the reference they must
+    reproduce when off."""
+
+    def __init__(self, gains, limits=Limits(), n=None):
+        self.gains, self.limits, self.n = gains, limits, n
+        self._m = _ops.for_size(n)
+        self._accel_ff = not _ops.is_plain_zero(gains.accel_ff)
+        zero = self._m.zeros(n)
+        self.t = None
+        self.int_x = self.int_y = self.int_yaw = zero
+
+    def step(self, t, est, ref):
+        m, g, lim = self._m, self.gains, self.limits
+        dt = 0.0 if self.t is None else t - self.t
+        self.t = t
+        ex = ref.x - est.x
+        ey = ref.y - est.y
+        int_x = self.int_x + ex * dt
+        int_y = self.int_y + ey * dt
+        ux = g.kp * ex + g.ki * int_x + g.velocity_ff * ref.vx
+        uy = g.kp * ey + g.ki * int_y + g.velocity_ff * ref.vy
+        if self._accel_ff:
+            ux = ux + g.accel_ff * ref.ax
+            uy = uy + g.accel_ff * ref.ay
+        yaw_ref = m.atan2(uy, ux)
+        eyaw = m.wrap(yaw_ref - est.yaw)
+        int_yaw = self.int_yaw + eyaw * dt
+        yaw_rate = g.kp_yaw * eyaw + g.ki_yaw * int_yaw
+        if g.heading_rate_ff is not False:
+            yaw_rate = yaw_rate + g.heading_rate_ff * reference_heading_rate(ref, m)
+        norm_up = m.hypot(ux, uy)
+        speed = speed_from_up(m, g.speed_law, norm_up, eyaw)
+        cmd, speed_free, rate_free = clamp(m, lim, speed, yaw_rate, ux, uy, norm_up)
+        self.int_x = keep_if(m, speed_free, int_x, self.int_x)
+        self.int_y = keep_if(m, speed_free, int_y, self.int_y)
+        self.int_yaw = keep_if(m, rate_free, int_yaw, self.int_yaw)
+        return cmd
+
+
+def _random_run(law, n, steps=400, seed=0):
+    """Drive a law with random poses and a random moving reference; all commands, stacked."""
+    rng = np.random.default_rng(seed)
+    size = None if n is None else n
+    out = []
+    t = 0.0
+    for _ in range(steps):
+        t += rng.choice([0.02, 0.02, 0.02, 0.04])
+        g = lambda s=1.0: (rng.normal(0.0, s, size) if n is not None  # noqa: E731
+                           else float(rng.normal(0.0, s)))
+        est = Estimate(g(2.0), g(2.0), g(3.0), g(), g(), g())
+        ref = Reference(g(2.0), g(2.0), g(2.0), g(2.0), g(), g())
+        c = law.step(t, est, ref)
+        out.append(np.array([c.speed, c.yaw_rate, c.ux, c.uy], dtype=float))
+    return np.array(out)
+
+
+OLD_FORMS = [
+    PZCGains(),                                                       # the paper's
+    PZCGains(0.7, 0.6, k_dc_yaw=1.5, lambda_c_yaw=1.2, velocity_ff=True, heading_rate_ff=True,
+             accel_ff=0.06),
+    PZCGains(2.0, 1.0, velocity_ff=True, accel_ff=0.3, speed_law="paper"),
+]
+
+
+@pytest.mark.parametrize("gains", OLD_FORMS)
+@pytest.mark.parametrize("limits", [Limits(), Limits(1.5, 0.8)])
+def test_extensions_off_are_the_old_law_bit_for_bit(gains, limits):
+    # Floats (the live loop) and arrays (batch) alike; defaults and explicit "off" values.
+    explicit_off = replace(gains, accel_ff_turn=None, brake_accel=0.0, brake_yaw_accel=0.0)
+    for n in (None, 5):
+        want = _random_run(_LawBefore(gains, limits, n), n)
+        for g in (gains, explicit_off):
+            assert np.array_equal(_random_run(PZCLaw(g, limits, n), n), want, equal_nan=True)
+
+
+def test_extensions_off_in_some_lanes_leave_those_lanes_exact():
+    # Batch tuning mixes candidates with and without an extension in one array: a lane with
+    # brake 0 and accel_ff_turn == accel_ff must still be the old law exactly.
+    n = 4
+    base = OLD_FORMS[1]
+    old = _random_run(_LawBefore(base, Limits(1.5, 0.8), n), n)
+    mixed = replace(base, accel_ff_turn=np.array([0.06, 0.0, 0.06, 0.2]),
+                    brake_accel=np.array([0.0, 0.5, 0.0, 0.0]),
+                    brake_yaw_accel=np.array([0.0, 0.0, 1.0, 0.0]))
+    new = _random_run(PZCLaw(mixed, Limits(1.5, 0.8), n), n)
+    assert np.array_equal(new[:, :, 0], old[:, :, 0])             # lane 0: all off
+    for lane in (1, 2, 3):                                         # each on: something changes
+        assert not np.allclose(new[:, :, lane], old[:, :, lane])
+
+
+def test_extensions_on_floats_and_arrays_agree():
+    g = replace(OLD_FORMS[1], accel_ff_turn=0.0, brake_accel=0.5, brake_yaw_accel=1.5)
+    one = _random_run(PZCLaw(g, Limits(1.5, 0.8)), None, seed=3)
+    arr = _random_run(PZCLaw(g, Limits(1.5, 0.8), 1), 1, seed=3)
+    assert np.allclose(one, arr[:, :, 0], rtol=1e-12, atol=1e-12)
+
+
+def test_new_fields_reject_negative_values():
+    for name in ("accel_ff_turn", "brake_accel", "brake_yaw_accel"):
+        with pytest.raises(ValueError, match=name):
+            PZCGains(**{name: -0.1})
+        with pytest.raises(ValueError, match=name):
+            PZCGains(**{name: np.array([0.1, -0.1])})
+
+
+def test_braking_p_is_the_sqrt_controller():
+    kp, alpha = 3.0, 2.0
+    knee = alpha / kp ** 2
+    m = _ops.scalar
+    # linear inside the knee, the braking curve beyond, value and slope continuous at the knee
+    assert braking_p(m, kp, alpha, 0.5 * knee) == (pytest.approx(kp * 0.5 * knee), False)
+    below, _ = braking_p(m, kp, alpha, knee * (1 - 1e-7))
+    above, beyond = braking_p(m, kp, alpha, knee * (1 + 1e-7))
+    assert beyond and above == pytest.approx(below, rel=1e-6)
+    slope = (braking_p(m, kp, alpha, knee * 1.001)[0] - above) / (knee * 0.001)
+    assert slope == pytest.approx(kp, rel=2e-3)
+    # beyond: a rate from which braking at alpha stops within the error (ends at e = 0 with the
+    # linear zone's last alpha / (2 kp^2) to spare), and it grows like sqrt, not linearly
+    for e in (0.5, 1.0, 3.0):
+        rate, beyond = braking_p(m, kp, alpha, e)
+        assert beyond and rate ** 2 / (2 * alpha) == pytest.approx(e - knee / 2)
+        assert rate < kp * e
+    # alpha 0 (off) and infinity: linear everywhere, in arrays too
+    for a in (0.0, math.inf):
+        assert braking_p(m, kp, a, 50.0) == (pytest.approx(kp * 50.0), False)
+    rate, beyond = braking_p(_ops.array, kp, np.array([0.0, alpha]), np.array([3.0, 3.0]))
+    assert rate[0] == pytest.approx(9.0) and not beyond[0] and beyond[1]
+    assert rate[1] == pytest.approx(math.sqrt(2 * alpha * (3.0 - knee / 2)))
+
+
+def test_braking_holds_the_integrators_beyond_the_linear_zone():
+    # Yaw error 2 rad (knee 0.22 rad): the yaw integrator must not move; the position error
+    # 3 m (knee 0.5 m at K_P 1, 0.5 m/s^2) holds the position integrators likewise.
+    g = PZCGains(0.5, 0.5, k_dc_yaw=1.5, lambda_c_yaw=1.5, brake_accel=0.5, brake_yaw_accel=2.0)
+    law = PZCLaw(g)
+    est = Estimate(0.0, 0.0, 2.0, 0.0, 0.0, 0.0)
+    for k in range(50):
+        cmd = law.step(0.02 * k, est, Reference(3.0, 0.0))
+    assert (law.int_x, law.int_y, law.int_yaw) == (0.0, 0.0, 0.0)
+    assert abs(cmd.yaw_rate) == pytest.approx(math.sqrt(2 * 2.0 * (2.0 - 2.0 / 9 / 2)))
+    # near the reference (inside both knees) they integrate as eq. (22)/(25)
+    law.reset()
+    est = Estimate(2.9, 0.0, 0.05, 0.0, 0.0, 0.0)
+    for k in range(50):
+        law.step(0.02 * k, est, Reference(3.0, 0.0))
+    assert law.int_x == pytest.approx(0.1 * 49 * 0.02)
+    assert law.int_yaw == pytest.approx(-0.05 * 49 * 0.02)
+
+
+def test_split_feed_forward_previews_speed_without_turning_the_heading():
+    # A circle at 2 m/s speeding up at 0.5 m/s^2: accel_ff turns u_p into the curve by
+    # atan(tau v w / (v + tau a_t)), accel_ff_turn = 0 keeps u_p along p_ref' (lengthened by
+    # tau a_t), accel_ff_turn = accel_ff is the unsplit law.
+    w, tau = 0.5, 0.2
+    v, a_t = 2.0, 0.5
+    ref = Reference(0.0, 0.0, v, 0.0, a_t, v * w)                  # heading +x, turning left
+    est = _estimate(0.0)
+    kw = dict(k_dc=1.0, lambda_c=1.0, velocity_ff=True, accel_ff=tau)
+    whole = PZCLaw(PZCGains(**kw)).step(0.0, est, ref)
+    split = PZCLaw(PZCGains(**kw, accel_ff_turn=0.0)).step(0.0, est, ref)
+    same = PZCLaw(PZCGains(**kw, accel_ff_turn=tau)).step(0.0, est, ref)
+    assert (whole.ux, whole.uy) == pytest.approx((v + tau * a_t, tau * v * w))
+    assert (split.ux, split.uy) == pytest.approx((v + tau * a_t, 0.0), abs=1e-12)
+    assert (same.ux, same.uy) == pytest.approx((whole.ux, whole.uy), abs=1e-12)
+    # a reference starting from rest: all of p_ref'' is along the path, none of it is dropped
+    still = PZCLaw(PZCGains(**kw, accel_ff_turn=0.0)).step(0.0, est, Reference(0, 0, 0, 0, 0.5, 0))
+    assert (still.ux, still.uy) == pytest.approx((tau * 0.5, 0.0))
+
+
+# The rover identified from an ArduPilot Rover SITL log (rover-skid, stock parameters), as in
+# /work/exp/id_try.toml: speed 0.14 s delay + 0.08 s lag, turn rate 0.045 + 0.017 s.
+from companion.sim.plant import RoverParams  # noqa: E402
+
+ARDUPILOT_SKID = RoverParams(
+    w_c=1 / 0.081877, w_c_yaw=1 / 0.0166667, max_speed=3.08332, max_yaw_rate=2.0944,
+    max_accel=0.992639, max_decel=1.04054, max_yaw_accel=2.07679, max_yaw_decel=1.8737,
+    speed_delay=0.137804, yaw_delay=0.0448846, turn_speed_coupling=0.0674473)
+# What the robust tuner chose for it without the extensions (k_df 1238, lambda_f 242).
+TUNED_BEFORE = PZCGains(0.691, 0.578, velocity_ff=True, heading_rate_ff=True, accel_ff=0.0585)
+
+
+def _fly(lanes: list[PZCGains], f_r: float, vehicle: RoverParams = ARDUPILOT_SKID):
+    """Each gain set on the vehicle at 40 Hz on ArduPilot's ticks with EKF-like noise, one
+    batch: (steady RMS, share of the second half at the yaw-rate limit) per lane."""
+    from dataclasses import fields
+    from companion.core.filter import FilterGains
+    from companion.core.pzc import PZCTracker
+    from companion.core.trajectory import Ellipse
+    from companion.sim.batch import SimConfig, simulate
+    n = len(lanes)
+    stacked = {}
+    for f in fields(PZCGains):
+        values = [getattr(g, f.name) for g in lanes]
+        if f.name == "speed_law":
+            stacked[f.name] = values[0]
+            continue
+        if f.name in ("k_dc_yaw", "lambda_c_yaw"):
+            values = [getattr(g, f.name[:-4]) if v is None else v for g, v in zip(lanes, values)]
+        if f.name == "accel_ff_turn":
+            values = [g.accel_ff if v is None else v for g, v in zip(lanes, values)]
+        stacked[f.name] = np.array(values, dtype=float)
+    tracker = PZCTracker(FilterGains(1237.8, 242.1), PZCGains(**stacked),
+                         Limits(3.08332, 2.0944), n=n)
+    sim = SimConfig(duration=60.0, control_rate=40.0, max_plant_dt=0.01, tick=0.02,
+                    noise_pos=0.005, noise_yaw=0.002, seed=1)
+    params = vehicle.with_(d_cen=np.zeros(n))
+    with np.errstate(all="ignore"):
+        r = simulate(tracker, params, Ellipse.paper(np.full(n, f_r)), n, sim)
+    return np.asarray(r.steady_rms), np.asarray(r.yaw_at_limit)
+
+
+def test_split_preview_tracks_the_speed_channel_delay_and_lag():
+    # 0.08 Hz: the speed lags ~0.22 s behind its setpoint. Previewing all of p_ref'' by 0.22 s
+    # cuts the turns (worse than the tuned 0.06 s); previewing only its along-path part removes
+    # the lag (model: 0.125 -> 0.054 m).
+    rms, at_limit = _fly([TUNED_BEFORE, replace(TUNED_BEFORE, accel_ff=0.22),
+                          replace(TUNED_BEFORE, accel_ff=0.22, accel_ff_turn=0.0)], 0.08)
+    assert 0.1 < rms[0] < 0.16
+    assert rms[1] > 1.3 * rms[0]
+    assert rms[2] < 0.07 and rms[2] < 0.55 * rms[0]
+    assert at_limit.max() == 0.0
+
+
+def test_yaw_braking_curve_stops_the_limit_cycle_on_a_slower_neighbour():
+    # Firmer yaw gains on the identified rover's slow corner (lags x1.3, accel limits x0.85, one
+    # telemetry sample later): the linear yaw PI meets the turn-rate accel limit as a relay and
+    # limit-cycles; the braking curve with the integrator held beyond it does not.
+    slow = ARDUPILOT_SKID.with_(
+        w_c=ARDUPILOT_SKID.w_c / 1.3, w_c_yaw=ARDUPILOT_SKID.w_c_yaw / 1.3,
+        max_accel=0.992639 * 0.85, max_decel=1.04054 * 0.85, max_yaw_accel=2.07679 * 0.85,
+        max_yaw_decel=1.8737 * 0.85, speed_delay=0.137804 + 0.025, yaw_delay=0.0448846 + 0.025)
+    firm = PZCGains(0.3, 0.3, k_dc_yaw=2.0, lambda_c_yaw=2.0, velocity_ff=True,
+                    heading_rate_ff=True, accel_ff=0.22, accel_ff_turn=0.0)
+    rms, at_limit = _fly([firm, replace(firm, brake_yaw_accel=2.0)], 0.04, slow)
+    assert at_limit[0] > 0.3 and rms[0] > 1.0                       # the limit cycle (3 m)
+    assert at_limit[1] < 0.01 and rms[1] < 0.03                     # held (1.3 cm)
+
+
+def test_braking_curves_shorten_the_chase_when_the_reference_outruns_the_rover():
+    # 0.12 Hz: the reference peaks at 4.77 m/s, the rover tops out at 3.08. The yaw braking
+    # curve lets firmer yaw gains run without a limit cycle, and the position braking curve
+    # (with its integrators held) shortens the chase (model: 1.98 before, ~1.6 and ~1.5 m).
+    firm = PZCGains(0.5, 0.5, k_dc_yaw=1.5, lambda_c_yaw=1.5, velocity_ff=True,
+                    heading_rate_ff=True, accel_ff=0.22, accel_ff_turn=0.0, brake_yaw_accel=2.0)
+    rms, at_limit = _fly([TUNED_BEFORE, firm, replace(firm, brake_accel=0.5)], 0.12)
+    assert rms[0] > 1.85
+    assert rms[1] < 0.9 * rms[0]
+    assert rms[2] < 0.96 * rms[1]
+    assert at_limit.max() < 0.05

@@ -138,3 +138,61 @@ def test_vehicle_limits_are_the_companions_ceiling():
     assert vehicle_limits(ROVER) == Limits(4.0, 2.0944)
     assert vehicle_limits(ROVER, max_speed=2.0) == Limits(2.0, 2.0944)
     assert vehicle_limits(RoverParams()) == Limits(6.0, 6.0)
+
+
+# --- The law's extensions for rate-limited, delayed inner loops in the robust search --------
+
+def _with_extensions(c: Candidates, split, brake, brake_yaw, accel_ff=None) -> Candidates:
+    """The robust search's extra dimensions on explicit candidates: flags per candidate,
+    accel_ff_turn 0.001 s, braking factors 0.3 (speed) and 1.0 (turn rate)."""
+    n = len(c)
+    c.params.update(accel_ff_turn=np.full(n, 0.001), brake_accel_k=np.full(n, 0.3),
+                    brake_yaw_accel_k=np.full(n, 1.0))
+    c.flags.update(split_accel_ff=np.array(split, float), use_brake=np.array(brake, float),
+                   use_brake_yaw=np.array(brake_yaw, float))
+    if accel_ff is not None:
+        c.flags["use_accel_ff"] = (np.array(accel_ff) > 0).astype(float)
+        c.params["accel_ff"] = np.where(np.array(accel_ff) > 0, accel_ff, 0.05)
+    return c
+
+
+def test_seeds_start_from_the_vehicles_own_delays_and_limits():
+    from companion.sim.robust import EXTRA_FLAGS, brake_scales, candidate_gains, seeds
+    s = seeds(ROVER)
+    on = s.flags["split_accel_ff"] > 0.5
+    assert on.any() and (~on).any()
+    for k in EXTRA_FLAGS:
+        assert set(np.unique(s.flags[k])) <= {0.0, 1.0}
+    # the speed preview seeded at the speed channel's delay + lag (0.05 + 0.3 s)
+    assert s.params["accel_ff"][on] == pytest.approx(0.35)
+    assert brake_scales(ROVER) == (1.0, pytest.approx(2.0944))
+    assert brake_scales(RoverParams()) == (5.0, 10.0)                # no identified limit
+    i = int(np.flatnonzero(on)[0])
+    fg, pg = candidate_gains(s, i, brake_scales(ROVER))
+    assert pg.accel_ff_turn == pytest.approx(s.params["accel_ff_turn"][i])
+    assert pg.brake_accel == pytest.approx(s.params["brake_accel_k"][i] * 1.0)
+    assert pg.brake_yaw_accel == pytest.approx(s.params["brake_yaw_accel_k"][i] * 2.0944)
+    j = int(np.flatnonzero(~on)[0])                                  # extensions off
+    _, old = candidate_gains(s, j, brake_scales(ROVER))
+    assert old.accel_ff_turn is None and old.brake_accel == 0.0 and old.brake_yaw_accel == 0.0
+    # the old layout (no extra keys, e.g. gains from a file) means every extension off
+    _, plain = candidate_gains(_candidates(HAND), 0)
+    assert plain == HAND[1]
+
+
+def test_yaw_braking_rescues_gains_that_limit_cycle_and_the_split_preview_tightens_them():
+    # HAND limit-cycles on the slow corner (test_the_worst_neighbour_decides). With the yaw
+    # braking curve at the vehicle's turn-rate deceleration it holds there; adding the speed
+    # preview at delay + lag (0.35 s) with the turning part split off tightens 0.08 Hz by ~9x.
+    from companion.sim.robust import LIMIT_CYCLE_SHARE
+    cfg = RobustConfig(vehicle=ROVER, limits=Limits(4.0, 2.0944), neighbours=1, duration=60.0)
+    vehicles = ensemble(ROVER, 1, cfg.spread, 0.025, 1)
+    cands = _with_extensions(_candidates(HAND, HAND, HAND), split=[0, 0, 1], brake=[0, 0, 1],
+                             brake_yaw=[0, 1, 1], accel_ff=[0.0, 0.0, 0.35])
+    ev = evaluate(cands, cfg, vehicles)
+    assert ev.rejected[0] == "limit cycle" and math.isinf(ev.objective[0])
+    assert ev.rejected[1] == "" and ev.yaw_at_limit[1].max() < LIMIT_CYCLE_SHARE
+    assert ev.steady_rms[1, :, 1].max() < 0.1                      # 0.04 Hz, both vehicles
+    assert ev.rejected[2] == "" and ev.objective[2] < ev.objective[1] - 0.5
+    assert ev.steady_rms[2, 0, 2] < 0.25 * ev.steady_rms[1, 0, 2]   # 0.08 Hz on the vehicle
+

@@ -37,12 +37,65 @@ chosen by ``companion tune``):
 * actuator lead (``lead_tau`` = the actuator's time constant 1/w_c in seconds, ``lead_max_gain``):
   cancels a slow actuator's pole, see :mod:`companion.core.lead`.
 
+Extensions for a real autopilot's inner loops (pure delay, lag, acceleration limits, a top speed;
+also off by default, chosen by the robust tuner :mod:`companion.sim.robust`, which knows the
+identified vehicle):
+
+* **split acceleration feed-forward** (``accel_ff_turn``, seconds): ``accel_ff`` previews the
+  whole of p_ref'' by one time tau, u_p += tau p_ref''. Its two parts do different jobs.
+  The part along p_ref' is a speed preview: a speed channel with delay d and lag l driven by
+  |p_ref'| + tau d|p_ref'|/dt delivers |p_ref'| on a ramp when tau = d + l, whatever the
+  yaw loop does. The part normal to p_ref' (the centripetal v^2/R) instead turns phi_ref =
+  atan2(u_p) ahead of the path by about tau * heading rate: right for a yaw loop as slow as
+  the speed loop, too early where the yaw channel is much faster (ArduPilot Rover: speed
+  0.14 s delay + 0.08 s lag, turn rate 0.045 + 0.017 s), where it cuts every turn. One tau
+  must compromise (the robust tuner picked 0.06 s on such a rover: half the speed lag
+  uncompensated). With ``accel_ff_turn`` set, the normal part uses its own time:
+
+      u_p += accel_ff p_ref'' + (accel_ff_turn - accel_ff) a_n,
+      a_n  = (d/dt heading(p_ref')) J p_ref'     (J: rotation by +90 deg)
+
+  so ``accel_ff`` can be the speed channel's d + l and ``accel_ff_turn`` the turn channel's
+  (on the rover above: 0.22 s and ~0; 0.08 Hz ellipse 0.125 -> 0.054 m steady RMS in the
+  model). ``None`` (default) is the single-tau form above.
+* **braking-curve proportional terms with integrator hold** (``brake_accel`` m/s^2,
+  ``brake_yaw_accel`` rad/s^2): a rate-limited inner loop (ArduPilot's ATC_ACCEL_MAX,
+  ATC_STR_ACC_MAX) turns a linear P demand K_P e, for a large e, into a ramp much slower than
+  the loop was designed for; the demand overshoots what can be stopped in time, and the PI's
+  integrator winds up on an error the vehicle cannot follow, which then pays it back as
+  overshoot: a limit cycle at the rate limit (seen on a 15 % slower neighbour of the identified
+  rover as soon as the yaw gains exceed ~1). With ``brake_yaw_accel = alpha`` the yaw P term is
+  ArduPilot's own square-root controller (AC_AttitudeControl ``sqrt_controller``):
+
+      P(e) = K_P e                                    for |e| <= alpha / K_P^2
+           = sign(e) sqrt(2 alpha (|e| - alpha / (2 K_P^2)))   beyond,
+
+  continuous with a continuous slope, the rate from which a vehicle decelerating at alpha stops
+  exactly at e = 0, and beyond the linear zone the yaw integrator is held: it integrates only
+  errors the vehicle can follow at its rate limit (an anti-windup against the rate limit, as
+  conditional integration is against the clamp). ``brake_accel`` does the same for the position
+  loop on |p~| (the vector's direction is kept). Inside the linear zone both are eq. (22)/(25)
+  exactly, so the PZC factorisation (Lemmas 5, 7) holds for small errors; the braking curve only
+  reshapes large transients, which lets the tuner raise the yaw gains without limit cycles
+  (0.12 Hz ellipse 1.98 -> about 1.5 m on the rover above, no limit cycle on any neighbour).
+  0 (default) is off.
+
 Limits: speed and yaw rate are clamped; while either output is clamped its integrator is held
 (conditional integration), so nothing winds up in saturation.
+
+Tried and not kept (measured on the identified ArduPilot rover's model, robust ensemble):
+previewing the pose by the delay with the filter's rate estimates (a Smith-like predictor; at
+40 Hz the rate estimates carry the position noise x 40/s, which costs more at 0.02-0.04 Hz
+than the preview gains at 0.08 Hz); extrapolating the heading-rate feed-forward to t + preview
+(worse at 0.12 Hz); slew-limiting the speed / yaw-rate setpoints to the accel limits (no gain for
+speed; for yaw it adds lag and limit-cycles); scaling the velocity feed-forward down or up while
+the reference outruns the top speed, or adding the centripetal preview only then ("cutting
+inside": no better than the braking curve alone).
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, replace
 
 from . import ops as _ops
@@ -58,7 +111,9 @@ class PZCGains:
 
     ``k_dc_yaw``/``lambda_c_yaw`` of ``None`` mean "same as the position loop" (the paper's form).
     Numeric fields may be numpy arrays in batch simulation; the feed-forward switches may then
-    be arrays of 0.0/1.0.
+    be arrays of 0.0/1.0. ``accel_ff_turn`` (s; ``None``: as ``accel_ff``), ``brake_accel``
+    (m/s^2) and ``brake_yaw_accel`` (rad/s^2; 0: off) are the extensions for rate-limited,
+    delayed inner loops described in the module docstring.
     """
 
     k_dc: Num = 5.0
@@ -71,10 +126,17 @@ class PZCGains:
     lead_tau: Num = 0.0
     lead_max_gain: Num = 1.0
     speed_law: str = "projected"
+    accel_ff_turn: Num | None = None
+    brake_accel: Num = 0.0
+    brake_yaw_accel: Num = 0.0
 
     def __post_init__(self):
         if self.speed_law not in SPEED_LAWS:
             raise ValueError(f"speed_law must be one of {SPEED_LAWS}, not {self.speed_law!r}")
+        for name in ("accel_ff_turn", "brake_accel", "brake_yaw_accel"):
+            value = getattr(self, name)
+            if value is not None and _any_negative(value):
+                raise ValueError(f"{name} must be >= 0, not {value!r}")
 
     @property
     def kp(self) -> Num:
@@ -102,6 +164,33 @@ class PZCGains:
         return k, lam
 
 
+def _any_negative(value) -> bool:
+    try:
+        return bool((value < 0).any())
+    except AttributeError:
+        return value < 0
+
+
+def braking_p(m, kp: Num, alpha: Num, err_abs: Num) -> tuple[Num, Num]:
+    """The proportional demand for an error magnitude ``err_abs`` (>= 0) under an acceleration
+    limit ``alpha``: ``(K_P |e|, False)`` in the linear zone |e| <= alpha / K_P^2, else
+    ``(sqrt(2 alpha (|e| - alpha / (2 K_P^2))), True)`` (ArduPilot's ``sqrt_controller``): the
+    rate from which decelerating at alpha ends at e = 0. Value and slope are continuous at the
+    knee. ``alpha`` 0 means no limit (always linear); it may be an array with zeros."""
+    if m is _ops.scalar:                       # one vehicle: plain branches, no where()
+        if not 0.0 < alpha < math.inf:
+            return kp * err_abs, False
+        linear = alpha / (kp * kp)
+        if err_abs <= linear:
+            return kp * err_abs, False
+        return math.sqrt(2.0 * alpha * (err_abs - 0.5 * linear)), True
+    a = m.where(alpha > 0, m.minimum(alpha, 1e300), 1e300)   # 0 / inf: a knee never reached
+    linear = a / (kp * kp)
+    beyond = err_abs > linear
+    root = m.sqrt(2.0 * a * m.maximum(err_abs - 0.5 * linear, 0.0))
+    return m.where(beyond, root, kp * err_abs), beyond
+
+
 def reference_heading_rate(ref: Reference, m=_ops.scalar) -> Num:
     """d/dt atan2(vy, vx) of the reference = (vx ay - vy ax) / |v|^2 (0 where it stands still)."""
     speed2 = ref.vx * ref.vx + ref.vy * ref.vy
@@ -116,7 +205,12 @@ class PZCLaw:
         self.limits = limits
         self.n = n
         self._m = _ops.for_size(n)
-        self._accel_ff = not _ops.is_plain_zero(gains.accel_ff)   # decided once, off the hot path
+        # Which optional terms run is decided once, off the hot path.
+        self._split_ff = gains.accel_ff_turn is not None
+        self._accel_ff = not _ops.is_plain_zero(gains.accel_ff) or (
+            self._split_ff and not _ops.is_plain_zero(gains.accel_ff_turn))
+        self._brake = not _ops.is_plain_zero(gains.brake_accel)
+        self._brake_yaw = not _ops.is_plain_zero(gains.brake_yaw_accel)
         self.reset()
 
     def reset(self) -> None:
@@ -133,18 +227,42 @@ class PZCLaw:
         ey = ref.y - est.y
         int_x = self.int_x + ex * dt
         int_y = self.int_y + ey * dt
-        ux = g.kp * ex + g.ki * int_x + g.velocity_ff * ref.vx
-        uy = g.kp * ey + g.ki * int_y + g.velocity_ff * ref.vy
+        kp = g.kp
+        if self._brake:
+            # Braking curve on |p~|, direction kept; integrators held beyond the linear zone.
+            err = m.hypot(ex, ey)
+            demand, beyond = braking_p(m, kp, g.brake_accel, err)
+            if beyond is not False:
+                kp = m.where(beyond, demand / m.maximum(err, 1e-12), kp)
+                int_x = m.where(beyond, self.int_x, int_x)
+                int_y = m.where(beyond, self.int_y, int_y)
+        ux = kp * ex + g.ki * int_x + g.velocity_ff * ref.vx
+        uy = kp * ey + g.ki * int_y + g.velocity_ff * ref.vy
+        heading_rate = None
         if self._accel_ff:
             ux = ux + g.accel_ff * ref.ax
             uy = uy + g.accel_ff * ref.ay
+            if self._split_ff:
+                # The normal part a_n = heading rate * J p_ref' gets its own preview time.
+                heading_rate = reference_heading_rate(ref, m)
+                turn = (g.accel_ff_turn - g.accel_ff) * heading_rate
+                ux = ux - turn * ref.vy
+                uy = uy + turn * ref.vx
 
         yaw_ref = m.atan2(uy, ux)
         eyaw = m.wrap(yaw_ref - est.yaw)
         int_yaw = self.int_yaw + eyaw * dt
-        yaw_rate = g.kp_yaw * eyaw + g.ki_yaw * int_yaw
+        if self._brake_yaw:
+            demand, beyond = braking_p(m, g.kp_yaw, g.brake_yaw_accel, abs(eyaw))
+            if beyond is not False:
+                int_yaw = m.where(beyond, self.int_yaw, int_yaw)
+            yaw_rate = m.where(eyaw < 0, -demand, demand) + g.ki_yaw * int_yaw
+        else:
+            yaw_rate = g.kp_yaw * eyaw + g.ki_yaw * int_yaw
         if g.heading_rate_ff is not False:
-            yaw_rate = yaw_rate + g.heading_rate_ff * reference_heading_rate(ref, m)
+            if heading_rate is None:
+                heading_rate = reference_heading_rate(ref, m)
+            yaw_rate = yaw_rate + g.heading_rate_ff * heading_rate
 
         norm_up = m.hypot(ux, uy)
         speed = speed_from_up(m, g.speed_law, norm_up, eyaw)

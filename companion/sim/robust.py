@@ -20,13 +20,19 @@ half) or diverges on any reference is rejected outright.
 
 The search is :mod:`companion.sim.tuning`'s (seeded random search, then rounds of perturbation
 around the elite) over the same gain space, with the actuator lead left out: a lead's gain is
-what turns a rate limit into a relay.
+what turns a rate limit into a relay. On top of it, this search chooses the law's extensions for
+rate-limited, delayed inner loops (:mod:`companion.core.pzc`): a separate preview time for the
+turning part of the acceleration feed-forward (``accel_ff_turn``) and braking-curve P terms with
+integrator hold (``brake_accel``, ``brake_yaw_accel``), each behind a flag, the braking
+accelerations as factors of the identified vehicle's decelerations (:data:`EXTRA_RANGES`). The
+seeds include the speed channel's delay + lag as the speed preview, so the search starts where
+the physics says the preview belongs.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Callable, Sequence
 
 import numpy as np
@@ -43,6 +49,30 @@ from .tuning import Candidates, perturb, random_candidates
 
 PAPER_F_R = (0.02, 0.04, 0.08, 0.12)
 LIMIT_CYCLE_SHARE = 0.05     # yaw-rate setpoint at its limit in more of the second half: rejected
+
+# The robust search's own dimensions (log-uniform ranges; tuning.RANGES / FLAGS are unchanged):
+# accel_ff_turn in seconds; the braking accelerations as factors of the vehicle's scale
+# (brake_scales: its speed / turn-rate deceleration), so one range fits any vehicle.
+EXTRA_RANGES = {
+    "accel_ff_turn": (0.002, 1.0),
+    "brake_accel_k": (0.05, 4.0),
+    "brake_yaw_accel_k": (0.1, 4.0),
+}
+EXTRA_FLAGS = ("split_accel_ff", "use_brake", "use_brake_yaw")
+# Braking scale when the vehicle has no identified limit (an infinite decel).
+DEFAULT_BRAKE_SCALE = (5.0, 10.0)            # m/s^2, rad/s^2
+
+
+def brake_scales(vehicle: RoverParams) -> tuple[float, float]:
+    """The accelerations the braking factors multiply: the identified vehicle's speed and
+    turn-rate decelerations (the braking curve is about stopping in time), or
+    :data:`DEFAULT_BRAKE_SCALE` where the vehicle has no limit."""
+    out = []
+    for value, default in ((vehicle.decel, DEFAULT_BRAKE_SCALE[0]),
+                           (vehicle.yaw_decel, DEFAULT_BRAKE_SCALE[1])):
+        v = float(np.min(value))
+        out.append(v if math.isfinite(v) and v > 0 else default)
+    return out[0], out[1]
 
 
 @dataclass(frozen=True)
@@ -152,18 +182,57 @@ class Evaluation:
     rejected: np.ndarray               # per candidate: why ("" if kept)
 
 
-def _tracker(cands: Candidates, repeat: int, limits: Limits) -> PZCTracker:
+def _extension_values(cands: Candidates, scales: tuple[float, float]) -> dict[str, np.ndarray]:
+    """accel_ff_turn (s; NaN: not split), brake_accel, brake_yaw_accel (0: off) per candidate,
+    from the extra parameters and flags (absent: every extension off, the old search)."""
+    n = len(cands)
+    p, f = cands.params, cands.flags
+    off = np.zeros(n)
+    accel_ff = np.where(f["use_accel_ff"] > 0.5, p["accel_ff"], 0.0)
+    split = f.get("split_accel_ff", off) > 0.5
+    return {
+        "accel_ff_turn": np.where(split, p.get("accel_ff_turn", accel_ff), np.nan),
+        "brake_accel": np.where(f.get("use_brake", off) > 0.5,
+                                p.get("brake_accel_k", off) * scales[0], 0.0),
+        "brake_yaw_accel": np.where(f.get("use_brake_yaw", off) > 0.5,
+                                    p.get("brake_yaw_accel_k", off) * scales[1], 0.0),
+    }
+
+
+def _tracker(cands: Candidates, repeat: int, limits: Limits,
+             scales: tuple[float, float] = DEFAULT_BRAKE_SCALE) -> PZCTracker:
     p, f = cands.params, cands.flags
     rep = lambda a: np.repeat(a, repeat)  # noqa: E731
     separate = f["separate_yaw"] > 0.5
+    accel_ff = np.where(f["use_accel_ff"] > 0.5, p["accel_ff"], 0.0)
+    ext = _extension_values(cands, scales)
+    turn = ext["accel_ff_turn"]
+    any_split = bool(np.any(np.isfinite(turn)))
     return PZCTracker(
         FilterGains(rep(p["k_df"]), rep(p["lambda_f"])),
         PZCGains(rep(p["k_dc"]), rep(p["lambda_c"]),
                  k_dc_yaw=rep(np.where(separate, p["k_dc_yaw"], p["k_dc"])),
                  lambda_c_yaw=rep(np.where(separate, p["lambda_c_yaw"], p["lambda_c"])),
                  velocity_ff=rep(f["velocity_ff"]), heading_rate_ff=rep(f["heading_rate_ff"]),
-                 accel_ff=rep(np.where(f["use_accel_ff"] > 0.5, p["accel_ff"], 0.0))),
+                 accel_ff=rep(accel_ff),
+                 # not split = the normal part previewed by accel_ff itself
+                 accel_ff_turn=rep(np.where(np.isfinite(turn), turn, accel_ff)) if any_split
+                 else None,
+                 brake_accel=rep(ext["brake_accel"]) if np.any(ext["brake_accel"] > 0) else 0.0,
+                 brake_yaw_accel=(rep(ext["brake_yaw_accel"])
+                                  if np.any(ext["brake_yaw_accel"] > 0) else 0.0)),
         limits, n=len(cands) * repeat)
+
+
+def candidate_gains(cands: Candidates, i: int,
+                    scales: tuple[float, float] = DEFAULT_BRAKE_SCALE) -> tuple[FilterGains, PZCGains]:
+    """Candidate ``i`` as gains (what a gains file stores): :meth:`Candidates.gains` plus the
+    extensions of this search, in absolute units (the braking factors times ``scales``)."""
+    fg, pg = cands.gains(i)
+    ext = {k: float(v[i]) for k, v in _extension_values(cands, scales).items()}
+    return fg, replace(pg, accel_ff_turn=None if math.isnan(ext["accel_ff_turn"])
+                       else ext["accel_ff_turn"],
+                       brake_accel=ext["brake_accel"], brake_yaw_accel=ext["brake_yaw_accel"])
 
 
 def evaluate(cands: Candidates, cfg: RobustConfig, vehicles: Sequence[RoverParams],
@@ -177,7 +246,7 @@ def evaluate(cands: Candidates, cfg: RobustConfig, vehicles: Sequence[RoverParam
                     seed=cfg.seed, yaw_rate_limit=min(cfg.limits.max_yaw_rate,
                                                       float(np.min(params.max_yaw_rate))))
     with np.errstate(all="ignore"):
-        result = simulate(_tracker(cands, n_v * n_r, cfg.limits), params,
+        result = simulate(_tracker(cands, n_v * n_r, cfg.limits, brake_scales(cfg.vehicle)), params,
                           _reference(refs, n_c, n_v), n, sim, progress)
     shape = (n_c, n_v, n_r)
     rms = np.asarray(result.steady_rms).reshape(shape)
@@ -198,27 +267,72 @@ def evaluate(cands: Candidates, cfg: RobustConfig, vehicles: Sequence[RoverParam
     return Evaluation(objective, rms, cost, at_limit, chatter, rejected)
 
 
-def seeds() -> Candidates:
-    """Generic starting points (vehicle-independent): gentle PI gains with both feed-forwards,
-    a few bandwidths apart, with and without acceleration feed-forward, and the paper's own
-    gains. No lead."""
+def seeds(vehicle: RoverParams | None = None) -> Candidates:
+    """Starting points: gentle PI gains with both feed-forwards, a few bandwidths apart, with
+    and without acceleration feed-forward, and the paper's own gains (no lead, no extension);
+    then firmer PI gains with every extension on: the speed preview at the vehicle's speed
+    channel delay + lag (0.3 s without a vehicle), the turn preview near zero or at the turn
+    channel's delay + lag, the braking curves at the vehicle's own decelerations (factor 1) or
+    below (0.2 speed, 0.5 turn rate: where the searches on an ArduPilot rover ended)."""
     rows = []
     for k_dc, lambda_c in ((0.2, 0.3), (0.4, 0.8), (1.0, 1.0), (2.0, 2.0)):
         for k_yaw, l_yaw in ((1.0, 1.0), (2.0, 2.0)):
             rows.append((500, 40, k_dc, lambda_c, k_yaw, l_yaw, 0.05, 0.05, 1, 1, 1, 1, 0, 0))
             rows.append((500, 40, k_dc, lambda_c, k_yaw, l_yaw, 0.3, 0.05, 1, 1, 1, 1, 1, 0))
     rows.append((1000, 120, 5, 12, 5, 12, 0.05, 0.05, 1, 0, 0, 0, 0, 0))
+    extra = [(0.01, 1.0, 1.0, 0, 0, 0)] * len(rows)
+    speed_preview, turn_preview = 0.3, 0.05
+    if vehicle is not None:
+        speed_preview = _finite(vehicle.speed_delay, 0.0) + 1.0 / _finite(vehicle.w_c, 20.0)
+        turn_preview = _finite(vehicle.yaw_delay, 0.0) + 1.0 / _finite(vehicle.yaw_bandwidth, 20.0)
+    for k_dc, lambda_c in ((0.3, 0.3), (0.7, 0.6)):
+        for k_yaw, l_yaw in ((1.0, 1.6), (2.0, 2.0)):
+            for turn, brake, brake_yaw in ((0.005, 0.2, 0.5), (turn_preview, 1.0, 1.0)):
+                rows.append((1000, 250, k_dc, lambda_c, k_yaw, l_yaw, speed_preview, 0.05, 1,
+                             1, 1, 1, 1, 0))
+                extra.append((turn, brake, brake_yaw, 1, 1, 1))
     a = np.array(rows, dtype=float)
+    e = np.array(extra, dtype=float)
     names = ("k_df", "lambda_f", "k_dc", "lambda_c", "k_dc_yaw", "lambda_c_yaw", "accel_ff",
              "lead_tau", "lead_max_gain")
     flags = ("velocity_ff", "heading_rate_ff", "separate_yaw", "use_accel_ff", "use_lead")
-    return Candidates({k: a[:, i] for i, k in enumerate(names)},
-                      {k: a[:, len(names) + i] for i, k in enumerate(flags)})
+    params = {k: a[:, i] for i, k in enumerate(names)}
+    params.update({k: e[:, i] for i, k in enumerate(EXTRA_RANGES)})
+    flag_values = {k: a[:, len(names) + i] for i, k in enumerate(flags)}
+    flag_values.update({k: e[:, len(EXTRA_RANGES) + i] for i, k in enumerate(EXTRA_FLAGS)})
+    return Candidates(params, flag_values)
+
+
+def _finite(value, default: float) -> float:
+    v = float(np.mean(value))
+    return v if math.isfinite(v) and v > 0 else default
 
 
 def _no_lead(c: Candidates) -> Candidates:
     c.flags["use_lead"] = np.zeros(len(c))
     return c
+
+
+def _random(rng: np.random.Generator, n: int) -> Candidates:
+    """:func:`companion.sim.tuning.random_candidates` plus this search's own dimensions."""
+    c = random_candidates(rng, n)
+    for k, (lo, hi) in EXTRA_RANGES.items():
+        c.params[k] = np.exp(rng.uniform(math.log(lo), math.log(hi), n))
+    for k in EXTRA_FLAGS:
+        c.flags[k] = rng.integers(0, 2, n).astype(float)
+    return _no_lead(c)
+
+
+def _perturb(rng: np.random.Generator, parents: Candidates, n: int, sigma: float) -> Candidates:
+    """:func:`companion.sim.tuning.perturb` (which carries the extra dimensions along with each
+    child's parent) plus the same log-normal steps and flag flips on the extra dimensions."""
+    child = perturb(rng, parents, n, sigma)
+    for k, (lo, hi) in EXTRA_RANGES.items():
+        child.params[k] = np.clip(child.params[k] * np.exp(sigma * rng.standard_normal(n)), lo, hi)
+    for k in EXTRA_FLAGS:
+        flip = rng.random(n) < 0.1
+        child.flags[k] = np.where(flip, 1.0 - child.flags[k], child.flags[k])
+    return _no_lead(child)
 
 
 @dataclass
@@ -240,9 +354,8 @@ def tune(cfg: RobustConfig, progress: Callable[[float], None] | None = None) -> 
     rng = np.random.default_rng(cfg.seed)
     period = 1.0 / cfg.rate_hz
     vehicles = ensemble(cfg.vehicle, cfg.neighbours, cfg.spread, period, cfg.seed)
-    start = seeds()
-    population = Candidates.concat(
-        [start, _no_lead(random_candidates(rng, max(1, cfg.population - len(start))))])
+    start = seeds(cfg.vehicle)
+    population = Candidates.concat([start, _random(rng, max(1, cfg.population - len(start)))])
     best, best_obj = None, np.array([])
     evaluated, rejected = 0, {"limit cycle": 0, "diverged": 0}
     total = cfg.rounds + 1
@@ -256,11 +369,11 @@ def tune(cfg: RobustConfig, progress: Callable[[float], None] | None = None) -> 
         pool_obj = ev.objective if best is None else np.concatenate([best_obj, ev.objective])
         order = np.argsort(pool_obj)[:cfg.elite]
         best, best_obj = pool.take(order), pool_obj[order]
-        population = _no_lead(perturb(rng, best, cfg.population, 0.5 * 0.6 ** r))
+        population = _perturb(rng, best, cfg.population, 0.5 * 0.6 ** r)
     winner = best.take(np.array([0]))
     ev = evaluate(winner, cfg, vehicles,
                   None if progress is None else (lambda f: progress((cfg.rounds + f) / total)))
-    fg, pg = winner.gains(0)
+    fg, pg = candidate_gains(winner, 0, brake_scales(cfg.vehicle))
     labels = [label for label, _ in cfg.reference_list()]
     if not math.isfinite(float(ev.objective[0])):
         raise RuntimeError("no gain set held on every neighbour: widen the search "
