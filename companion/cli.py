@@ -20,6 +20,7 @@ COMMANDS = [
     "run",
     "paper_table",
     "tune",
+    "identify",
     "mission",
     "simulate",
     "monitor",

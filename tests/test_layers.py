@@ -26,14 +26,15 @@ ALLOWED: dict[str, set[str]] = {
     "bus": {"live", "security", "errors", "secretfile"},
     "security": {"errors", "secretfile"},
     "logs": {"core", "live", "mission", "errors"},
+    "ident": {"core", "sim", "live", "logs", "errors"},
     "errors": set(),
     "secretfile": {"errors"},
     "progress": {"live"},
     "cli": {"__init__", "errors", "commands"},
     "__main__": {"cli"},
     "__init__": set(),
-    "commands": {"core", "sim", "mission", "mav", "live", "bus", "security", "logs", "errors",
-                 "progress", "secretfile", "__init__"},
+    "commands": {"core", "sim", "mission", "mav", "live", "bus", "security", "logs", "ident",
+                 "errors", "progress", "secretfile", "__init__"},
 }
 SITL_PLANT_ALLOWED = {"core", "sim", "mav", "errors"}
 # The mathematics touches no file, socket, clock, process or thread.

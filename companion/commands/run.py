@@ -58,6 +58,18 @@ def add_gain_arguments(p: argparse.ArgumentParser) -> None:
                    help="turn-rate limit of every setpoint (rad/s)")
 
 
+def add_timeout_arguments(p: argparse.ArgumentParser) -> None:
+    """The live loop's failsafe timeouts (companion run and identify)."""
+    t = p.add_argument_group("timeouts (wall seconds)")
+    t.add_argument("--stale-timeout", type=positive, default=0.5, metavar="S",
+                   help="stop the rover when no valid sample arrives for S (default 0.5)")
+    t.add_argument("--heartbeat-timeout", type=positive, default=10.0, metavar="S")
+    t.add_argument("--telemetry-timeout", type=positive, default=10.0, metavar="S")
+    t.add_argument("--arm-timeout", type=positive, default=60.0, metavar="S")
+    t.add_argument("--lost-timeout", type=positive, default=30.0, metavar="S",
+                   help="give up when telemetry stays lost for S (default 30)")
+
+
 def add_safety_arguments(p: argparse.ArgumentParser) -> None:
     """Flight logs and MAVLink signing (companion run and demo)."""
     g = p.add_argument_group("flight log and signing")
@@ -112,14 +124,7 @@ def register(subparsers) -> None:
                    help="speed-loop bandwidth (default: the mission's [vehicle], else 20)")
     v.add_argument("--d-cen", type=non_negative, dest="d_cen", metavar="M",
                    help="axle to tracked point (default: the mission's [vehicle], else 0)")
-    t = p.add_argument_group("timeouts (wall seconds)")
-    t.add_argument("--stale-timeout", type=positive, default=0.5, metavar="S",
-                   help="stop the rover when no valid sample arrives for S (default 0.5)")
-    t.add_argument("--heartbeat-timeout", type=positive, default=10.0, metavar="S")
-    t.add_argument("--telemetry-timeout", type=positive, default=10.0, metavar="S")
-    t.add_argument("--arm-timeout", type=positive, default=60.0, metavar="S")
-    t.add_argument("--lost-timeout", type=positive, default=30.0, metavar="S",
-                   help="give up when telemetry stays lost for S (default 30)")
+    add_timeout_arguments(p)
     add_safety_arguments(p)
     p.add_argument("--realtime", action="store_true",
                    help="run the control loop under SCHED_FIFO (Linux; needs root or "

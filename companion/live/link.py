@@ -1,8 +1,9 @@
 """The MAVLink connection to one vehicle: pymavlink underneath, the companion's vocabulary on top.
 
 Connect, wait for the vehicle's heartbeat, tell ArduPilot from PX4, ask for pose telemetry at a
-rate (reading the COMMAND_ACKs and falling back to a rate the vehicle accepts), change mode,
-arm, and encode the tracker's command as SET_POSITION_TARGET_LOCAL_NED:
+rate (reading the COMMAND_ACKs and falling back to a rate the vehicle accepts), read parameters
+(PARAM_REQUEST_READ, for ``companion identify``'s priors), change mode, arm, and encode the
+tracker's command as SET_POSITION_TARGET_LOCAL_NED:
 
 * ArduPilot: frame BODY_NED, type_mask 1511 (use vx, vy, yaw_rate), vx = v_ref, vy = 0,
   yaw_rate = omega_ref: Rover's ``set_desired_turn_rate_and_speed``, the paper's two inputs;
@@ -24,7 +25,7 @@ from __future__ import annotations
 import os
 import time
 from dataclasses import dataclass
-from typing import Any, Callable
+from typing import Any, Callable, Sequence
 
 os.environ["MAVLINK20"] = "1"   # before pymavlink.mavutil is imported: MAVLink 2 frames
 from pymavlink import mavutil  # noqa: E402
@@ -230,6 +231,33 @@ class Link:
                     self.last_ack[command] = msg.result
                     return msg.result
         return None
+
+    def read_params(self, names: Sequence[str], timeout: float = 2.0) -> dict[str, float]:
+        """The vehicle's values of the parameters ``names`` (PARAM_REQUEST_READ by name, asked
+        again each second): ``{name: value}`` for those answered within ``timeout`` seconds; a
+        parameter the firmware does not have is simply missing.
+
+        Other messages read meanwhile are dropped: only for set-up, before the control loop.
+        """
+        v = self.vehicle
+        found: dict[str, float] = {}
+        deadline = time.monotonic() + timeout
+        next_ask = 0.0
+        while len(found) < len(names) and (left := deadline - time.monotonic()) > 0:
+            if time.monotonic() >= next_ask:
+                for name in names:
+                    if name not in found:
+                        self.mav.param_request_read_send(v.sysid, v.compid, name.encode(), -1)
+                next_ask = time.monotonic() + 1.0
+            msg = self.recv()
+            if msg is None:
+                self.wait(min(left, 0.05))
+            elif msg.get_type() == "PARAM_VALUE" and self.is_vehicle(msg):
+                name = msg.param_id if isinstance(msg.param_id, str) else msg.param_id.decode()
+                name = name.rstrip("\x00")
+                if name in names:
+                    found[name] = float(msg.param_value)
+        return found
 
     def set_message_rate(self, msg_id: int, hz: float) -> int | None:
         """MAV_CMD_SET_MESSAGE_INTERVAL: the ACK's result, or None without an answer."""

@@ -166,8 +166,14 @@ def _finite_or_none(x: float) -> float | None:
 
 def fly(s: RunSettings, sinks: Sequence[Sink] = (), control: ControlChannel | None = None,
         log: Callable[[str], None] = lambda text: None,
-        switch: StopSwitch | None = None) -> RunResult:
-    """Run one session against a live vehicle; raises UserError for a user's problem."""
+        switch: StopSwitch | None = None,
+        make_tracker: Callable[[Any, Limits], Any] | None = None) -> RunResult:
+    """Run one session against a live vehicle; raises UserError for a user's problem.
+
+    ``make_tracker(link, limits)``, if given, builds the tracker instead of the PZC tracker
+    (``companion identify`` flies its excitation manoeuvre so); it runs once the vehicle is
+    known and its telemetry rate agreed, and may read from the link (parameters) meanwhile.
+    """
     from .link import HOLD_MODE, TRACK_MODE, Link
     from ..core.pzc import PZCTracker
 
@@ -192,7 +198,8 @@ def fly(s: RunSettings, sinks: Sequence[Sink] = (), control: ControlChannel | No
         choice = choose_gains(s, accepted or rate)
         log(f"gains: {choice.source}; limits: speed {limits.max_speed:g} m/s, "
             f"yaw rate {limits.max_yaw_rate:g} rad/s")
-        tracker = PZCTracker(choice.filter, choice.pzc, limits)
+        tracker = (PZCTracker(choice.filter, choice.pzc, limits) if make_tracker is None
+                   else make_tracker(link, limits))
         config = replace(s.runner, period=1.0 / accepted if accepted else None)
         runner = Runner(link, tracker, s.mission, config, limits, sinks, control, log)
         # Sinks that write files (the flight-log CSV) flush when the loop is about to sleep.

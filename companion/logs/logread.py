@@ -54,6 +54,9 @@ class Flight:
     events: list[tuple[float | None, str]] = field(default_factory=list)
     corrupt: list[int] = field(default_factory=list)   # CSV line numbers / tlog frame indices
     records: int = 0
+    # Signed speed along the heading, m/s (negative when reversing): what a speed setpoint asks
+    # for, so what identification compares it with (``speed`` is the unsigned ground speed).
+    speed_along: np.ndarray | None = None
 
     def metrics(self) -> dict[str, Any]:
         out: dict[str, Any] = {"samples": int(len(self.t)), "records": self.records,
@@ -132,22 +135,25 @@ def read_csv(path: str | Path) -> Flight:
     a = np.array(rows, dtype=float).reshape(-1, len(_NUMERIC))
     col = {name: a[:, i] for i, name in enumerate(_NUMERIC)}
     t = col["vehicle_time"]
-    speed, yaw_rate = _differentiate(t, col["x"], col["y"], col["yaw"])
+    speed, yaw_rate, along = _differentiate(t, col["x"], col["y"], col["yaw"])
     return Flight(str(path), "csv", t, col["x"], col["y"], col["yaw"], speed, yaw_rate,
                   mission_t=col["mission_time"], x_ref=col["x_ref"], y_ref=col["y_ref"],
                   x_hat=col["x_hat"], y_hat=col["y_hat"], yaw_hat=col["yaw_hat"], cmd_t=t,
                   speed_cmd=col["speed_cmd"], yaw_rate_cmd=col["yaw_rate_cmd"], events=events,
-                  corrupt=corrupt, records=len(rows) + len(events))
+                  corrupt=corrupt, records=len(rows) + len(events), speed_along=along)
 
 
-def _differentiate(t, x, y, yaw) -> tuple[np.ndarray, np.ndarray]:
-    """Speed and turn rate by central differences (the CSV keeps poses, not velocities)."""
+def _differentiate(t, x, y, yaw) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Speed, turn rate and signed speed along the heading by central differences (the CSV
+    keeps poses, not velocities)."""
     if len(t) < 3:
-        return np.zeros_like(t), np.zeros_like(t)
+        return np.zeros_like(t), np.zeros_like(t), np.zeros_like(t)
     with np.errstate(divide="ignore", invalid="ignore"):
-        speed = np.hypot(np.gradient(x, t), np.gradient(y, t))
+        vx, vy = np.gradient(x, t), np.gradient(y, t)
+        speed = np.hypot(vx, vy)
         rate = np.gradient(np.unwrap(yaw), t)
-    return np.nan_to_num(speed), np.nan_to_num(rate)
+        along = vx * np.cos(yaw) + vy * np.sin(yaw)
+    return np.nan_to_num(speed), np.nan_to_num(rate), np.nan_to_num(along)
 
 
 def read_tlog(path: str | Path, mission: Any = None) -> Flight:
@@ -158,7 +164,7 @@ def read_tlog(path: str | Path, mission: Any = None) -> Flight:
         raise UserError(f"LOG {path}: cannot open as a tlog: {exc}") from None
     vehicle: tuple[int, int] | None = None
     att: dict[tuple[int, int], tuple[float, float]] = {}
-    poses: list[tuple[float, float, float, float, float, float]] = []
+    poses: list[tuple[float, float, float, float, float, float, float]] = []
     cmds: dict[int, tuple[float, float]] = {}
     events: list[tuple[float | None, str]] = []
     corrupt: list[int] = []
@@ -190,7 +196,8 @@ def read_tlog(path: str | Path, mission: Any = None) -> Flight:
                     continue     # a reboot, a duplicate, a bad sample: the companion refused it
                 last_t = t
                 yaw, rate = att[src]
-                poses.append((t, msg.x, msg.y, yaw, math.hypot(msg.vx, msg.vy), rate))
+                poses.append((t, msg.x, msg.y, yaw, math.hypot(msg.vx, msg.vy), rate,
+                              msg.vx * math.cos(yaw) + msg.vy * math.sin(yaw)))
             elif kind == "SET_POSITION_TARGET_LOCAL_NED":
                 if msg.type_mask & (1 << 11):       # yaw rate ignored: PX4's velocity vector
                     cmds[msg.time_boot_ms] = (math.hypot(msg.vx, msg.vy), math.nan)
@@ -200,12 +207,12 @@ def read_tlog(path: str | Path, mission: Any = None) -> Flight:
                 events.append((last_t if poses else None, f"vehicle: {msg.text}"))
     finally:
         conn.close()
-    a = np.array(poses, dtype=float).reshape(-1, 6)
-    t, x, y, yaw, speed, rate = (a[:, i] for i in range(6))
+    a = np.array(poses, dtype=float).reshape(-1, 7)
+    t, x, y, yaw, speed, rate, along = (a[:, i] for i in range(7))
     ms = np.round(t * 1e3).astype(np.int64)
     answered = [k for k, m in enumerate(ms) if int(m) in cmds]
     flight = Flight(str(path), "tlog", t, x, y, yaw, speed, rate, events=events,
-                    corrupt=corrupt, records=index)
+                    corrupt=corrupt, records=index, speed_along=along)
     if answered:
         flight.cmd_t = t[answered]
         flight.speed_cmd = np.array([cmds[int(ms[k])][0] for k in answered])
@@ -229,7 +236,7 @@ def _attach_reference(flight: Flight, mission: Any, cmds: dict, ms: np.ndarray) 
     trajectory = mission.anchored(float(flight.x[start]), float(flight.y[start]),
                                   float(flight.yaw[start]))
     refs = [trajectory.sample(float(m)) for m in mt[inside]]
-    for name in ("t", "x", "y", "yaw", "speed", "yaw_rate"):
+    for name in ("t", "x", "y", "yaw", "speed", "yaw_rate", "speed_along"):
         setattr(flight, name, getattr(flight, name)[keep][inside])
     flight.mission_t = mt[inside]
     flight.x_ref = np.array([r.x for r in refs])

@@ -1,0 +1,288 @@
+"""``companion identify``: the vehicle model's inner loops, fitted to a flight log or to a short
+manoeuvre flown on the spot.
+
+    companion identify LOG --out vehicle.toml [--check LOG2] [--plot DIR] [--json]
+    companion identify --connect URL --out vehicle.toml [--arm] [--space R] [--json]
+
+LOG is a .tlog (the companion's, or any with its SET_POSITION_TARGET_LOCAL_NED speed / turn-rate
+setpoints) or the companion's .csv. The fit (:mod:`companion.ident.fit`) finds, per channel, the
+delay, lag, clamp and acceleration / deceleration limits, and the skid-steer coupling, and
+reports the RMS of the model's speed and turn rate against the measured ones; ``--check LOG2``
+reports it on another log too. What the log does not determine takes its prior: the autopilot's
+limit parameters when known (read live, or found in the .tlog), else stock ArduPilot values.
+
+With ``--connect`` it flies the excitation manoeuvre (:mod:`companion.ident.excite`) in GUIDED
+through the live loop of ``companion run`` (every failsafe, the flight logs, Zenoh, signing),
+within ``--space`` metres of where the rover starts and for at most 90 s, then fits the .tlog
+it wrote.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import shlex
+import sys
+import tempfile
+import time
+from pathlib import Path
+from typing import Any
+
+from ..errors import UserError
+from .run import (add_safety_arguments, add_timeout_arguments, logger, open_flight_log,
+                  positive, signing_key)
+
+EPILOG = """\
+exit codes: 0 done; 2 a user error (bad flag, a log that is malformed, too short or without
+setpoints, no vehicle); 3 the manoeuvre was stopped by a fault (the rover is stopped: zero
+setpoint, then HOLD; what was flown is still fitted when long enough).
+"""
+
+MANOEUVRE_S = 85.0         # vehicle s of manoeuvre: the script (~75 s) and its returns, < 90 s
+HEADROOM = 1.2             # setpoints this far above the autopilot's limits, so the clamps show
+
+
+def register(subparsers) -> None:
+    p = subparsers.add_parser(
+        "identify", help="fit the vehicle model to a flight log (or fly a manoeuvre and fit it)",
+        description=__doc__.split("\n\n", 1)[1],
+        epilog=EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("log_path", nargs="?", metavar="LOG",
+                   help="flight log to fit: .tlog or the companion's .csv (or use --connect)")
+    p.add_argument("--out", required=True, metavar="FILE", help="vehicle file to write (TOML)")
+    p.add_argument("--check", metavar="LOG2", help="another log to report the model's RMS on")
+    p.add_argument("--plot", metavar="DIR", help="draw measured against model (PNG) into DIR")
+    p.add_argument("--name", metavar="NAME", help="the vehicle's name in the file")
+    live = p.add_argument_group("live: fly the excitation manoeuvre and fit it")
+    live.add_argument("--connect", metavar="URL", help="pymavlink connection string")
+    live.add_argument("--sysid", type=int, metavar="N", help="system id of the vehicle")
+    live.add_argument("--arm", action="store_true",
+                      help="arm the vehicle (retrying once a second); default: wait for it")
+    live.add_argument("--space", type=positive, default=10.0, metavar="M",
+                      help="stay within M metres of the start (default 10)")
+    live.add_argument("--max-speed", type=positive, dest="max_speed", metavar="M_S",
+                      help="largest speed setpoint (default 1.2 x the autopilot's top speed)")
+    live.add_argument("--max-yaw-rate", type=positive, dest="max_yaw_rate", metavar="RAD_S",
+                      help="largest turn-rate setpoint (default 1.2 x ATC_STR_RAT_MAX)")
+    live.add_argument("--rate", type=positive, metavar="HZ",
+                      help="telemetry / control rate to ask for (default 40)")
+    add_timeout_arguments(p)
+    add_safety_arguments(p)
+    o = p.add_argument_group("output")
+    o.add_argument("--json", action="store_true", help="print one JSON object")
+    o.add_argument("-q", "--quiet", action="store_true", help="no log lines on stderr")
+    from .zenoh_args import add_zenoh_arguments
+    add_zenoh_arguments(p)
+    # run's settings builder reads these; identify flies no PZC gains.
+    p.set_defaults(func=run, gains=None, k_df=None, lambda_f=None, k_dc=None, lambda_c=None)
+
+
+def _command_line() -> str:
+    return "companion " + shlex.join(sys.argv[1:])
+
+
+def _check_out(path: str) -> None:
+    """Refuse an --out that cannot be written before anything is read, flown or fitted."""
+    parent = Path(path).resolve().parent
+    if not parent.is_dir():
+        raise UserError(f"--out {path}: no such directory {parent}")
+    if Path(path).is_dir():
+        raise UserError(f"--out {path}: is a directory")
+
+
+def run(args) -> int:
+    if (args.log_path is None) == (args.connect is None):
+        raise UserError("give a LOG to fit or --connect URL to fly the manoeuvre (one of them)")
+    _check_out(args.out)
+    if args.connect is not None:
+        return _live(args)
+    report = identify_log(args.log_path, args, {})
+    _print(report, args.json)
+    return 0
+
+
+def identify_log(path: str, args, autopilot: dict[str, float],
+                 log=lambda text: None, label: str | None = None):
+    """Read, fit, check, write, plot: the offline half (the live half ends here too).
+    ``label`` names the log in the file when the path is not worth keeping (``--no-log``)."""
+    from ..ident.data import autopilot_params, read_series
+    from ..ident.fit import fit, rms
+    from ..ident.priors import AUTOPILOT_PARAMS, from_autopilot
+    from ..ident.record import Report, vehicle_file
+    from ..sim.vehicle_file import save
+
+    series, _ = read_series(path)
+    check = read_series(args.check)[0] if args.check else None   # a bad one fails before the fit
+    autopilot = {**autopilot_params(path, AUTOPILOT_PARAMS), **autopilot}
+    priors = from_autopilot(autopilot)
+    log(f"fitting {len(series.t)} samples ({series.duration:.1f} s)")
+    t0 = time.perf_counter()
+    result = fit(series, priors.params, progress=lambda what: log(f"fitting the {what}"))
+    report = Report(result, priors, series, label or str(path), time.perf_counter() - t0,
+                    out=args.out,
+                    autopilot=autopilot, command=_command_line())
+    if check is not None:
+        report.check_log, report.check_rms = str(args.check), rms(result.params, check)
+    save(vehicle_file(report, args.name or Path(path).stem), args.out)
+    if args.plot:
+        report.figures = _plot(report, check, Path(args.plot))
+    return report
+
+
+def _plot(report, check, out: Path) -> list[str]:
+    from ..ident.plot import plot_fit
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise UserError(f"--plot {out}: cannot create it: {exc.strerror}") from None
+    f = report.fit
+    figures = [plot_fit(report.series, f.params, out / "identify_fit.png",
+                        f"{Path(report.log).name}: RMS speed {f.speed_rms:.3f} m/s, "
+                        f"turn rate {f.yaw_rate_rms:.3f} rad/s")]
+    if check is not None:
+        figures.append(plot_fit(check, f.params, out / "identify_check.png",
+                                f"check {Path(report.check_log).name}: RMS speed "
+                                f"{report.check_rms[0]:.3f} m/s, turn rate "
+                                f"{report.check_rms[1]:.3f} rad/s"))
+    return figures
+
+
+def _print(report, as_json: bool, flight: dict[str, Any] | None = None) -> None:
+    from ..ident.record import as_dict, parameter_table, undetermined
+    if as_json:
+        d = as_dict(report)
+        if flight is not None:
+            d["flight"] = flight
+        print(json.dumps(d), flush=True)
+        return
+    f = report.fit
+    table = parameter_table(f.params)
+
+    def num(value, unit):
+        return "none" if value is None else f"{value:.3g} {unit}"
+    s, w = table["speed"], table["turn_rate"]
+    lines = [
+        f"vehicle     {report.out}",
+        f"log         {report.log}: {len(report.series.t)} samples, "
+        f"{report.series.duration:.1f} s; fitted in {report.fit_time_s:.1f} s",
+        f"speed       delay {num(s['delay_s'], 's')}, lag {num(s['lag_s'], 's')}, "
+        f"max {num(s['max_m_s'], 'm/s')}, accel {num(s['accel_max_m_s2'], 'm/s^2')}, "
+        f"decel {num(s['decel_max_m_s2'], 'm/s^2')}",
+        f"turn rate   delay {num(w['delay_s'], 's')}, lag {num(w['lag_s'], 's')}, "
+        f"max {num(w['max_rad_s'], 'rad/s')}, accel {num(w['accel_max_rad_s2'], 'rad/s^2')}, "
+        f"decel {num(w['decel_max_rad_s2'], 'rad/s^2')}",
+        f"coupling    {table['coupling']['turn_speed']:.3g} of top speed lost at full turn rate",
+        f"RMS         speed {f.speed_rms:.3f} m/s, turn rate {f.yaw_rate_rms:.3f} rad/s "
+        "(model minus measured, fitted log)",
+    ]
+    if report.check_rms is not None:
+        lines.append(f"check       speed {report.check_rms[0]:.3f} m/s, turn rate "
+                     f"{report.check_rms[1]:.3f} rad/s on {report.check_log}")
+    loose = undetermined(report)
+    lines.append("undetermined " + ("nothing: the log determined every parameter" if not loose
+                                    else "by this log: " + "; ".join(loose)))
+    if flight is not None:
+        lines.append(f"flight      {flight['reason']} (exit {flight['exit_code']}), "
+                     f"{flight['duration_s']:.1f} s, farthest {flight['max_distance_m']:.1f} m "
+                     f"of {flight['space_m']:g} m, {flight['returns']} returns, HOLD "
+                     + ("confirmed" if flight["hold_confirmed"] else "not confirmed"))
+        for key in ("tlog", "csv"):
+            if flight.get(key):
+                lines.append(f"{key:<11} {flight[key]}")
+    for figure in report.figures:
+        lines.append(f"figure      {figure}")
+    print("\n".join(lines), flush=True)
+
+
+# --------------------------------------------------------------------------- live
+
+def _mission(space: float):
+    """The mission the live loop flies: the start point held for the manoeuvre's length."""
+    from ..ident.excite import Home
+    from ..mission import Mission
+    return Mission(name="identify excitation",
+                   description=f"companion identify: excitation manoeuvre within {space:g} m",
+                   trajectory=Home(MANOEUVRE_S), duration=MANOEUVRE_S, rate_hz=None,
+                   filter_gains=None, pzc_gains=None, limits=None, vehicle=None, frame="start",
+                   source="companion identify", kind="excitation")
+
+
+def _live(args) -> int:
+    from ..bus import open_bus, shut
+    from ..ident.excite import Excitation, Plan
+    from ..ident.priors import AUTOPILOT_PARAMS, from_autopilot
+    from ..live.link import ARDUPILOT
+    from ..live.session import StopSwitch, fly
+    from .run import install_signals, settings_from_args
+    from .zenoh_args import bus_options
+
+    if args.check:
+        from ..ident.data import read_series
+        read_series(args.check)          # a bad check log is refused before anything flies
+    key = signing_key(args)
+    log = logger("companion identify", args.quiet)
+    read: dict[str, float] = {}
+    made: list[Excitation] = []
+
+    def make_tracker(link, limits):
+        """Read the autopilot's limits (the priors), size the manoeuvre, build the tracker."""
+        if link.vehicle.autopilot != ARDUPILOT:
+            raise UserError(f"identify drives ArduPilot's speed / turn-rate setpoints; this "
+                            f"vehicle runs {link.vehicle.autopilot}")
+        read.update(link.read_params(AUTOPILOT_PARAMS))
+        log("autopilot parameters: " + (", ".join(f"{k} {v:g}" for k, v in sorted(read.items()))
+                                        or "none answered; default priors"))
+        prior = from_autopilot(read).params
+        plan = Plan(space=args.space,
+                    max_speed=min(limits.max_speed, HEADROOM * prior.max_speed),
+                    max_yaw_rate=min(limits.max_yaw_rate, HEADROOM * prior.max_yaw_rate),
+                    decel=min(prior.decel, prior.max_accel), top_speed=prior.max_speed)
+        log(f"manoeuvre within {plan.space:g} m: setpoints up to {plan.max_speed:.2f} m/s, "
+            f"{plan.max_yaw_rate:.2f} rad/s")
+        made.append(Excitation(plan))
+        return made[-1]
+
+    switch = StopSwitch()
+    restore = install_signals(switch)
+    bus, log_sinks, scratch = None, [], None
+    try:
+        if not args.log:                 # --no-log: the logs go to a scratch dir, then away
+            scratch = tempfile.TemporaryDirectory(prefix="identify-")
+            args.log, args.log_dir = True, scratch.name
+        bus = open_bus(bus_options(args), log)
+        paths, log_sinks = open_flight_log(args, "identify", log)
+        settings = settings_from_args(args, _mission(args.space), args.connect, key, paths.tlog)
+        result = fly(settings, sinks=list(log_sinks) + ([bus] if bus else []), log=log,
+                     switch=switch, control=bus.control if bus else None,
+                     make_tracker=make_tracker)
+        if result.exit_code == 2:
+            raise UserError(result.reason)
+        tracker = made[-1] if made else None
+        flight = {"reason": result.reason, "exit_code": result.exit_code,
+                  "hold_confirmed": result.hold_confirmed, "duration_s": result.duration_s,
+                  "failsafes": result.failsafes, "space_m": args.space,
+                  "max_distance_m": tracker.max_distance if tracker else 0.0,
+                  "returns": tracker.returns if tracker else 0,
+                  "tlog": None if scratch else paths.tlog, "csv": None if scratch else paths.csv}
+        if switch.reason is not None:
+            log(f"stopped by {switch.reason} before the manoeuvre ended: not fitted"
+                + ("" if scratch else f" (the log is {paths.tlog})"))
+            return result.exit_code
+        for sink in log_sinks:
+            sink.close()                 # the CSV complete before anything reads the logs
+        report = identify_log(paths.tlog, _offline_args(args), read, log,
+                              "the manoeuvre flown (--no-log: log not kept)" if scratch else None)
+    finally:
+        shut(bus)
+        restore()
+        for sink in log_sinks:
+            sink.close()
+        if scratch is not None:
+            scratch.cleanup()
+    _print(report, args.json, flight)
+    return result.exit_code
+
+
+def _offline_args(args):
+    """The live command's flags as the offline half reads them."""
+    return argparse.Namespace(check=args.check, plot=args.plot, name=args.name, out=args.out)

@@ -1,0 +1,367 @@
+"""The fit: the vehicle model's inner loops against a log's setpoints and measured response.
+
+Pure: arrays in (:class:`Series`: setpoints held on the measurement times, measured signed
+speed along the heading and turn rate), parameters and RMS out; no file, no clock.
+
+The model is :func:`companion.sim.response.respond` (per channel: delay -> clamp -> rate limit
+-> first-order lag, and the speed clamp shrinking with the turn rate), so the model fitted is
+the model the simulations and the bundled plant run; the search steps one channel at a time
+(:mod:`companion.ident.channels`, respond's model step for step, at half the cost) and the
+figures reported come from ``respond`` itself. The turn-rate channel is fitted first
+(delay, lag, clamp, accel, decel: it does not depend on speed), then the speed channel (delay,
+lag, clamp, accel, decel, coupling) with the turn rate the fitted turn-rate model produces.
+
+Search (per channel): every parameter is mapped onto [0, 1] (log scale for lags and limits,
+linear for delays and the coupling share); a uniform random population plus the prior, then
+rounds that sample around the best so far and around the elite's mean with the elite's
+covariance, capped by a width that shrinks each round (a cross-entropy search with full
+covariance, so parameters that trade against each other are followed along their valley), three
+independent chains side by side (a delay traded against a lag can have two valleys). One round
+is one vectorised simulation of all chains' populations; the rounds on a 20 ms grid (ArduPilot's
+50 Hz loop; on 40 ms the grid's own error is above the noise), the last on 10 ms. The
+objective is the RMS of simulated minus measured output over the log.
+
+What the log does not determine: around the best, each parameter is moved by a clear step
+(lags and limits x1.5 and /1.5, delays 50 ms, the coupling 0.15). If the RMS moves by less than
+``tol`` (2 %) either way, or, for a clamp or a rate limit, when raising it changes nothing (the
+limit never bound: the log gives only a lower bound), the parameter is *undetermined*: it moves
+towards its prior (:mod:`companion.ident.priors`) as far as the log allows (the RMS within
+``tol``): all the way (status ``prior``), or part of the way when the log contradicts the prior
+(status ``bound``: e.g. a top speed the log shows is at least 4.3 m/s against a prior of 4 ends
+at the lowest value the log allows, a cautious model).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Callable
+
+import numpy as np
+
+from ..sim.plant import RoverParams
+from ..sim.response import respond
+from . import channels
+from .priors import SPEED_FIELDS, YAW_FIELDS
+
+FITTED, PRIOR, BOUND = "fitted", "prior", "bound"
+LIMITS = {"max_speed", "max_accel", "max_decel", "max_yaw_rate", "max_yaw_accel", "max_yaw_decel"}
+LAGS = {"w_c", "w_c_yaw"}
+DELAYS = {"speed_delay", "yaw_delay"}
+COUPLING = "turn_speed_coupling"
+MIN_COMMAND = 1e-3        # a channel whose setpoints never exceed this was not driven at all
+
+
+@dataclass(frozen=True)
+class Series:
+    """One log as the fit sees it, on the measurement times ``t`` (s, increasing): the setpoint
+    in force at each sample (held since it was sent) and the measured response."""
+
+    t: np.ndarray
+    speed_cmd: np.ndarray          # m/s
+    yaw_rate_cmd: np.ndarray       # rad/s
+    speed: np.ndarray              # measured signed speed along the heading, m/s
+    yaw_rate: np.ndarray           # measured turn rate, rad/s
+
+    def __post_init__(self) -> None:
+        n = len(self.t)
+        if n < 2 or any(len(a) != n for a in (self.speed_cmd, self.yaw_rate_cmd, self.speed,
+                                               self.yaw_rate)):
+            raise ValueError("a series needs >= 2 samples and arrays of one length")
+
+    @property
+    def duration(self) -> float:
+        return float(self.t[-1] - self.t[0])
+
+
+@dataclass(frozen=True)
+class Search:
+    """How hard to look. A round costs about as much for 10 sets as for 300 (the step loop's
+    overhead dominates), so the budget is counted in rounds: ``schedule`` is one (population
+    per chain, grid step) per round, the first uniform, the rest around the best; ``dt`` is the
+    grid of the final figures."""
+
+    schedule: tuple[tuple[int, float], ...] = (
+        ((150, 0.02),) + ((100, 0.02),) * 10 + ((40, 0.01),))
+    chains: int = 3                # independent searches, evaluated in the same calls
+    check_dt: float = 0.02         # grid of the determinacy check
+    dt: float = 0.01
+    shrink: float = 0.72           # search width (unit box) x this per round, from 0.3
+    tol: float = 0.02              # relative RMS change below which a parameter is not seen
+    seed: int = 0
+
+
+@dataclass(frozen=True)
+class Fit:
+    params: RoverParams
+    speed_rms: float               # m/s, simulated minus measured, over the series
+    yaw_rate_rms: float            # rad/s
+    status: dict[str, str] = field(default_factory=dict)    # field -> FITTED / PRIOR / BOUND
+    evaluations: int = 0           # model runs (one per parameter set)
+
+    @property
+    def undetermined(self) -> tuple[str, ...]:
+        """The fitted fields the log did not determine (left at the prior, or only bounded)."""
+        return tuple(name for name, s in self.status.items() if s != FITTED)
+
+
+@dataclass(frozen=True)
+class _Dim:
+    name: str
+    lo: float
+    hi: float
+    log: bool
+
+    def value(self, u: np.ndarray) -> np.ndarray:
+        u = np.clip(u, 0.0, 1.0)
+        if self.log:
+            return self.lo * (self.hi / self.lo) ** u
+        return self.lo + (self.hi - self.lo) * u
+
+    def unit(self, value: float) -> float:
+        if not math.isfinite(value):
+            return 1.0
+        if self.log:
+            share = math.log(max(value, 1e-12) / self.lo) / math.log(self.hi / self.lo)
+            return float(np.clip(share, 0.0, 1.0))
+        return float(np.clip((value - self.lo) / (self.hi - self.lo), 0.0, 1.0))
+
+    def steps(self, value: float) -> tuple[float, float]:
+        """(raised, lowered): a change the log should show if it determines this parameter."""
+        if self.name in DELAYS:
+            return value + 0.05, max(value - 0.05, 0.0)
+        if self.name == COUPLING:
+            return min(value + 0.15, 1.0), max(value - 0.15, 0.0)
+        return value * 1.5, value / 1.5
+
+
+def _dims(fields: tuple[str, ...], series: Series) -> list[_Dim]:
+    """Search ranges; clamps from what the log shows (a clamp well below the measured peak is
+    impossible, one far above the largest setpoint is indistinguishable from none)."""
+    v_meas = float(np.max(np.abs(series.speed)))
+    v_cmd = float(np.max(np.abs(series.speed_cmd)))
+    w_meas = float(np.max(np.abs(series.yaw_rate)))
+    w_cmd = float(np.max(np.abs(series.yaw_rate_cmd)))
+    ranges = {
+        "yaw_delay": (0.0, 0.4, False), "speed_delay": (0.0, 0.5, False),
+        "w_c_yaw": (0.3, 60.0, True), "w_c": (0.2, 50.0, True),
+        "max_yaw_rate": (max(0.7 * w_meas, 0.05), max(1.5 * w_cmd, 1.2 * w_meas, 0.1), True),
+        "max_speed": (max(0.7 * v_meas, 0.05), max(1.5 * v_cmd, 1.2 * v_meas, 0.1), True),
+        "max_yaw_accel": (0.1, 50.0, True), "max_yaw_decel": (0.1, 50.0, True),
+        "max_accel": (0.05, 20.0, True), "max_decel": (0.05, 20.0, True),
+        COUPLING: (0.0, 1.0, False),
+    }
+    return [_Dim(name, *ranges[name]) for name in fields]
+
+
+class _Channel:
+    """One channel's objective: RMS of simulated minus measured output for a batch of sets.
+
+    Runs only that channel (:mod:`companion.ident.channels`, respond's model step for step);
+    the speed channel sees the turn rate of the turn-rate model in ``base``."""
+
+    def __init__(self, series: Series, base: RoverParams, which: int):
+        self.series, self.base, self.which = series, base, which
+        self.measured = series.yaw_rate if which == 1 else series.speed
+        self.evaluations = 0
+        self._omega: dict[float, np.ndarray] = {}
+
+    def _omega_grid(self, dt: float) -> np.ndarray:
+        if dt not in self._omega:
+            s, p = self.series, self.base
+            self._omega[dt] = channels.turn_rate(
+                s.t, s.yaw_rate_cmd, 1, dt, float(s.yaw_rate[0]), p.yaw_delay, p.yaw_bandwidth,
+                p.max_yaw_rate, p.max_yaw_accel, p.yaw_decel)[1][:, 0]
+        return self._omega[dt]
+
+    def cost(self, values: dict[str, np.ndarray], n: int, dt: float) -> np.ndarray:
+        s = self.series
+        p = self.base.with_(**values)
+        if self.which == 1:
+            out, _ = channels.turn_rate(s.t, s.yaw_rate_cmd, n, dt, float(s.yaw_rate[0]),
+                                        p.yaw_delay, p.yaw_bandwidth, p.max_yaw_rate,
+                                        p.max_yaw_accel, p.yaw_decel)
+        else:
+            out = channels.speed(s.t, s.speed_cmd, self._omega_grid(dt), n, dt,
+                                 float(s.speed[0]), p.speed_delay, p.w_c, p.max_speed,
+                                 p.max_accel, p.decel, p.turn_speed_coupling, p.max_yaw_rate)
+        self.evaluations += n
+        err = out - self.measured[:, None]
+        return np.sqrt(np.mean(err * err, axis=0))
+
+
+def _next_population(u: np.ndarray, cost: np.ndarray, population: int, width: float,
+                     rng: np.random.Generator) -> np.ndarray:
+    """One chain's next round: its best, then samples around the best and around the elite's
+    mean with the elite's covariance (capped by ``width``)."""
+    d = u.shape[1]
+    order = np.argsort(cost)
+    best = u[order[0]]
+    elite = u[order[:max(2 * d + 2, len(u) // 10)]]
+    # The elite's covariance is the valley's shape: sampling with it follows parameters that
+    # trade against each other (a top speed and the coupling that lowers it), which independent
+    # widths would cross only by luck.
+    cov = np.atleast_2d(np.cov(elite.T)) + (0.05 * width) ** 2 * np.eye(d)
+    top = float(np.sqrt(np.max(np.linalg.eigvalsh(cov))))
+    chol = np.linalg.cholesky(cov) * min(1.0, width / top)
+    half = population // 2
+    around_best = best + rng.standard_normal((half, d)) @ chol.T
+    around_elite = elite.mean(axis=0) + rng.standard_normal((population - half - 1, d)) @ chol.T
+    # The best so far is re-evaluated on this round's grid, so costs stay comparable.
+    return np.clip(np.vstack([best[None, :], around_best, around_elite]), 0.0, 1.0)
+
+
+def _search(channel: _Channel, dims: list[_Dim], u0: np.ndarray, cfg: Search,
+            rng: np.random.Generator) -> tuple[np.ndarray, float]:
+    """The cross-entropy search of the module docstring, ``cfg.chains`` independent chains
+    evaluated together (one ``respond``-sized call per round for all of them: a delay traded
+    against a lag has two valleys, and one chain may settle in the wrong one); the best unit
+    vector found and its RMS."""
+    d, chains = len(dims), cfg.chains
+
+    def evaluate(u: np.ndarray, dt: float) -> np.ndarray:
+        values = {dim.name: dim.value(u[:, i]) for i, dim in enumerate(dims)}
+        return channel.cost(values, len(u), dt)
+
+    (first, dt), *rounds = cfg.schedule
+    u = rng.random((first * chains, d))
+    u[0] = u0
+    us, costs = np.split(u, chains), np.split(evaluate(u, dt), chains)
+    for r, (population, dt) in enumerate(rounds):
+        width = max(0.3 * cfg.shrink ** r, 0.003)
+        us = [_next_population(uc, cc, population, width, rng) for uc, cc in zip(us, costs)]
+        costs = np.split(evaluate(np.vstack(us), dt), chains)
+    best_chain = int(np.argmin([c.min() for c in costs]))
+    k = int(np.argmin(costs[best_chain]))
+    return us[best_chain][k], float(costs[best_chain][k])
+
+
+def _settle(channel: _Channel, dims: list[_Dim], best: dict[str, float], prior: RoverParams,
+            cfg: Search) -> tuple[dict[str, float], dict[str, str]]:
+    """Which parameters the log determines; the others move to their prior as far as the log
+    allows (all of the way: PRIOR; part of the way: BOUND). Returns (values, status)."""
+    names = [dim.name for dim in dims]
+    by_name = {dim.name: dim for dim in dims}
+
+    keys = list(best)                      # every parameter of the channel, moved or not
+
+    def costs(rows: list[dict[str, float]]) -> np.ndarray:
+        return channel.cost({k: np.array([row[k] for row in rows]) for k in keys}, len(rows),
+                            cfg.check_dt)
+
+    rows: list[dict[str, float]] = [best]
+    for dim in dims:
+        for stepped in dim.steps(best[dim.name]):
+            rows.append({**best, dim.name: stepped})
+    cost = costs(rows)
+    limit = float(cost[0]) * (1.0 + cfg.tol) + 1e-9
+    cost = cost[1:]
+    status = {name: FITTED for name in names}
+    loose = []
+    for i, dim in enumerate(dims):
+        up_flat, down_flat = cost[2 * i] <= limit, cost[2 * i + 1] <= limit
+        if (up_flat and down_flat) or (dim.name in LIMITS and up_flat):
+            loose.append(dim.name)
+    if not loose:
+        return best, status
+
+    def moved(values: dict[str, float], which: list[str]) -> dict[str, float]:
+        out = dict(values)
+        for name in which:                 # accel before decel: "as accel" sees the new accel
+            out[name] = _prior_value(prior, name, out)
+        return out
+
+    # All of them at their priors at once; else one at a time, in field order (an accel limit
+    # before its decel limit, whose prior may be "as accel").
+    joint = moved(best, loose)
+    if costs([joint])[0] <= limit:
+        return joint, {**status, **{name: PRIOR for name in loose}}
+    values = dict(best)
+    for name in loose:
+        target = _prior_value(prior, name, values)
+        if not math.isfinite(target):
+            target = by_name[name].hi      # "no limit": as far up as the search looked
+        # From the fitted value towards the prior, in steps: the nearest to the prior the log
+        # allows (for a limit the log bounds from below: the lowest it allows, a cautious model).
+        dim = by_name[name]
+        fractions = np.linspace(0.0, 1.0, 13)[1:]
+        if dim.log:
+            ladder = values[name] * (target / values[name]) ** fractions
+        else:
+            ladder = values[name] + (target - values[name]) * fractions
+        c = costs([{**values, name: float(v)} for v in ladder])
+        ok = np.flatnonzero(c <= limit)
+        if len(ok):
+            values[name] = float(ladder[ok[-1]])
+            status[name] = PRIOR if ok[-1] == len(ladder) - 1 else BOUND
+        else:
+            status[name] = BOUND
+    return values, status
+
+
+def _prior_value(prior: RoverParams, name: str, values: dict[str, float]) -> float:
+    """A field's prior as a number; a decel limit left at "as accel" (None) takes the accel
+    value in ``values`` (ArduPilot's ATC_DECEL_MAX 0 means the same limit both ways)."""
+    value = getattr(prior, name)
+    if value is None and name == "max_decel":
+        value = values.get("max_accel", prior.max_accel)
+    elif value is None and name == "max_yaw_decel":
+        value = values.get("max_yaw_accel", prior.max_yaw_accel)
+    elif value is None and name == "w_c_yaw":
+        value = prior.w_c
+    return float(value)
+
+
+def _fit_channel(series: Series, base: RoverParams, prior: RoverParams, fields: tuple[str, ...],
+                 which: int, cfg: Search, rng: np.random.Generator,
+                 ) -> tuple[dict[str, float], dict[str, str], int]:
+    channel = _Channel(series, base, which)
+    commands = series.yaw_rate_cmd if which == 1 else series.speed_cmd
+    start: dict[str, float] = {}
+    for name in fields:
+        start[name] = _prior_value(prior, name, start)
+    if float(np.max(np.abs(commands))) < MIN_COMMAND:
+        # Never driven: nothing in the log speaks to this channel.
+        return start, {name: PRIOR for name in fields}, 0
+    dims = _dims(fields, series)
+    u0 = np.array([dim.unit(start[dim.name]) for dim in dims])
+    u_best, _ = _search(channel, dims, u0, cfg, rng)
+    best = {dim.name: float(dim.value(u_best[i])) for i, dim in enumerate(dims)}
+    values, status = _settle(channel, dims, best, prior, cfg)
+    still = [dim for dim in dims if status[dim.name] == FITTED]
+    if still and len(still) < len(dims):
+        # What moved to its prior changes what the rest are seen to do (a coupling that bit
+        # only under a low clamp the search had found): look at those once more.
+        values, again = _settle(channel, still, values, prior, cfg)
+        status.update(again)
+    return values, status, channel.evaluations
+
+
+def rms(params: RoverParams, series: Series, dt: float = 0.01) -> tuple[float, float]:
+    """(speed RMS m/s, turn-rate RMS rad/s) of the model ``params`` against a series."""
+    v, w = respond(params, series.t, series.speed_cmd, series.yaw_rate_cmd, 1, dt,
+                   v0=float(series.speed[0]), omega0=float(series.yaw_rate[0]))
+    return (float(np.sqrt(np.mean((v[:, 0] - series.speed) ** 2))),
+            float(np.sqrt(np.mean((w[:, 0] - series.yaw_rate) ** 2))))
+
+
+def simulate(params: RoverParams, series: Series, dt: float = 0.01
+             ) -> tuple[np.ndarray, np.ndarray]:
+    """The model's speed and turn rate on the series' times (for plots)."""
+    v, w = respond(params, series.t, series.speed_cmd, series.yaw_rate_cmd, 1, dt,
+                   v0=float(series.speed[0]), omega0=float(series.yaw_rate[0]))
+    return v[:, 0], w[:, 0]
+
+
+def fit(series: Series, prior: RoverParams, search: Search = Search(),
+        progress: Callable[[str], None] = lambda text: None) -> Fit:
+    """Fit the turn-rate channel, then the speed channel (module docstring)."""
+    rng = np.random.default_rng(search.seed)
+    progress("turn-rate channel")
+    yaw, yaw_status, n_yaw = _fit_channel(series, prior, prior, YAW_FIELDS, 1, search, rng)
+    progress("speed channel")
+    base = prior.with_(**yaw)
+    speed, speed_status, n_speed = _fit_channel(series, base, prior, SPEED_FIELDS, 0, search, rng)
+    params = base.with_(**speed)
+    speed_rms, yaw_rms = rms(params, series, search.dt)
+    return Fit(params, speed_rms, yaw_rms, {**yaw_status, **speed_status}, n_yaw + n_speed + 1)

@@ -1,0 +1,112 @@
+"""What identification assumes before it sees a log: priors for every model parameter.
+
+A log rarely excites everything (a top speed never reached, a turn never sharp enough to hit the
+rate limit), and a parameter it does not determine takes its prior. The priors come from the
+autopilot's own limit parameters when they are known (read live with PARAM_REQUEST_READ, or
+found as PARAM_VALUE in a .tlog), otherwise from :data:`DEFAULTS`, a stock ArduPilot Rover's
+values (``vehicle-interfaces.md``: ATC_ACCEL_MAX 1 m/s^2, ATC_STR_ACC_MAX 120 deg/s^2,
+ATC_STR_RAT_MAX 120 deg/s, about 4 m/s top speed) and, for what no parameter states (delays,
+lags, coupling), deliberately sluggish values: a model that assumes a slower vehicle than the
+real one makes a tuner cautious, not unstable.
+
+How ArduPilot Rover's parameters map onto :class:`companion.sim.plant.RoverParams`
+(APM_Control/AR_AttitudeControl.cpp):
+
+* ``ATC_ACCEL_MAX`` (m/s^2, 0 = no limit) -> ``max_accel``; ``ATC_DECEL_MAX`` (0 = as accel)
+  -> ``max_decel`` (None: the identified acceleration limit);
+* ``ATC_STR_ACC_MAX`` (deg/s^2, 0 = no limit) -> ``max_yaw_accel``; ``ATC_STR_DEC_MAX`` where
+  the firmware has it (0 = as accel) -> ``max_yaw_decel``;
+* ``ATC_STR_RAT_MAX`` (deg/s, 0 = no limit) -> ``max_yaw_rate``;
+* ``WP_SPEED`` (m/s) -> ``max_speed``: GUIDED holds a faster speed setpoint to it (seen on
+  SITL rover-skid: a 4.8 m/s setpoint settles at exactly WP_SPEED 3.0 m/s, on a 15 m straight);
+  no faster than full throttle, CRUISE_SPEED * 100 / CRUISE_THROTTLE (ArduPilot's throttle
+  feed-forward assumes speed proportional to throttle), which is the prior without WP_SPEED.
+
+``MOT_STR_THR_MIX`` is read and recorded but sets nothing: how steering and throttle share the
+motors is not the model's coupling share, which only a turn at speed shows.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+from ..sim.plant import RoverParams
+
+# The autopilot parameters a live identification reads (PARAM_REQUEST_READ).
+AUTOPILOT_PARAMS = ("ATC_ACCEL_MAX", "ATC_DECEL_MAX", "ATC_STR_ACC_MAX", "ATC_STR_DEC_MAX",
+                    "ATC_STR_RAT_MAX", "CRUISE_SPEED", "CRUISE_THROTTLE", "WP_SPEED",
+                    "MOT_STR_THR_MIX")
+
+# The fields identification fits, turn-rate channel first (the speed channel's coupling needs
+# the turn rate), with the vehicle file's names for people.
+YAW_FIELDS = ("yaw_delay", "w_c_yaw", "max_yaw_rate", "max_yaw_accel", "max_yaw_decel")
+SPEED_FIELDS = ("speed_delay", "w_c", "max_speed", "max_accel", "max_decel", "turn_speed_coupling")
+FILE_NAMES = {"speed_delay": "speed.delay_s", "w_c": "speed.lag_s", "max_speed": "speed.max_m_s",
+              "max_accel": "speed.accel_max_m_s2", "max_decel": "speed.decel_max_m_s2",
+              "yaw_delay": "turn_rate.delay_s", "w_c_yaw": "turn_rate.lag_s",
+              "max_yaw_rate": "turn_rate.max_rad_s", "max_yaw_accel": "turn_rate.accel_max_rad_s2",
+              "max_yaw_decel": "turn_rate.decel_max_rad_s2",
+              "turn_speed_coupling": "coupling.turn_speed"}
+
+DEFAULTS = RoverParams(
+    w_c=1.0 / 0.4, w_c_yaw=1.0 / 0.15,           # lags: 0.4 s speed, 0.15 s turn rate
+    speed_delay=0.1, yaw_delay=0.1,                # s
+    max_speed=4.0, max_yaw_rate=math.radians(120.0),
+    max_accel=1.0, max_decel=None,                 # None: as the identified acceleration
+    max_yaw_accel=math.radians(120.0), max_yaw_decel=None,
+    turn_speed_coupling=0.5)                       # skid-steer mixing, MOT_STR_THR_MIX's default
+
+
+@dataclass(frozen=True)
+class Priors:
+    params: RoverParams
+    source: dict[str, str] = field(default_factory=dict)   # RoverParams field -> where from
+
+    def describe(self, name: str) -> str:
+        return self.source.get(name, "default")
+
+
+def _positive(values: dict[str, float], key: str) -> float | None:
+    value = values.get(key)
+    if value is None or not math.isfinite(value):
+        return None
+    return float(value)
+
+
+def from_autopilot(values: dict[str, float]) -> Priors:
+    """Priors from the autopilot's parameters (``{name: value}``, any subset; others default)."""
+    changes: dict[str, float | None] = {}
+    source: dict[str, str] = {}
+
+    def take(name: str, value: float | None, why: str) -> None:
+        changes[name] = value
+        source[name] = why
+
+    accel = _positive(values, "ATC_ACCEL_MAX")
+    if accel is not None:
+        take("max_accel", accel if accel > 0 else math.inf, f"ATC_ACCEL_MAX {accel:g}")
+    decel = _positive(values, "ATC_DECEL_MAX")
+    if decel is not None:
+        take("max_decel", decel if decel > 0 else None, f"ATC_DECEL_MAX {decel:g}")
+    yaw_accel = _positive(values, "ATC_STR_ACC_MAX")
+    if yaw_accel is not None:
+        take("max_yaw_accel", math.radians(yaw_accel) if yaw_accel > 0 else math.inf,
+             f"ATC_STR_ACC_MAX {yaw_accel:g} deg/s^2")
+    yaw_decel = _positive(values, "ATC_STR_DEC_MAX")
+    if yaw_decel is not None:
+        take("max_yaw_decel", math.radians(yaw_decel) if yaw_decel > 0 else None,
+             f"ATC_STR_DEC_MAX {yaw_decel:g} deg/s^2")
+    rate = _positive(values, "ATC_STR_RAT_MAX")
+    if rate is not None:
+        take("max_yaw_rate", math.radians(rate) if rate > 0 else math.inf,
+             f"ATC_STR_RAT_MAX {rate:g} deg/s")
+    cruise, throttle = _positive(values, "CRUISE_SPEED"), _positive(values, "CRUISE_THROTTLE")
+    full = (cruise * 100.0 / throttle) if cruise and throttle and cruise > 0 and throttle > 0 \
+        else None
+    wp_speed = _positive(values, "WP_SPEED")
+    if wp_speed is not None and wp_speed > 0 and (full is None or wp_speed <= full):
+        take("max_speed", wp_speed, f"WP_SPEED {wp_speed:g}")
+    elif full is not None:
+        take("max_speed", full, f"CRUISE_SPEED {cruise:g} / CRUISE_THROTTLE {throttle:g} %")
+    return Priors(DEFAULTS.with_(**changes), source)

@@ -1,0 +1,136 @@
+"""What a vehicle file written by ``companion identify`` records, and the figures it reports.
+
+Turns a :class:`companion.ident.fit.Fit` into a :class:`companion.sim.vehicle_file.VehicleFile`
+whose header says how it was made (the command, the log(s), the priors, what the log did not
+determine) and whose ``[fit]`` / ``[source]`` records hold the RMS figures and the inputs, and
+into the parameter table the command prints and its ``--json`` object carries (the vehicle
+file's own section / key names and units).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+from ..sim.plant import RoverParams
+from ..sim.vehicle_file import VehicleFile
+from .fit import Fit, Series
+from .priors import FILE_NAMES, SPEED_FIELDS, YAW_FIELDS, Priors
+
+
+@dataclass
+class Report:
+    """Everything one identification produced (what is printed, written and returned)."""
+
+    fit: Fit
+    priors: Priors
+    series: Series
+    log: str
+    fit_time_s: float
+    out: str = ""
+    check_log: str | None = None
+    check_rms: tuple[float, float] | None = None
+    autopilot: dict[str, float] = field(default_factory=dict)
+    figures: list[str] = field(default_factory=list)
+    command: str = ""
+
+
+def file_value(params: RoverParams, name: str) -> float:
+    """A RoverParams field in the vehicle file's unit (lags as time constants)."""
+    if name == "w_c":
+        return 1.0 / params.w_c
+    if name == "w_c_yaw":
+        return 1.0 / params.yaw_bandwidth
+    if name == "max_decel":
+        return params.decel
+    if name == "max_yaw_decel":
+        return params.yaw_decel
+    return float(getattr(params, name))
+
+
+def _number(value: float) -> float | None:
+    return value if math.isfinite(value) else None
+
+
+def parameter_table(params: RoverParams) -> dict[str, dict[str, float | None]]:
+    """{"speed": {"delay_s": ...}, "turn_rate": {...}, "coupling": {...}} (None: no limit)."""
+    out: dict[str, dict[str, float | None]] = {}
+    for name in YAW_FIELDS + SPEED_FIELDS:
+        section, key = FILE_NAMES[name].split(".")
+        out.setdefault(section, {})[key] = _number(file_value(params, name))
+    return {k: out[k] for k in ("speed", "turn_rate", "coupling")}
+
+
+def undetermined(report: Report) -> list[str]:
+    """Vehicle-file names of what the log did not determine, with what was used."""
+    lines = []
+    for name in report.fit.undetermined:
+        status = report.fit.status[name]
+        value = file_value(report.fit.params, name)
+        why = (f"prior, {report.priors.describe(name)}" if status == "prior"
+               else "the log bounds it; its prior contradicts the log")
+        lines.append(f"{FILE_NAMES[name]} = {value:.4g} ({why})")
+    return lines
+
+
+def as_dict(report: Report) -> dict[str, Any]:
+    """The ``--json`` object (without the live flight's part)."""
+    f = report.fit
+    return {
+        "schema": "pzc-rover/identify/1",
+        "out": report.out,
+        "log": report.log,
+        "samples": int(len(report.series.t)),
+        "duration_s": report.series.duration,
+        "fit_time_s": report.fit_time_s,
+        "evaluations": f.evaluations,
+        "params": parameter_table(f.params),
+        "rms": {"speed_m_s": f.speed_rms, "yaw_rate_rad_s": f.yaw_rate_rms},
+        "check": (None if report.check_rms is None else
+                  {"log": report.check_log, "speed_m_s": report.check_rms[0],
+                   "yaw_rate_rad_s": report.check_rms[1]}),
+        "undetermined": [FILE_NAMES[name] for name in f.undetermined],
+        "status": {FILE_NAMES[name]: s for name, s in f.status.items()},
+        "priors": {FILE_NAMES[name]: {"value": _number(file_value(report.priors.params, name))
+                                      if getattr(report.priors.params, name) is not None
+                                      else None,
+                                      "source": report.priors.describe(name)}
+                   for name in YAW_FIELDS + SPEED_FIELDS},
+        "autopilot_params": report.autopilot,
+        "figures": report.figures,
+    }
+
+
+def vehicle_file(report: Report, name: str) -> VehicleFile:
+    f = report.fit
+    header = [f"pzc-rover vehicle file, written by `{report.command}`" if report.command
+              else "pzc-rover vehicle file, written by `companion identify`",
+              f"fitted to {report.log} ({len(report.series.t)} samples, "
+              f"{report.series.duration:.1f} s of setpoints) in {report.fit_time_s:.1f} s: "
+              f"RMS speed {f.speed_rms:.3f} m/s, turn rate {f.yaw_rate_rms:.3f} rad/s"]
+    if report.check_rms is not None:
+        header.append(f"checked on {report.check_log}: RMS speed {report.check_rms[0]:.3f} m/s, "
+                      f"turn rate {report.check_rms[1]:.3f} rad/s")
+    header.append("autopilot parameters (priors): " + (
+        ", ".join(f"{k} {v:g}" for k, v in sorted(report.autopilot.items()))
+        if report.autopilot else "none known, default priors"))
+    loose = undetermined(report)
+    header.append("not determined by the log: " + ("; ".join(loose) if loose else "nothing"))
+    header.append("d_cen is not identified (kept 0): measure the axle to the tracked point")
+    fit_record: dict[str, Any] = {
+        "speed_rms_m_s": f.speed_rms, "yaw_rate_rms_rad_s": f.yaw_rate_rms,
+        "samples": len(report.series.t), "duration_s": report.series.duration,
+        "fit_time_s": report.fit_time_s,
+        "undetermined": ", ".join(FILE_NAMES[n] for n in f.undetermined)}
+    if report.check_rms is not None:
+        fit_record.update(check_speed_rms_m_s=report.check_rms[0],
+                          check_yaw_rate_rms_rad_s=report.check_rms[1])
+    source: dict[str, Any] = {"log": report.log}
+    if report.check_log:
+        source["check_log"] = report.check_log
+    if report.command:
+        source["command"] = report.command
+    source.update(report.autopilot)
+    return VehicleFile(params=f.params, name=name, header="\n".join(header), fit=fit_record,
+                       source=source)

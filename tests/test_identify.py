@@ -1,0 +1,342 @@
+"""``companion identify``: the fit recovers a known vehicle (synthetic data from ``respond``, a
+``companion run`` log and a live manoeuvre against ``sitl-plant --vehicle FILE``), parameters a
+log does not excite take their priors, the manoeuvre stays within ``--space`` and ends in HOLD,
+and a bad log is one line with exit code 2. Real processes over loopback UDP, real files."""
+
+from __future__ import annotations
+
+import json
+import math
+import struct
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from companion.core.signals import Reference
+from companion.ident import channels
+from companion.ident.excite import Excitation, Plan
+from companion.ident.fit import BOUND, FITTED, PRIOR, Series, fit, rms
+from companion.ident.priors import DEFAULTS, from_autopilot
+from companion.live.flightlog import CSV_FIELDS
+from companion.sim.plant import RoverModel, RoverParams, RoverState
+from companion.sim.response import respond
+from companion.sim.vehicle_file import VehicleFile, load, save
+from companion_harness import ROOT, ellipse_mission, mavlink2
+from safety_harness import read_tlog
+from sitl_plant.testing import Pilot, PlantProcess, free_udp_port
+
+# A vehicle like ArduPilot's rover-skid: every part of the model switched on.
+TRUE = RoverParams(w_c=4.0, w_c_yaw=15.0, max_speed=3.5, max_yaw_rate=2.0, max_accel=1.0,
+                   max_decel=1.4, max_yaw_accel=2.2, max_yaw_decel=3.0, speed_delay=0.08,
+                   yaw_delay=0.04, turn_speed_coupling=0.3)
+
+
+def companion(*args: str, timeout: float = 120.0) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "companion", *args], capture_output=True,
+                          text=True, timeout=timeout, cwd=ROOT)
+
+
+def one_line_error(p: subprocess.CompletedProcess, needle: str) -> None:
+    assert p.returncode == 2, p.stderr
+    assert "Traceback" not in p.stderr
+    lines = p.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("companion identify: error:"), p.stderr
+    assert needle in lines[0], lines[0]
+
+
+def steps(rng: np.random.Generator, t: np.ndarray, low: float, high: float, hold: float):
+    k = (t // hold).astype(int)
+    return rng.uniform(low, high, k.max() + 1)[k]
+
+
+def synthetic(params: RoverParams, seconds: float, speed_amp: float, rate_amp: float,
+              seed: int = 1, noise: float = 0.02) -> Series:
+    """ArduPilot-like 20/20/20/40 ms samples, random setpoint steps, the model's response on a
+    1 ms grid plus measurement noise."""
+    rng = np.random.default_rng(seed)
+    t = np.concatenate([[0.0], np.cumsum(np.tile([0.02, 0.02, 0.02, 0.04], int(seconds / 0.1)))])
+    u = np.clip(steps(rng, t, -0.5 * speed_amp, speed_amp, 2.5), -2.0, None)
+    w = steps(rng, t, -rate_amp, rate_amp, 1.7)
+    v, om = respond(params, t, u, w, 1, 0.001)
+    return Series(t, u, w, v[:, 0] + noise * rng.standard_normal(len(t)),
+                  om[:, 0] + noise * rng.standard_normal(len(t)))
+
+
+def within(value: float, truth: float, rel: float) -> bool:
+    return abs(value - truth) <= rel * abs(truth)
+
+
+# --------------------------------------------------------------------------- the fit, pure
+
+def test_the_search_runs_respond_s_model_one_channel_at_a_time():
+    """The fit's channel-at-a-time stepping is respond's model, step for step."""
+    rng = np.random.default_rng(7)
+    series = synthetic(TRUE, 20.0, speed_amp=4.5, rate_amp=2.6)
+    n = 6
+    params = RoverParams(
+        w_c=rng.uniform(1, 20, n), w_c_yaw=rng.uniform(1, 30, n), max_speed=rng.uniform(2, 5, n),
+        max_yaw_rate=rng.uniform(1, 3, n), max_accel=rng.uniform(0.5, 3, n),
+        max_decel=rng.uniform(0.5, 3, n), max_yaw_accel=rng.uniform(1, 5, n),
+        max_yaw_decel=rng.uniform(1, 5, n), speed_delay=rng.uniform(0, 0.2, n),
+        yaw_delay=rng.uniform(0, 0.2, n), turn_speed_coupling=rng.uniform(0, 0.8, n))
+    s = series
+    for dt in (0.01, 0.02):
+        v, w = respond(params, s.t, s.speed_cmd, s.yaw_rate_cmd, n, dt, v0=0.3, omega0=-0.2)
+        w2, grid = channels.turn_rate(s.t, s.yaw_rate_cmd, n, dt, -0.2, params.yaw_delay,
+                                      params.yaw_bandwidth, params.max_yaw_rate,
+                                      params.max_yaw_accel, params.yaw_decel)
+        v2 = channels.speed(s.t, s.speed_cmd, grid, n, dt, 0.3, params.speed_delay, params.w_c,
+                            params.max_speed, params.max_accel, params.decel,
+                            params.turn_speed_coupling, params.max_yaw_rate)
+        np.testing.assert_allclose(w2, w, rtol=0, atol=1e-12)
+        np.testing.assert_allclose(v2, v, rtol=0, atol=1e-12)
+
+
+def test_fit_recovers_known_parameters_from_noisy_data():
+    series = synthetic(TRUE, 60.0, speed_amp=4.5, rate_amp=2.6)
+    result = fit(series, DEFAULTS)
+    p = result.params
+    assert all(s == FITTED for s in result.status.values()), result.status
+    for name in ("max_accel", "max_decel", "max_yaw_accel", "max_yaw_decel", "max_yaw_rate"):
+        assert within(getattr(p, name), getattr(TRUE, name), 0.05), (name, getattr(p, name))
+    assert within(p.max_speed, TRUE.max_speed, 0.1)
+    assert abs(p.speed_delay - TRUE.speed_delay) <= 0.025
+    assert abs(p.yaw_delay - TRUE.yaw_delay) <= 0.025
+    assert within(p.w_c, TRUE.w_c, 0.3) and within(p.yaw_bandwidth, TRUE.yaw_bandwidth, 0.3)
+    assert abs(p.turn_speed_coupling - TRUE.turn_speed_coupling) <= 0.12
+    # The RMS is the noise's (0.02), not the model's error.
+    assert result.speed_rms < 0.026 and result.yaw_rate_rms < 0.026
+    assert rms(TRUE, series)[0] <= result.speed_rms * 1.05
+
+
+def test_parameters_the_log_does_not_excite_take_their_priors():
+    # Small setpoints: no clamp is reached, no turn fast enough for the coupling to bite.
+    series = synthetic(TRUE, 40.0, speed_amp=1.2, rate_amp=0.9, seed=2)
+    priors = from_autopilot({"ATC_STR_RAT_MAX": 100.0, "CRUISE_SPEED": 3.0,
+                             "CRUISE_THROTTLE": 60.0})
+    result = fit(series, priors.params)
+    assert result.status["max_yaw_rate"] == PRIOR
+    assert result.params.max_yaw_rate == pytest.approx(math.radians(100.0))
+    assert result.status["max_speed"] == PRIOR
+    assert result.params.max_speed == pytest.approx(5.0)
+    assert result.status["turn_speed_coupling"] in (PRIOR, BOUND)
+    assert {"max_speed", "max_yaw_rate"} <= set(result.undetermined)
+    # What the steps do show is still found.
+    assert within(result.params.max_accel, TRUE.max_accel, 0.1)
+    assert "max_accel" not in result.undetermined
+
+
+def test_a_prior_the_log_contradicts_becomes_the_bound_the_log_allows():
+    # Top speed prior 2 m/s, but the vehicle is seen at 3.3 m/s without reaching its clamp.
+    series = synthetic(TRUE.with_(max_speed=6.0, turn_speed_coupling=0.0), 40.0,
+                       speed_amp=3.4, rate_amp=0.3, seed=3)
+    priors = from_autopilot({"CRUISE_SPEED": 1.0, "CRUISE_THROTTLE": 50.0})
+    result = fit(series, priors.params)
+    assert result.status["max_speed"] == BOUND
+    assert 3.2 <= result.params.max_speed <= 4.5
+    assert result.speed_rms < 0.03
+
+
+# --------------------------------------------------------------------------- the manoeuvre, pure
+
+@pytest.mark.parametrize("space", [5.0, 10.0])
+def test_excitation_stays_within_space_and_shows_every_limit(space):
+    model = RoverModel(TRUE)
+    state = RoverState(x=3.0, y=-2.0, yaw=1.0)
+    plan = Plan(space=space, max_speed=4.2, max_yaw_rate=2.4, decel=1.0)
+    tracker = Excitation(plan)
+    home = Reference(3.0, -2.0)
+    cmds, far = [], 0.0
+    t = 0.0
+    for _ in range(int(85.0 / 0.025)):
+        cmd = tracker.step(t, model.measure(state), home)
+        cmds.append((cmd.speed, cmd.yaw_rate))
+        for _ in range(25):
+            state = model.step(state, cmd.speed, cmd.yaw_rate, 0.001)
+        far = max(far, math.hypot(state.x - 3.0, state.y + 2.0))
+        t += 0.025
+    c = np.array(cmds)
+    assert far <= space
+    assert np.abs(c[:, 0]).max() <= plan.max_speed and np.abs(c[:, 1]).max() <= plan.max_yaw_rate
+    assert c[:, 1].max() == plan.max_yaw_rate and c[:, 1].min() == -plan.max_yaw_rate
+    assert c[:, 0].min() < -0.5                                # reversing
+    assert np.any((np.abs(c[:, 0]) > 1.5) & (np.abs(c[:, 1]) == plan.max_yaw_rate))  # coupling
+    # The script got to its turns at full speed (in 5 m the returns take longer than in 10 m,
+    # where it runs to its end), and, when it ended, the rover stands at home.
+    labels = [seg.label for seg in tracker.segments]
+    assert tracker.index > labels.index("coupling: figure eight at full speed")
+    if tracker.phase == "done":
+        assert math.hypot(state.x - 3.0, state.y + 2.0) < 1.0 and abs(state.v) < 0.05
+    assert space < 10 or tracker.phase == "done"
+
+
+# --------------------------------------------------------------------------- real logs
+
+@pytest.fixture(scope="module")
+def vehicle_file(tmp_path_factory) -> Path:
+    path = tmp_path_factory.mktemp("vehicle") / "true.toml"
+    save(VehicleFile(params=TRUE, name="test vehicle"), path)
+    return path
+
+
+def check_recovered(params: dict, rel: float = 0.15) -> None:
+    """The identified file's figures against TRUE, for what any log of ours excites."""
+    s, w = params["speed"], params["turn_rate"]
+    assert within(s["accel_max_m_s2"], TRUE.max_accel, rel), s
+    assert within(w["accel_max_rad_s2"], TRUE.max_yaw_accel, rel), w
+    assert within(w["max_rad_s"], TRUE.max_yaw_rate, rel), w
+    assert abs(w["delay_s"] - TRUE.yaw_delay) <= 0.05, w
+
+
+def test_identify_a_companion_run_log_end_to_end(vehicle_file, tmp_path):
+    mission = ellipse_mission(tmp_path / "ellipse.toml", 40.0, f_r=0.12)
+    logs = tmp_path / "logs"
+    with PlantProcess("--lockstep", "--vehicle", str(vehicle_file)) as plant:
+        run = companion("run", "--connect", f"udpin:127.0.0.1:{plant.port}", "--arm", "--json",
+                        "-q", "--no-zenoh", "--mission", str(mission), "--log-dir", str(logs),
+                        "--max-yaw-rate", "3")
+    assert run.returncode == 0, run.stderr
+    flown = json.loads(run.stdout.strip().splitlines()[-1])
+    out, plots = tmp_path / "vehicle.toml", tmp_path / "plots"
+    p = companion("identify", flown["tlog"], "--out", str(out), "--check", flown["csv"],
+                  "--plot", str(plots), "--json")
+    assert p.returncode == 0, p.stderr
+    r = json.loads(p.stdout)
+    check_recovered(r["params"])
+    assert r["rms"]["speed_m_s"] < 0.05 and r["rms"]["yaw_rate_rad_s"] < 0.05
+    assert r["check"]["log"] == flown["csv"] and r["check"]["yaw_rate_rad_s"] < 0.15
+    assert r["fit_time_s"] < 60.0 and r["out"] == str(out)
+    assert set(r["undetermined"]) == {k for k, v in r["status"].items() if v != "fitted"}
+    written = load(out)
+    # (the file keeps 6 significant digits)
+    assert written.params.max_accel == pytest.approx(r["params"]["speed"]["accel_max_m_s2"],
+                                                     rel=1e-5)
+    assert written.fit["speed_rms_m_s"] == pytest.approx(r["rms"]["speed_m_s"], rel=1e-5)
+    assert "check_yaw_rate_rms_rad_s" in written.fit and written.source["log"] == flown["tlog"]
+    header = out.read_text().splitlines()[0]
+    assert header.startswith("# pzc-rover vehicle file, written by `companion identify ")
+    assert flown["tlog"] in header
+    assert all(Path(f).stat().st_size > 10_000 for f in r["figures"]) and len(r["figures"]) == 2
+    # The plain-text report says the same, and names what the log left undetermined.
+    text = companion("identify", flown["tlog"], "--out", str(tmp_path / "again.toml"))
+    assert text.returncode == 0 and "RMS         speed" in text.stdout
+    assert "undetermined" in text.stdout
+
+
+def test_live_identify_stays_within_space_ends_in_hold_and_writes_the_file(vehicle_file,
+                                                                         tmp_path):
+    out, logs = tmp_path / "live.toml", tmp_path / "logs"
+    with PlantProcess("--lockstep", "--vehicle", str(vehicle_file),
+                      "--start", "4", "-3", "2.0") as plant:
+        p = companion("identify", "--connect", f"udpin:127.0.0.1:{plant.port}", "--arm",
+                      "--space", "6", "--out", str(out), "--json", "--no-zenoh",
+                      "--log-dir", str(logs), timeout=240.0)
+        # The vehicle's own word, after the companion has gone: it is in HOLD.
+        with Pilot(plant.port) as pilot:
+            assert pilot.wait("HEARTBEAT", 5.0).custom_mode == 4
+    assert p.returncode == 0, p.stderr
+    r = json.loads(p.stdout)
+    flight = r["flight"]
+    assert flight["reason"] == "mission_done" and flight["hold_confirmed"]
+    assert flight["duration_s"] <= 90.0
+    assert flight["max_distance_m"] <= 6.0
+    check_recovered(r["params"], rel=0.1)
+    assert within(r["params"]["speed"]["decel_max_m_s2"], TRUE.decel, 0.1)
+    assert within(r["params"]["turn_rate"]["decel_max_rad_s2"], TRUE.yaw_decel, 0.1)
+    assert abs(r["params"]["speed"]["delay_s"] - TRUE.speed_delay) <= 0.05
+    assert r["rms"]["speed_m_s"] < 0.05 and r["rms"]["yaw_rate_rad_s"] < 0.05
+    # Independently of the companion: the vehicle's own reports in the log.
+    frames, bad = read_tlog(Path(flight["tlog"]))
+    assert bad == 0
+    poses = [(m.x, m.y) for _, m in frames if m.get_type() == "LOCAL_POSITION_NED"]
+    x0, y0 = poses[0]
+    assert max(math.hypot(x - x0, y - y0) for x, y in poses) <= 6.0
+    asked = {m.param_id for _, m in frames if m.get_type() == "PARAM_REQUEST_READ"}
+    assert {"ATC_ACCEL_MAX", "ATC_STR_ACC_MAX", "ATC_STR_RAT_MAX"} <= asked
+    written = load(out)
+    assert written.params.max_yaw_accel == pytest.approx(
+        r["params"]["turn_rate"]["accel_max_rad_s2"], rel=1e-5)
+    assert "--connect" in written.source["command"] and written.source["log"] == flight["tlog"]
+
+
+# --------------------------------------------------------------------------- one-line errors
+
+def _tlog(path: Path, messages) -> Path:
+    """A .tlog as pymavlink writes one: 8-byte big-endian microseconds, then the frame."""
+    mav = mavlink2.MAVLink(None, srcSystem=1, srcComponent=1)
+    with open(path, "wb") as f:
+        for k, msg in enumerate(messages):
+            f.write(struct.pack(">Q", 1_700_000_000_000_000 + 25_000 * k) + msg.pack(mav))
+    return path
+
+
+def test_a_log_without_setpoints_is_one_line(tmp_path):
+    msgs = [mavlink2.MAVLink_heartbeat_message(10, 3, 0, 0, 0, 3)]
+    for k in range(400):
+        msgs.append(mavlink2.MAVLink_attitude_message(1000 + 25 * k, 0, 0, 0.1, 0, 0, 0))
+        msgs.append(mavlink2.MAVLink_local_position_ned_message(1000 + 25 * k, 0.01 * k, 0, 0,
+                                                                0.4, 0, 0))
+    log = _tlog(tmp_path / "telemetry_only.tlog", msgs)
+    one_line_error(companion("identify", str(log), "--out", str(tmp_path / "v.toml")),
+                   "no setpoints")
+    assert not (tmp_path / "v.toml").exists()
+
+
+def test_a_too_short_log_is_one_line(tmp_path):
+    rows = [",".join(CSV_FIELDS)]
+    for k in range(30):
+        t = 0.025 * k
+        numeric = [t, t, 0.5 * t, 0, 0, 0.5 * t, 0, 0, 0, 0, 0, 0, 0.5, 0, 0.5, 0.1]
+        rows.append(",".join(f"{v:g}" for v in numeric) + ",GUIDED,1,,")
+    log = tmp_path / "short.csv"
+    log.write_text("\n".join(rows) + "\n")
+    one_line_error(companion("identify", str(log), "--out", str(tmp_path / "v.toml")),
+                   "too short")
+
+
+def test_malformed_logs_are_one_line(tmp_path):
+    garbage = tmp_path / "garbage.tlog"
+    garbage.write_bytes(bytes(range(256)) * 40)
+    one_line_error(companion("identify", str(garbage), "--out", str(tmp_path / "v.toml")),
+                   "garbage.tlog")
+    not_ours = tmp_path / "other.csv"
+    not_ours.write_text("time,lat,lon\n1,2,3\n")
+    one_line_error(companion("identify", str(not_ours), "--out", str(tmp_path / "v.toml")),
+                   "not a companion flight-log CSV")
+    one_line_error(companion("identify", str(tmp_path / "missing.tlog"), "--out",
+                             str(tmp_path / "v.toml")), "no such file")
+
+
+def test_log_or_connect_and_a_writable_out(tmp_path):
+    one_line_error(companion("identify", "--out", str(tmp_path / "v.toml")), "one of them")
+    one_line_error(companion("identify", "x.tlog", "--connect",
+                             f"udpin:127.0.0.1:{free_udp_port()}", "--out", "v.toml"),
+                   "one of them")
+    one_line_error(companion("identify", "x.tlog", "--out", str(tmp_path / "no/dir/v.toml")),
+                   "no such directory")
+
+
+# --------------------------------------------------------------------------- the real autopilot
+
+@pytest.mark.sitl
+@pytest.mark.slow
+def test_live_identify_on_ardupilot_sitl_finds_its_own_limits(ardupilot, tmp_path):
+    """Stock rover-skid at 5 x real time: the manoeuvre within 10 m, HOLD at the end, and the
+    acceleration and turn-rate acceleration limits within 15 % of ArduPilot's (ATC_ACCEL_MAX 1
+    m/s^2, ATC_STR_ACC_MAX 120 deg/s^2), read from the vehicle as priors."""
+    sitl = ardupilot(speedup=5)
+    out = tmp_path / "skid.toml"
+    p = companion("identify", "--connect", sitl.url(0), "--arm", "--out", str(out), "--json",
+                  "--no-zenoh", "--log-dir", str(tmp_path / "logs"), timeout=300.0)
+    assert p.returncode == 0, p.stderr
+    r = json.loads(p.stdout)
+    assert r["flight"]["reason"] == "mission_done" and r["flight"]["hold_confirmed"]
+    assert r["flight"]["max_distance_m"] <= 10.0
+    assert r["autopilot_params"]["ATC_ACCEL_MAX"] == 1.0
+    assert within(r["params"]["speed"]["accel_max_m_s2"], 1.0, 0.15)
+    assert within(r["params"]["turn_rate"]["accel_max_rad_s2"], math.radians(120.0), 0.15)
+    assert r["rms"]["speed_m_s"] < 0.1 and r["rms"]["yaw_rate_rad_s"] < 0.1
+    assert load(out).source["ATC_STR_ACC_MAX"] == 120.0
