@@ -6,6 +6,7 @@ import argparse
 import json
 import math
 import sys
+from pathlib import Path
 from typing import Any
 
 from ..errors import UserError
@@ -119,7 +120,11 @@ def register(subparsers) -> None:
     p.add_argument("--arm", action="store_true",
                    help="arm the vehicle (retrying once a second); default: wait for it")
     add_gain_arguments(p)
-    v = p.add_argument_group("vehicle (to pick shipped tuned gains)")
+    v = p.add_argument_group("vehicle (to pick tuned gains)")
+    v.add_argument("--vehicle", metavar="FILE",
+                   help="the rover's vehicle file (companion identify / calibrate): its gains "
+                        "(found beside it, else tuned now and stored there) and its limits; "
+                        "default: the mission's [vehicle] file")
     v.add_argument("--w-c", type=positive, dest="w_c", metavar="RAD_S",
                    help="speed-loop bandwidth (default: the mission's [vehicle], else 20)")
     v.add_argument("--d-cen", type=non_negative, dest="d_cen", metavar="M",
@@ -138,8 +143,33 @@ def register(subparsers) -> None:
     p.set_defaults(func=run)
 
 
+def vehicle_choice(args, mission, log) -> tuple[object, object]:
+    """The gains and limits of the vehicle file (``--vehicle``, else the mission's), or
+    (None, None). Gains are looked up only when no --gains file overrides them; tuning on the
+    spot shows a progress bar."""
+    path = getattr(args, "vehicle", None) or mission.vehicle_file
+    if path is None:
+        return None, None
+    from ..sim import vehicle_file
+    from ..sim.vehicle_gains import gains_for, vehicle_limits
+    vehicle = vehicle_file.load(path).params
+    limits = vehicle_limits(vehicle)
+    if args.gains:
+        return None, limits
+    rate = args.rate or mission.rate_hz or 40.0
+    command = f"companion run --vehicle {path} (tuned on first use)"
+    from ..progress import progress_bar
+    bar, progress = progress_bar(f"tuning for {Path(path).name}",
+                                  not getattr(args, "quiet", False))
+    try:
+        return gains_for(path, rate, command, progress, log), limits
+    finally:
+        if bar is not None:
+            bar.close()
+
+
 def settings_from_args(args, mission, url: str, key: bytes | None = None,
-                       tlog: str | None = None):
+                       tlog: str | None = None, vehicle: tuple = (None, None)):
     from ..live.link import LinkConfig
     from ..live.runner import RunnerConfig
     from ..live.session import GainFlags, RunSettings
@@ -157,7 +187,8 @@ def settings_from_args(args, mission, url: str, key: bytes | None = None,
         gain_flags=GainFlags(args.k_df, args.lambda_f, args.k_dc, args.lambda_c),
         max_speed=args.max_speed, max_yaw_rate=args.max_yaw_rate,
         realtime=getattr(args, "realtime", False),
-        w_c=getattr(args, "w_c", None), d_cen=getattr(args, "d_cen", None))
+        w_c=getattr(args, "w_c", None), d_cen=getattr(args, "d_cen", None),
+        vehicle_gains=vehicle[0], vehicle_limits=vehicle[1])
 
 
 def logger(prefix: str, quiet: bool):
@@ -230,6 +261,7 @@ def run(args) -> int:
     mission = load_mission(args.mission, args.origin)
     key = signing_key(args)
     log = logger("companion run", args.quiet)
+    vehicle = vehicle_choice(args, mission, log)     # before connecting: may tune for a minute
     switch = StopSwitch()
     restore = install_signals(switch)
     bus, log_sinks = None, []
@@ -238,7 +270,7 @@ def run(args) -> int:
         # The flight log once every flag has been checked: a bad one leaves no empty log.
         paths, log_sinks = open_flight_log(args, "run", log)
         settings = settings_from_args(args, mission, args.connect, key,
-                                      paths.tlog if paths else None)
+                                      paths.tlog if paths else None, vehicle)
         sinks = list(log_sinks)
         if args.progress:
             sinks.append(ProgressSink(mission.duration, mission.name))

@@ -21,6 +21,7 @@ import sys
 from pathlib import Path
 
 from ..errors import UserError, require_positive
+from ..progress import progress_bar
 
 
 def register(subparsers) -> None:
@@ -133,7 +134,7 @@ def run(args) -> int:
                      limits=Limits(max_speed=args.max_speed, max_yaw_rate=args.max_yaw_rate),
                      max_accel=args.max_accel, population=args.population, rounds=args.rounds,
                      seed=args.seed)
-    bar, progress = _progress_bar(f"tune {args.rate:g} Hz", not args.no_progress)
+    bar, progress = progress_bar(f"tune {args.rate:g} Hz", not args.no_progress)
     try:
         result = tune(cfg, progress)
     finally:
@@ -172,20 +173,6 @@ def _print_gains(d: dict) -> None:
                                         f"tau {p['lead_tau']:.3g} s, max gain {p['lead_max_gain']:.3g}"))
 
 
-def _progress_bar(label: str, enabled: bool):
-    """A tqdm bar on stderr and a ``progress(fraction)`` that moves it (or no bar)."""
-    if not enabled:
-        return None, None
-    from tqdm import tqdm
-    bar = tqdm(total=100, desc=label, file=sys.stderr, mininterval=0.5,
-               bar_format="{desc} {percentage:3.0f}%|{bar}| {elapsed}<{remaining}")
-
-    def progress(frac: float) -> None:
-        if 100 * frac > bar.n:
-            bar.update(round(100 * frac - bar.n, 1))
-    return bar, progress
-
-
 def mission_references(paths: list[str]) -> tuple[list[tuple[str, object]], float]:
     """Missions as the robust tuner's references (``start`` frame at the simulated rover's
     pose; other frames moved so the path begins there) and the duration to simulate."""
@@ -219,7 +206,7 @@ def run_robust(args) -> int:
     refs, duration = mission_references(args.mission)
     cfg = config_for(args.vehicle, rate, refs, duration, population=args.population,
                      rounds=args.rounds, neighbours=args.neighbours, seed=args.seed)
-    bar, progress = _progress_bar(f"robust tune {rate:g} Hz", not args.no_progress)
+    bar, progress = progress_bar(f"robust tune {rate:g} Hz", not args.no_progress)
     try:
         result = robust_tune(cfg, progress)
     except RuntimeError as exc:

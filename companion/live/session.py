@@ -58,6 +58,8 @@ class RunSettings:
     w_c: float | None = None           # the vehicle's, to pick shipped tuned gains
     d_cen: float | None = None
     realtime: bool = False             # --realtime: SCHED_FIFO for the loop
+    vehicle_gains: Any = None          # TunedGains for --vehicle / the mission's [vehicle] file
+    vehicle_limits: Limits | None = None   # that vehicle's top speed and turn rate
 
 
 REALTIME_PRIORITY = 10   # low among real-time tasks: above every normal process, below the kernel's
@@ -122,12 +124,15 @@ def choose_gains(s: RunSettings, rate: float) -> Choice:
     file = gains_mod.load(s.gains_file) if s.gains_file else None
     w_c, d_cen = vehicle_keys(s)
     shipped = gains_mod.find_tuned(rate, w_c, d_cen) or gains_mod.find_tuned(rate, w_c)
+    own = s.vehicle_gains
     filt, fsrc = ((file.filter, f"--gains {s.gains_file}") if file else
                   (m.filter_gains, f"mission {m.source}") if m.filter_gains else
+                  (own.filter, f"vehicle {own.source}") if own else
                   (shipped.filter, f"shipped {shipped.source}") if shipped else
                   (FilterGains(), "paper"))
     pzc, psrc = ((file.pzc, f"--gains {s.gains_file}") if file else
                  (m.pzc_gains, f"mission {m.source}") if m.pzc_gains else
+                 (own.pzc, f"vehicle {own.source}") if own else
                  (shipped.pzc, f"shipped {shipped.source}") if shipped else
                  (PZCGains(), "paper"))
     f = s.gain_flags
@@ -140,11 +145,12 @@ def choose_gains(s: RunSettings, rate: float) -> Choice:
                               if v is not None})
         psrc = f"flags over {psrc}"
     source = fsrc if fsrc == psrc else f"filter: {fsrc}; pzc: {psrc}"
-    return Choice(filt, pzc, source, shipped.rate_hz if shipped else None)
+    tuned_rate = own.rate_hz if own else (shipped.rate_hz if shipped else None)
+    return Choice(filt, pzc, source, tuned_rate)
 
 
 def choose_limits(s: RunSettings) -> Limits:
-    base = s.mission.limits or DEFAULT_LIMITS
+    base = s.mission.limits or s.vehicle_limits or DEFAULT_LIMITS
     try:
         return Limits(max_speed=s.max_speed if s.max_speed is not None else base.max_speed,
                       max_yaw_rate=(s.max_yaw_rate if s.max_yaw_rate is not None
