@@ -21,6 +21,7 @@ COMMANDS = [
     "paper_table",
     "tune",
     "identify",
+    "calibrate",
     "mission",
     "simulate",
     "monitor",

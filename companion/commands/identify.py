@@ -53,8 +53,16 @@ def register(subparsers) -> None:
     p.add_argument("--check", metavar="LOG2", help="another log to report the model's RMS on")
     p.add_argument("--plot", metavar="DIR", help="draw measured against model (PNG) into DIR")
     p.add_argument("--name", metavar="NAME", help="the vehicle's name in the file")
-    live = p.add_argument_group("live: fly the excitation manoeuvre and fit it")
-    live.add_argument("--connect", metavar="URL", help="pymavlink connection string")
+    add_live_arguments(p, "live: fly the excitation manoeuvre and fit it")
+    p.set_defaults(func=run)
+
+
+def add_live_arguments(p: argparse.ArgumentParser, title: str, required: bool = False) -> None:
+    """The flags of a live identification (identify --connect, calibrate): the link, the
+    manoeuvre's space and limits, run's timeouts, logs, signing, output and Zenoh flags."""
+    live = p.add_argument_group(title)
+    live.add_argument("--connect", metavar="URL", required=required,
+                      help="pymavlink connection string")
     live.add_argument("--sysid", type=int, metavar="N", help="system id of the vehicle")
     live.add_argument("--arm", action="store_true",
                       help="arm the vehicle (retrying once a second); default: wait for it")
@@ -74,7 +82,8 @@ def register(subparsers) -> None:
     from .zenoh_args import add_zenoh_arguments
     add_zenoh_arguments(p)
     # run's settings builder reads these; identify flies no PZC gains.
-    p.set_defaults(func=run, gains=None, k_df=None, lambda_f=None, k_dc=None, lambda_c=None)
+    p.set_defaults(gains=None, k_df=None, lambda_f=None, k_dc=None, lambda_c=None,
+                   log_path=None, check=None, plot=None, name=None)
 
 
 def _command_line() -> str:
@@ -208,6 +217,15 @@ def _mission(space: float):
 
 
 def _live(args) -> int:
+    code, report, flight = fly_and_fit(args)
+    if report is not None:
+        _print(report, args.json, flight)
+    return code
+
+
+def fly_and_fit(args):
+    """Fly the manoeuvre through run's live loop, then fit its log: (exit code, report or None
+    when stopped before the manoeuvre ended, the flight's summary)."""
     from ..bus import open_bus, shut
     from ..ident.excite import Excitation, Plan
     from ..ident.priors import AUTOPILOT_PARAMS, from_autopilot
@@ -267,7 +285,7 @@ def _live(args) -> int:
         if switch.reason is not None:
             log(f"stopped by {switch.reason} before the manoeuvre ended: not fitted"
                 + ("" if scratch else f" (the log is {paths.tlog})"))
-            return result.exit_code
+            return result.exit_code, None, flight
         for sink in log_sinks:
             sink.close()                 # the CSV complete before anything reads the logs
         report = identify_log(paths.tlog, _offline_args(args), read, log,
@@ -279,8 +297,7 @@ def _live(args) -> int:
             sink.close()
         if scratch is not None:
             scratch.cleanup()
-    _print(report, args.json, flight)
-    return result.exit_code
+    return result.exit_code, report, flight
 
 
 def _offline_args(args):
