@@ -7,9 +7,11 @@ from __future__ import annotations
 
 import json
 import math
+import signal
 import struct
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import numpy as np
@@ -260,6 +262,53 @@ def test_live_identify_stays_within_space_ends_in_hold_and_writes_the_file(vehic
     assert written.params.max_yaw_accel == pytest.approx(
         r["params"]["turn_rate"]["accel_max_rad_s2"], rel=1e-5)
     assert "--connect" in written.source["command"] and written.source["log"] == flight["tlog"]
+
+
+def test_sigterm_stops_the_manoeuvre_in_hold_and_fits_nothing(vehicle_file, tmp_path):
+    out = tmp_path / "v.toml"
+    with PlantProcess("--speedup", "2", "--vehicle", str(vehicle_file)) as plant:
+        proc = subprocess.Popen(
+            [sys.executable, "-m", "companion", "identify", "--connect",
+             f"udpin:127.0.0.1:{plant.port}", "--arm", "--out", str(out), "--no-zenoh",
+             "--log-dir", str(tmp_path / "logs")],
+            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=ROOT)
+        try:
+            seen = ""
+            while "tracking 'identify excitation'" not in seen:
+                line = proc.stderr.readline()
+                assert line, f"identify ended before tracking:\n{seen}"
+                seen += line
+            time.sleep(3.0)
+            proc.send_signal(signal.SIGTERM)
+            _, err = proc.communicate(timeout=15.0)
+        finally:
+            if proc.poll() is None:
+                proc.kill()
+                proc.communicate()
+        assert proc.returncode == 0 and "Traceback" not in err, err
+        assert "stopped by SIGTERM before the manoeuvre ended: not fitted" in err
+        with Pilot(plant.port) as pilot:
+            assert pilot.wait("HEARTBEAT", 5.0).custom_mode == 4          # HOLD
+            speeds = [math.hypot(m.vx, m.vy) for m in
+                      pilot.collect(("LOCAL_POSITION_NED",), 3.0)[-10:]]
+            assert max(speeds) < 0.05
+    assert not out.exists()
+
+
+def test_a_pilot_takeover_ends_the_manoeuvre_and_what_was_flown_is_fitted(vehicle_file,
+                                                                          tmp_path):
+    out = tmp_path / "v.toml"
+    with PlantProcess("--lockstep", "--vehicle", str(vehicle_file), "--takeover-at", "30") \
+            as plant:
+        p = companion("identify", "--connect", f"udpin:127.0.0.1:{plant.port}", "--arm",
+                      "--out", str(out), "--json", "--no-zenoh", "--no-log", timeout=240.0)
+    assert p.returncode == 3, p.stderr
+    r = json.loads(p.stdout)
+    assert r["flight"]["reason"].startswith("pilot_override")
+    assert r["flight"]["tlog"] is None and r["log"].startswith("the manoeuvre flown")
+    # The turn-rate part was flown before the pilot took over: its limits are found.
+    assert within(r["params"]["turn_rate"]["accel_max_rad_s2"], TRUE.max_yaw_accel, 0.1)
+    assert load(out).fit["samples"] == r["samples"]
 
 
 # --------------------------------------------------------------------------- one-line errors
