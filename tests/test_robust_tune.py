@@ -196,3 +196,18 @@ def test_yaw_braking_rescues_gains_that_limit_cycle_and_the_split_preview_tighte
     assert ev.rejected[2] == "" and ev.objective[2] < ev.objective[1] - 0.5
     assert ev.steady_rms[2, 0, 2] < 0.25 * ev.steady_rms[1, 0, 2]   # 0.08 Hz on the vehicle
 
+
+
+def test_gains_files_keep_every_law_parameter(tmp_path):
+    # Every field of PZCGains survives a gains file: a field dropped on reading would fly other
+    # gains than the ones tuned (it happened: the braking curves came back as 0).
+    from dataclasses import fields
+    pzc = PZCGains(0.7, 0.6, k_dc_yaw=2.0, lambda_c_yaw=2.5, velocity_ff=True,
+                   heading_rate_ff=True, accel_ff=0.34, lead_tau=0.2, lead_max_gain=3.0,
+                   speed_law="paper", accel_ff_turn=0.005, brake_accel=0.21, brake_yaw_accel=0.98)
+    defaults = PZCGains(0.7, 0.6)
+    changed = [f.name for f in fields(PZCGains) if getattr(pzc, f.name) != getattr(defaults, f.name)]
+    assert len(changed) == len(fields(PZCGains)) - 2          # all but k_dc, lambda_c
+    path = tmp_path / "g.toml"
+    gains_mod.TunedGains(FilterGains(900.0, 50.0), pzc, rate_hz=40.0, w_c=5.0).save(path)
+    assert gains_mod.load(path).pzc == pzc

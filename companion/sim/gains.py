@@ -124,10 +124,12 @@ def parse(data: dict, where: str) -> TunedGains:
             if kwargs[key] < (0 if key == "lead_tau" else 1):
                 raise UserError(f"{where}: pzc.{key} must be >= {0 if key == 'lead_tau' else 1}, "
                                 f"not {kwargs[key]!r}")
-    if "accel_ff" in pzc:
-        kwargs["accel_ff"] = _number(pzc, "accel_ff", f"{where}: pzc", positive=False)
-        if kwargs["accel_ff"] < 0:
-            raise UserError(f"{where}: pzc.accel_ff must be >= 0 s, not {kwargs['accel_ff']!r}")
+    # seconds and accelerations that are off at 0 (accel_ff_turn absent: as accel_ff)
+    for key in ("accel_ff", "accel_ff_turn", "brake_accel", "brake_yaw_accel"):
+        if key in pzc:
+            kwargs[key] = _number(pzc, key, f"{where}: pzc", positive=False)
+            if kwargs[key] < 0:
+                raise UserError(f"{where}: pzc.{key} must be >= 0, not {kwargs[key]!r}")
     for key in ("velocity_ff", "heading_rate_ff"):
         if key in pzc:
             if not isinstance(pzc[key], bool):

@@ -1,0 +1,107 @@
+"""The whole flow on ArduPilot Rover SITL, against ArduPilot's own following, in one session.
+
+Boots ``ardurover`` (``rover-skid``; ``--param NAME=VALUE`` for another vehicle), then
+
+1. ``companion calibrate --connect ... --out DIR --arm``: identify live, tune;
+2. ``companion run --vehicle DIR/vehicle.toml`` on the paper's ellipse at each ``--f-r``;
+3. ArduPilot's GUIDED position-target following (:mod:`native_follow`) on the same ellipses,
+
+and prints, per speed, the steady RMS over the last 30 s of each and the share of that time the
+companion's yaw-rate setpoint sat at its limit (a limit cycle shows as a large share).
+
+    python benchmarks/sitl_tracking.py [--param ATC_ACCEL_MAX=0.5 ...] [--speedup 3] [--json]
+
+Needs ``ARDUPILOT_SITL`` (or ``ARDUPILOT_DIR``); prints figures, asserts nothing.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "tests"))
+sys.path.insert(0, str(ROOT / "benchmarks"))
+
+from sim_to_real import MISSIONS, at_limit_share  # noqa: E402
+
+
+def companion(argv: list[str], timeout: float) -> dict:
+    p = subprocess.run([sys.executable, "-m", "companion", *argv], capture_output=True,
+                       text=True, timeout=timeout, cwd=ROOT)
+    if p.returncode != 0:
+        raise SystemExit(f"companion {argv[0]}: exit {p.returncode}: {p.stderr.strip()[-600:]}")
+    return json.loads(p.stdout.strip().splitlines()[-1])
+
+
+def main() -> int:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--param", action="append", default=[], metavar="NAME=VALUE",
+                   help="an ArduPilot parameter for this vehicle (repeatable)")
+    p.add_argument("--f-r", default="0.04,0.08,0.12")
+    p.add_argument("--speedup", type=float, default=1.0, help="SITL speedup (default 1)")
+    p.add_argument("--keep", metavar="DIR", help="keep vehicle.toml, gains.toml and logs here")
+    p.add_argument("--json", action="store_true")
+    args = p.parse_args()
+    from ardupilot_harness import ArduPilotSITL
+    from native_follow import follow
+    from companion import mission as missions
+
+    params = {k: float(v) for k, v in (item.split("=", 1) for item in args.param)}
+    speeds = [float(v) for v in args.f_r.split(",")]
+    rows, out = [], {}
+    with tempfile.TemporaryDirectory(prefix="sitl-tracking-") as tmp:
+        work = Path(args.keep) if args.keep else Path(tmp)
+        work.mkdir(parents=True, exist_ok=True)
+        sitl = ArduPilotSITL(Path(tmp) / "sitl", speedup=args.speedup, params=params).start()
+        try:
+            url = sitl.url(0)
+            t0 = time.monotonic()
+            cal = companion(["calibrate", "--connect", url, "--out", str(work / "rover"),
+                             "--arm", "--no-zenoh", "--log-dir", str(work / "logs"), "--json"],
+                            timeout=900)
+            out["calibrate_wall_s"] = time.monotonic() - t0
+            out["vehicle"] = cal["vehicle"]
+            ident = cal["identify"]
+            out["identified"] = ident["params"]
+            out["identify_rms"] = ident["rms"]
+            vehicle = cal["vehicle"]
+            from companion.sim import vehicle_file
+            yaw_limit = float(vehicle_file.load(vehicle).params.max_yaw_rate)
+            for f_r in speeds:
+                r = companion(["run", "--connect", url, "--vehicle", vehicle, "--mission",
+                               str(ROOT / "missions" / MISSIONS[f_r]), "--arm", "--json",
+                               "--no-zenoh", "--log-dir", str(work / "logs")], timeout=600)
+                rows.append({"f_r": f_r, "companion_rms": r["steady_rms"],
+                             "at_limit": at_limit_share(r["csv"], yaw_limit),
+                             "gains": r["gains_source"]})
+                print(json.dumps(rows[-1]), file=sys.stderr, flush=True)
+            for row in rows:
+                native = follow(url, missions.paper_ellipse(row["f_r"], 60.0), arm=True)
+                row["ardupilot_rms"] = native["steady_rms"]
+                print(json.dumps(row), file=sys.stderr, flush=True)
+        finally:
+            sitl.stop()
+    out["params"], out["rows"] = params, rows
+    if args.json:
+        print(json.dumps(out))
+        return 0
+    print(f"ArduPilot SITL rover-skid {params or 'stock'}: calibrate {out['calibrate_wall_s']:.0f} s "
+          f"wall; identified accel {out['identified']['speed']['accel_max_m_s2']:.3g} m/s^2, "
+          f"turn-rate accel {out['identified']['turn_rate']['accel_max_rad_s2']:.3g} rad/s^2")
+    print(f"{'f_r':>5s} {'companion m':>12s} {'at limit %':>11s} {'ArduPilot m':>12s}")
+    for r in rows:
+        print(f"{r['f_r']:5.2f} {r['companion_rms']:12.3f} {100 * r['at_limit']:11.1f} "
+              f"{r.get('ardupilot_rms', math.nan):12.3f}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
