@@ -116,6 +116,23 @@ def run(args) -> int:
 
     mission = _mission(args)
     params = vehicle_file.load(args.vehicle).params if args.vehicle else vehicle_file.preset(args.preset)
+    log = logger("companion demo", args.quiet)
+    # An identified vehicle (--vehicle, or a preset made from one) flies the gains tuned for it,
+    # as `companion run --vehicle` does: shipped beside the preset, else tuned now.
+    own_file = args.vehicle or vehicle_file.preset_path(args.preset)
+    own_gains = None
+    if own_file is not None and not args.gains:
+        from ..progress import progress_bar
+        from ..sim.vehicle_gains import gains_for
+        bar, progress = progress_bar(f"tuning for {Path(own_file).name}",
+                                     not args.quiet and not args.json)
+        try:
+            own_gains = gains_for(own_file, args.rate or mission.rate_hz or 40.0,
+                                  f"companion demo --vehicle {own_file} (tuned on first use)",
+                                  progress, log)
+        finally:
+            if bar is not None:
+                bar.close()
     # The companion's limits: the flags, else the mission's, else the plant's own (so the
     # anti-windup knows where the vehicle saturates), else the default ceiling.
     base = mission.limits or DEFAULT_LIMITS
@@ -123,14 +140,14 @@ def run(args) -> int:
     max_yaw_rate = args.max_yaw_rate or min(base.max_yaw_rate, params.max_yaw_rate)
     port = _free_port()
     key = signing_key(args)
-    log = logger("companion demo", args.quiet)
     paths, log_sinks = None, []
     settings = RunSettings(
         link=LinkConfig(url=f"udpin:127.0.0.1:{port}", heartbeat_timeout=15.0,
                         signing_key=key),
         mission=mission, runner=RunnerConfig(arm=True), rate=args.rate, gains_file=args.gains,
         gain_flags=GainFlags(args.k_df, args.lambda_f, args.k_dc, args.lambda_c),
-        max_speed=max_speed, max_yaw_rate=max_yaw_rate, w_c=params.w_c, d_cen=args.d_cen)
+        max_speed=max_speed, max_yaw_rate=max_yaw_rate, w_c=params.w_c, d_cen=args.d_cen,
+        vehicle_gains=own_gains)
     rate = requested_rate(settings)
     argv = plant_argv(args, port, rate)
     trace = TraceSink()

@@ -176,6 +176,12 @@ VEHICLES_DIR = Path(__file__).parent / "vehicles"
 PRESETS = ("paper", "stock", "ardupilot-skid")
 
 
+def preset_path(name: str) -> Path | None:
+    """The shipped vehicle file behind a preset name (None for the built-in models)."""
+    return VEHICLES_DIR / f"{name.replace('-', '_')}.toml" if name not in ("paper", "stock") \
+        else None
+
+
 def preset(name: str) -> RoverParams:
     """The parameters of a named vehicle (:data:`PRESETS`)."""
     if name == "paper":
