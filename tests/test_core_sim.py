@@ -38,19 +38,24 @@ ARDUPILOT_LIKE = RoverParams(d_cen=0.2, w_c=3.0, w_c_yaw=8.0, max_speed=4.0, max
                              max_accel=1.0, max_yaw_accel=2.0, turn_speed_coupling=0.4)
 
 
-def test_rate_limited_step_is_exact_against_fine_rk4():
+@pytest.mark.parametrize("speed_turn", [0.0, 0.3])
+def test_rate_limited_step_is_exact_against_fine_rk4(speed_turn):
     # Ramp-then-exponential closed forms per channel, through speed reversals, turn-rate
-    # reversals at the limit and coupling, against RK4 at a 20x finer step.
-    model = RoverModel(ARDUPILOT_LIKE)
+    # reversals at the limit and both couplings, against RK4 at a 20x finer step (the clamp
+    # from the state at the start of each 1 ms step, as ``step`` takes it).
+    model = RoverModel(ARDUPILOT_LIKE.with_(speed_turn_coupling=speed_turn))
     a = b = RoverState(0.0, 0.0, 0.3, 0.5, -0.2)
+    clipped = 0
     for k in range(6000):
         u, w = 3.0 * math.sin(0.002 * k) + 1.0, 2.0 * math.cos(0.003 * k)
         a = model.step(a, u, w, 1e-3)
-        uc, wc = model.clamp_command(u, w, b.omega)
+        uc, wc = model.clamp_command(u, w, b.omega, b.v)
+        clipped += abs(wc) < min(abs(w), ARDUPILOT_LIKE.max_yaw_rate) - 1e-3
         for _ in range(20):
             b = model.step_rk4(b, uc, wc, 5e-5)
     for key in ("x", "y", "yaw", "v", "omega"):
         assert getattr(a, key) == pytest.approx(getattr(b, key), abs=1e-7)
+    assert (clipped > 100) == (speed_turn > 0)          # the speed-side clamp did bind
 
 
 def test_rate_limits_ramp_and_decel_differs_from_accel():
@@ -94,17 +99,58 @@ def test_skid_steer_coupling_takes_speed_while_turning():
     assert s.v == pytest.approx(3.0, abs=1e-6)
 
 
+def test_skid_steer_coupling_takes_turn_rate_at_speed():
+    # Full speed leaves (1 - c_w) of the turn rate, half of top speed (1 - c_w / 2); at rest
+    # the whole turn rate; the speed itself is not touched by c_w.
+    model = RoverModel(RoverParams(w_c=20.0, w_c_yaw=20.0, max_speed=4.0, max_yaw_rate=2.0,
+                                   speed_turn_coupling=0.15))
+    s = RoverState()
+    for _ in range(3000):
+        s = model.step(s, 10.0, 5.0, 1e-3)
+    assert s.v == pytest.approx(4.0) and s.omega == pytest.approx(2.0 * 0.85, abs=1e-6)
+    for _ in range(3000):
+        s = model.step(s, 2.0, -5.0, 1e-3)
+    assert s.v == pytest.approx(2.0) and s.omega == pytest.approx(-2.0 * 0.925, abs=1e-6)
+    for _ in range(3000):
+        s = model.step(s, 0.0, 5.0, 1e-3)
+    assert s.v == pytest.approx(0.0, abs=1e-9) and s.omega == pytest.approx(2.0, abs=1e-6)
+    assert not model.params.is_paper and RoverParams(speed_turn_coupling=0.0).is_paper
+    # Many vehicles at once, each with its own share.
+    shares = np.array([0.0, 0.15, 1.0])
+    _, w = RoverModel(RoverParams(max_speed=4.0, max_yaw_rate=2.0,
+                                  speed_turn_coupling=shares), 3).clamp_command(
+        np.full(3, 4.0), np.full(3, 3.0), np.zeros(3), np.array([4.0, -4.0, 2.0]))
+    assert w == pytest.approx([2.0, 1.7, 1.0])
+
+
+def test_robust_ensemble_perturbs_and_stacks_the_turn_rate_coupling():
+    # The robust tuner's neighbours carry c_w (+- the coupling spread, within [0, 1]) into the
+    # stacked batch parameters, per vehicle.
+    from companion.sim.robust import Spread, _stack_params, ensemble
+    vehicle = RoverParams(w_c=3.0, max_speed=3.0, max_yaw_rate=2.1, max_accel=1.0,
+                          turn_speed_coupling=0.3, speed_turn_coupling=0.1)
+    members = ensemble(vehicle, 8, Spread(coupling=0.15), 0.025, seed=2)
+    shares = [m.speed_turn_coupling for m in members]
+    assert shares[0] == 0.1 and shares[2] == 0.0                # the fixed corner: -0.15, clipped
+    assert all(0.0 <= c <= 0.25 + 1e-12 for c in shares) and len(set(shares[3:])) == 6
+    assert max(shares) > 0.1 and min(shares[3:]) < 0.1
+    stacked = _stack_params(members, 2, 1)
+    assert list(stacked.speed_turn_coupling) == [c for c in shares for _ in range(2)]
+
+
 def test_batch_vehicle_model_equals_one_vehicle_each():
-    # Per-vehicle delays, limits and coupling in one batch give each vehicle's own answer.
+    # Per-vehicle delays, limits and couplings in one batch give each vehicle's own answer.
     d_cen, w_c = np.array([0.0, 0.2, 0.3]), np.array([3.0, 3.0, 5.0])
     accel, delay = np.array([1.0, 1.0, 2.0]), np.array([0.0, 0.05, 0.1])
+    speed_turn = np.array([0.0, 0.15, 0.4])
     common = dict(max_speed=4.0, max_yaw_rate=2.1, max_yaw_accel=2.0, yaw_delay=0.04,
                   turn_speed_coupling=0.4)
     batch = RoverModel(RoverParams(d_cen=d_cen, w_c=w_c, max_accel=accel, speed_delay=delay,
-                                   **common), 3)
+                                   speed_turn_coupling=speed_turn, **common), 3)
     singles = [RoverModel(RoverParams(d_cen=float(d_cen[i]), w_c=float(w_c[i]),
                                       max_accel=float(accel[i]), speed_delay=float(delay[i]),
-                                      **common)) for i in range(3)]
+                                      speed_turn_coupling=float(speed_turn[i]), **common))
+               for i in range(3)]
     z = np.zeros(3)
     sb, ss = RoverState(z, z, z, z, z), [RoverState() for _ in range(3)]
     for k in range(3000):
@@ -117,7 +163,7 @@ def test_batch_vehicle_model_equals_one_vehicle_each():
 
 def test_channel_response_is_the_full_models():
     from companion.sim.response import respond
-    params = ARDUPILOT_LIKE.with_(speed_delay=0.05, yaw_delay=0.02)
+    params = ARDUPILOT_LIKE.with_(speed_delay=0.05, yaw_delay=0.02, speed_turn_coupling=0.2)
     t = np.arange(0.0, 20.0, 0.025)
     u = np.where(t % 10 < 5, 2.0, -1.0)
     w = np.where(t % 7 < 3, 1.5, -1.5)

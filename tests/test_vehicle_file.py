@@ -12,7 +12,8 @@ from companion.sim.plant import RoverParams
 
 FULL = RoverParams(d_cen=0.1, w_c=1 / 0.3, w_c_yaw=1 / 0.05, max_speed=4.0, max_yaw_rate=2.0944,
                    max_accel=1.0, max_decel=1.5, max_yaw_accel=2.09, max_yaw_decel=2.5,
-                   speed_delay=0.06, yaw_delay=0.04, turn_speed_coupling=0.3)
+                   speed_delay=0.06, yaw_delay=0.04, turn_speed_coupling=0.3,
+                   speed_turn_coupling=0.15)
 
 
 def test_round_trip_keeps_every_parameter(tmp_path):
@@ -21,10 +22,12 @@ def test_round_trip_keeps_every_parameter(tmp_path):
                                                fit={"speed_rms_m_s": 0.05}), path)
     text = path.read_text()
     assert text.startswith("# made by a test\n# line 2\n")
+    assert "\n[coupling]\nturn_speed = 0.3\nspeed_turn = 0.15\n" in text
     back = vehicle_file.load(path)
     assert back.name == "skid" and back.fit == {"speed_rms_m_s": 0.05}
     for name in ("d_cen", "w_c", "w_c_yaw", "max_speed", "max_yaw_rate", "max_accel", "decel",
-                 "max_yaw_accel", "yaw_decel", "speed_delay", "yaw_delay", "turn_speed_coupling"):
+                 "max_yaw_accel", "yaw_decel", "speed_delay", "yaw_delay", "turn_speed_coupling",
+                 "speed_turn_coupling"):
         assert getattr(back.params, name) == pytest.approx(getattr(FULL, name), rel=1e-5), name
 
 
@@ -46,6 +49,7 @@ def test_the_empty_file_is_the_papers_plant(tmp_path):
     ('schema = "pzc-rover/vehicle/1"\n[speed]\nmax_m_s = 0', "speed.max_m_s: must be > 0"),
     ('schema = "pzc-rover/vehicle/1"\n[turn_rate]\ndelay_s = 9', "turn_rate.delay_s: must be between"),
     ('schema = "pzc-rover/vehicle/1"\n[coupling]\nturn_speed = 1.5', "coupling.turn_speed"),
+    ('schema = "pzc-rover/vehicle/1"\n[coupling]\nspeed_turn = -0.1', "coupling.speed_turn"),
     ('schema = "pzc-rover/vehicle/1"\n[speed]\nmax_speed = 3', "unknown key 'speed.max_speed'"),
     ('schema = "pzc-rover/vehicle/1"\nwheels = 4', "unknown key 'wheels'"),
     ('schema = "pzc-rover/vehicle/1"\n[speed]\nlag_s = "fast"', "speed.lag_s: must be a finite"),

@@ -7,8 +7,13 @@
     omega' = clip(w_c_yaw (u_omega - omega), -yaw_decel, +yaw_accel) turn-rate channel
 
 Each channel's input is the command after a pure delay, clamped to the vehicle's top speed and
-turn rate, and (skid-steer mixing, ``turn_speed_coupling`` c) the speed clamp shrinks while the
-rover turns: ``|u_v| <= max_speed (1 - c |omega| / max_yaw_rate)``. Without delays, rate limits
+turn rate, and skid-steer mixing takes from both: the speed clamp shrinks while the rover turns
+(``turn_speed_coupling`` c), ``|u_v| <= max_speed (1 - c min(1, |omega| / max_yaw_rate))``, and
+the turn-rate clamp while it drives (``speed_turn_coupling`` c_w),
+``|u_omega| <= max_yaw_rate (1 - c_w min(1, |v| / max_speed))`` (ArduPilot Rover SITL rover-skid
+turns at 2.1 rad/s in place but only about 1.8 rad/s at full throttle: when the motors saturate
+the mixer gives up turn rate as well as speed). Both clamps use the state at the step's start.
+Without delays, rate limits
 or coupling this is the paper's plant (first-order actuators at ``w_c``); with them it is what a
 setpoint meets inside ArduPilot Rover (a rate-limited target, a lag, a delay, shared motor range;
 the "accel" limit applies while ``|v|`` grows, the "decel" one while it shrinks).
@@ -55,6 +60,7 @@ class RoverParams:
     speed_delay: Num = 0.0                # s of pure delay before the speed channel
     yaw_delay: Num = 0.0                  # s of pure delay before the turn-rate channel
     turn_speed_coupling: Num = 0.0        # c: share of top speed lost at full turn rate
+    speed_turn_coupling: Num = 0.0        # c_w: share of the turn-rate clamp lost at full speed
 
     @property
     def yaw_bandwidth(self) -> Num:
@@ -74,7 +80,8 @@ class RoverParams:
         return not any(_any_finite(v) for v in (self.max_accel, self.decel, self.max_yaw_accel,
                                                  self.yaw_decel)) \
             and not any(_any_positive(v) for v in (self.speed_delay, self.yaw_delay,
-                                                   self.turn_speed_coupling))
+                                                   self.turn_speed_coupling,
+                                                   self.speed_turn_coupling))
 
     @property
     def has_delay(self) -> bool:
@@ -125,6 +132,7 @@ class RoverModel:
         self._m = _ops.for_size(n)
         self._paper = params.is_paper
         self._coupled = _any_positive(params.turn_speed_coupling)
+        self._turn_coupled = _any_positive(params.speed_turn_coupling)
         self.delay = CommandDelay(params.speed_delay, params.yaw_delay, n) if params.has_delay else None
         self._trig_yaw = None
         self._trig_cs = None
@@ -159,20 +167,27 @@ class RoverModel:
                     *_rate_bounds(m, omega, p.max_yaw_accel, p.yaw_decel))
         return v * c - lat * sn, v * sn + lat * c, omega, dv, dw
 
-    def clamp_command(self, speed: Num, yaw_rate: Num, omega: Num = 0.0) -> tuple[Num, Num]:
-        """Top speed and turn rate; with coupling, the speed range the turn rate ``omega`` leaves."""
+    def clamp_command(self, speed: Num, yaw_rate: Num, omega: Num = 0.0,
+                      v: Num = 0.0) -> tuple[Num, Num]:
+        """Top speed and turn rate; with coupling, the speed range the turn rate ``omega`` leaves
+        and the turn-rate range the speed ``v`` leaves (both the state at the step's start, so
+        neither clamp depends on the other's result: the motors share one range)."""
         m, p = self._m, self.params
         top = p.max_speed
         if self._coupled:
             share = m.minimum(abs(omega) / p.max_yaw_rate, 1.0)
             top = top * (1.0 - p.turn_speed_coupling * share)
-        return m.clip(speed, -top, top), m.clip(yaw_rate, -p.max_yaw_rate, p.max_yaw_rate)
+        top_w = p.max_yaw_rate
+        if self._turn_coupled:
+            share_w = m.minimum(abs(v) / p.max_speed, 1.0)
+            top_w = top_w * (1.0 - p.speed_turn_coupling * share_w)
+        return m.clip(speed, -top, top), m.clip(yaw_rate, -top_w, top_w)
 
     def step(self, s: RoverState, speed_cmd: Num, yaw_rate_cmd: Num, dt: float) -> RoverState:
         """Advance ``dt`` seconds with the commands (v_ref, omega_ref) held (after the delay)."""
         if self.delay is not None:
             speed_cmd, yaw_rate_cmd = self.delay.push(speed_cmd, yaw_rate_cmd, dt)
-        u, w = self.clamp_command(speed_cmd, yaw_rate_cmd, s.omega)
+        u, w = self.clamp_command(speed_cmd, yaw_rate_cmd, s.omega, s.v)
         if self._paper:
             return self._step_exact(s, u, w, dt)
         return self._step_limited(s, u, w, dt)

@@ -2,8 +2,8 @@
 
 What identification fits and what the plant's tests check: given the setpoints an autopilot was
 sent (speed ``v_ref``, turn rate ``omega_ref``, held between samples) this runs only the two
-channels of :class:`companion.sim.plant.RoverModel` (delay -> clamp with coupling -> rate limit ->
-lag), without the pose, for ``n`` parameter sets side by side (any :class:`RoverParams` field may
+channels of :class:`companion.sim.plant.RoverModel` (delay -> clamp with both couplings -> rate
+limit -> lag), without the pose, for ``n`` parameter sets side by side (any :class:`RoverParams` field may
 be an array of length ``n``). The same channel solution (:func:`companion.sim.plant._channel`) and
 delay line as the full model, so a fitted model is the model the simulations run.
 """
@@ -50,7 +50,7 @@ def respond(params: RoverParams, t: Sequence[float], speed_cmd: Sequence[float],
         u_k, w_k = u_in[held[k]], w_in[held[k]]
         if delay is not None:
             u_k, w_k = delay.push(u_k + np.zeros(n), w_k + np.zeros(n), dt)
-        u_k, w_k = model.clamp_command(u_k, w_k, w)
+        u_k, w_k = model.clamp_command(u_k, w_k, w, v)
         _, v, _, _ = _channel(m, v, u_k, p.w_c, p.max_accel, p.decel, dt, both=False)
         _, w, _, _ = _channel(m, w, w_k, p.yaw_bandwidth, p.max_yaw_accel, p.yaw_decel, dt, both=False)
     return v_out[sample_step], w_out[sample_step]

@@ -115,17 +115,24 @@ def ensemble(vehicle: RoverParams, count: int, spread: Spread, sample_period: fl
     """The identified vehicle first, then ``count`` neighbours: the slow corner (longer lags,
     lower limits, later) always among them, the rest drawn at random within ``spread``."""
     rng = np.random.default_rng(seed)
+    # The turn-rate side of the mixing (speed_turn_coupling) is drawn from its own stream, so
+    # every other draw stays what it was before it was modelled; and apart from the speed
+    # side's, because a mixer that favours steering gives up speed and keeps turn rate.
+    rng_turn = np.random.default_rng([seed, 1])
     out = [vehicle]
     for i in range(count):
         if i == 0:
             lag_k, lim_k, extra, dc = 1 + spread.lag, 1 - spread.limit, spread.delay_samples, 0.0
+            dcw = 0.0
         elif i == 1:
             lag_k, lim_k, extra, dc = 1 - spread.lag / 2, 1 + spread.limit, 0.0, -spread.coupling
+            dcw = -spread.coupling
         else:
             lag_k = 1 + spread.lag * rng.uniform(-0.5, 1.0)
             lim_k = 1 + spread.limit * rng.uniform(-1.0, 1.0)
             extra = float(rng.integers(-1, int(spread.delay_samples) + 1))
             dc = spread.coupling * rng.uniform(-1.0, 1.0)
+            dcw = spread.coupling * rng_turn.uniform(-1.0, 1.0)
         delay = extra * sample_period
         out.append(vehicle.with_(
             w_c=vehicle.w_c / lag_k, w_c_yaw=vehicle.yaw_bandwidth / lag_k,
@@ -133,7 +140,8 @@ def ensemble(vehicle: RoverParams, count: int, spread: Spread, sample_period: fl
             max_yaw_accel=vehicle.max_yaw_accel * lim_k, max_yaw_decel=vehicle.yaw_decel * lim_k,
             speed_delay=max(0.0, vehicle.speed_delay + delay),
             yaw_delay=max(0.0, vehicle.yaw_delay + delay),
-            turn_speed_coupling=float(np.clip(vehicle.turn_speed_coupling + dc, 0.0, 1.0))))
+            turn_speed_coupling=float(np.clip(vehicle.turn_speed_coupling + dc, 0.0, 1.0)),
+            speed_turn_coupling=float(np.clip(vehicle.speed_turn_coupling + dcw, 0.0, 1.0))))
     return out
 
 
@@ -142,7 +150,7 @@ def _stack_params(vehicles: Sequence[RoverParams], repeat: int, tile: int) -> Ro
     sequence ``tile`` times (vehicle order: candidate, then vehicle, then reference)."""
     values = {k: [float(getattr(v, k)) for v in vehicles] for k in
               ("d_cen", "w_c", "max_speed", "max_yaw_rate", "max_accel", "max_yaw_accel",
-               "speed_delay", "yaw_delay", "turn_speed_coupling")}
+               "speed_delay", "yaw_delay", "turn_speed_coupling", "speed_turn_coupling")}
     values["w_c_yaw"] = [float(v.yaw_bandwidth) for v in vehicles]
     values["max_decel"] = [float(v.decel) for v in vehicles]
     values["max_yaw_decel"] = [float(v.yaw_decel) for v in vehicles]

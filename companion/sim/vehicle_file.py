@@ -23,6 +23,7 @@ A small TOML file, units in the key names, a header saying how it was made::
 
     [coupling]
     turn_speed = 0.3              # share of top speed lost at full turn rate (skid-steer mixing)
+    speed_turn = 0.15             # share of the turn-rate clamp lost at full speed
 
     [fit]                         # optional: how well the model reproduced the log
     speed_rms_m_s = 0.05
@@ -58,7 +59,8 @@ _CHANNELS: dict[str, dict[str, tuple[str, str]]] = {
                   "max_rad_s": ("max_yaw_rate", "limit"),
                   "accel_max_rad_s2": ("max_yaw_accel", "limit"),
                   "decel_max_rad_s2": ("max_yaw_decel", "limit")},
-    "coupling": {"turn_speed": ("turn_speed_coupling", "share")},
+    "coupling": {"turn_speed": ("turn_speed_coupling", "share"),
+                 "speed_turn": ("speed_turn_coupling", "share")},
 }
 _RECORDS = ("fit", "source")
 
@@ -152,7 +154,8 @@ def dumps(vehicle: VehicleFile) -> str:
               "max_accel": p.max_accel, "max_decel": p.decel, "yaw_delay": p.yaw_delay,
               "w_c_yaw": 1.0 / p.yaw_bandwidth, "max_yaw_rate": p.max_yaw_rate,
               "max_yaw_accel": p.max_yaw_accel, "max_yaw_decel": p.yaw_decel,
-              "turn_speed_coupling": p.turn_speed_coupling}
+              "turn_speed_coupling": p.turn_speed_coupling,
+              "speed_turn_coupling": p.speed_turn_coupling}
     for section, keys in _CHANNELS.items():
         lines += ["", f"[{section}]"]
         lines += [f"{key} = {_fmt(values[name])}" for key, (name, _) in keys.items()]
