@@ -113,7 +113,10 @@ def _describe_gains(g) -> dict:
                 "velocity_ff": bool(pzc.velocity_ff), "heading_rate_ff": bool(pzc.heading_rate_ff),
                 "accel_ff": float(pzc.accel_ff),
                 "lead_tau": float(pzc.lead_tau), "lead_max_gain": float(pzc.lead_max_gain),
-                "speed_law": pzc.speed_law},
+                "speed_law": pzc.speed_law,
+                "accel_ff_turn": None if pzc.accel_ff_turn is None else float(pzc.accel_ff_turn),
+                "brake_accel": float(pzc.brake_accel),
+                "brake_yaw_accel": float(pzc.brake_yaw_accel)},
         "cost": g.cost,
     }
 
@@ -171,6 +174,10 @@ def _print_gains(d: dict) -> None:
           f"accel_ff {p['accel_ff']:.3g} s  speed_law {p['speed_law']}")
     print("        actuator lead: " + ("off" if p["lead_tau"] == 0 else
                                         f"tau {p['lead_tau']:.3g} s, max gain {p['lead_max_gain']:.3g}"))
+    turn = "as accel_ff" if p["accel_ff_turn"] is None else f"{p['accel_ff_turn']:.3g} s"
+    brakes = ", ".join(f"{name} {p[key]:.3g} {unit}" for name, key, unit in (
+        ("position", "brake_accel", "m/s^2"), ("yaw", "brake_yaw_accel", "rad/s^2")) if p[key])
+    print(f"        turning preview {turn}; braking curves: {brakes or 'off'}")
 
 
 def mission_references(paths: list[str]) -> tuple[list[tuple[str, object]], float]:
