@@ -30,10 +30,11 @@ from companion_harness import ROOT, ellipse_mission, mavlink2
 from safety_harness import read_tlog
 from sitl_plant.testing import Pilot, PlantProcess, free_udp_port
 
-# A vehicle like ArduPilot's rover-skid: every part of the model switched on.
+# A vehicle like ArduPilot's rover-skid: every part of the model switched on (the mixer takes
+# speed while turning and turn rate at speed).
 TRUE = RoverParams(w_c=4.0, w_c_yaw=15.0, max_speed=3.5, max_yaw_rate=2.0, max_accel=1.0,
                    max_decel=1.4, max_yaw_accel=2.2, max_yaw_decel=3.0, speed_delay=0.08,
-                   yaw_delay=0.04, turn_speed_coupling=0.3)
+                   yaw_delay=0.04, turn_speed_coupling=0.3, speed_turn_coupling=0.15)
 
 
 def companion(*args: str, timeout: float = 120.0) -> subprocess.CompletedProcess:
@@ -83,13 +84,24 @@ def test_the_search_runs_respond_s_model_one_channel_at_a_time():
         max_yaw_rate=rng.uniform(1, 3, n), max_accel=rng.uniform(0.5, 3, n),
         max_decel=rng.uniform(0.5, 3, n), max_yaw_accel=rng.uniform(1, 5, n),
         max_yaw_decel=rng.uniform(1, 5, n), speed_delay=rng.uniform(0, 0.2, n),
-        yaw_delay=rng.uniform(0, 0.2, n), turn_speed_coupling=rng.uniform(0, 0.8, n))
+        yaw_delay=rng.uniform(0, 0.2, n), turn_speed_coupling=rng.uniform(0, 0.8, n),
+        speed_turn_coupling=rng.uniform(0, 0.5, n))
     s = series
     for dt in (0.01, 0.02):
         v, w = respond(params, s.t, s.speed_cmd, s.yaw_rate_cmd, n, dt, v0=0.3, omega0=-0.2)
+        # respond's speed on every grid step (respond sampled at the grid's own times, one
+        # extra point so float rounding cannot drop the last step): what the turn-rate
+        # channel's coupling reads.
+        g = channels.Grid.of(s.t, dt)
+        tg = s.t[0] + dt * np.arange(g.steps + 1)
+        held = np.append(g.held, g.held[-1])
+        v_grid, _ = respond(params, tg, s.speed_cmd[held], s.yaw_rate_cmd[held], n, dt,
+                            v0=0.3, omega0=-0.2)
         w2, grid = channels.turn_rate(s.t, s.yaw_rate_cmd, n, dt, -0.2, params.yaw_delay,
                                       params.yaw_bandwidth, params.max_yaw_rate,
-                                      params.max_yaw_accel, params.yaw_decel)
+                                      params.max_yaw_accel, params.yaw_decel,
+                                      params.speed_turn_coupling, v_grid[:g.steps],
+                                      params.max_speed)
         v2 = channels.speed(s.t, s.speed_cmd, grid, n, dt, 0.3, params.speed_delay, params.w_c,
                             params.max_speed, params.max_accel, params.decel,
                             params.turn_speed_coupling, params.max_yaw_rate)
@@ -109,6 +121,7 @@ def test_fit_recovers_known_parameters_from_noisy_data():
     assert abs(p.yaw_delay - TRUE.yaw_delay) <= 0.025
     assert within(p.w_c, TRUE.w_c, 0.3) and within(p.yaw_bandwidth, TRUE.yaw_bandwidth, 0.3)
     assert abs(p.turn_speed_coupling - TRUE.turn_speed_coupling) <= 0.12
+    assert abs(p.speed_turn_coupling - TRUE.speed_turn_coupling) <= 0.05
     # The RMS is the noise's (0.02), not the model's error.
     assert result.speed_rms < 0.026 and result.yaw_rate_rms < 0.026
     assert rms(TRUE, series)[0] <= result.speed_rms * 1.05

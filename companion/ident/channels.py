@@ -8,10 +8,13 @@ of a search round, whose cost is the Python step loop, not the population.
 The model is respond's, step for step: the same grid (``dt`` from ``t[0]``, the setpoint in
 force at each grid point, each sample read at the grid point at or just before it), a pure delay
 of ``round(delay / dt)`` steps with zeros before the first setpoint (as
-:class:`companion.sim.plant.CommandDelay`), the clamp with the coupling evaluated on the turn
-rate at the start of the step (as :meth:`RoverModel.clamp_command`), and the exact
-rate-limited lag of :func:`companion.sim.plant._channel`. ``tests/test_identify.py`` holds the
-two to each other.
+:class:`companion.sim.plant.CommandDelay`), the clamps with the couplings evaluated on the
+other channel's output at the start of the step (as :meth:`RoverModel.clamp_command`: the speed
+clamp on the turn rate, the turn-rate clamp on the speed), and the exact rate-limited lag of
+:func:`companion.sim.plant._channel`. Each channel takes the other's output on the grid as
+given (the fit gives the turn-rate channel the measured speed, the speed channel the fitted
+turn-rate model's output); given respond's own, each is respond's. ``tests/test_identify.py``
+holds the two to each other.
 """
 
 from __future__ import annotations
@@ -37,7 +40,7 @@ class Grid:
     def of(cls, t: np.ndarray, dt: float) -> "Grid":
         steps = int(np.floor((t[-1] - t[0]) / dt)) + 1
         grid = t[0] + dt * np.arange(steps)
-        held = np.searchsorted(t, grid, side="right") - 1
+        held = np.searchsorted(t, grid + 1e-9 * dt, side="right") - 1     # as respond
         sample_step = np.minimum(((t - t[0]) / dt + 1e-9).astype(int), steps - 1)
         return cls(steps, held, sample_step)
 
@@ -51,16 +54,33 @@ def _delayed(commands: np.ndarray, delay, n: int, dt: float):
 
 
 def turn_rate(t: np.ndarray, yaw_rate_cmd: np.ndarray, n: int, dt: float, omega0: float,
-              delay, bandwidth, max_rate, accel, decel) -> tuple[np.ndarray, np.ndarray]:
-    """The turn rate of ``n`` models at the samples ``t``, and on the grid (shape (steps, n))."""
+              delay, bandwidth, max_rate, accel, decel, coupling=0.0,
+              speed_grid: np.ndarray | None = None, max_speed=np.inf,
+              ) -> tuple[np.ndarray, np.ndarray]:
+    """The turn rate of ``n`` models at the samples ``t``, and on the grid (shape (steps, n)).
+
+    With ``coupling`` (``speed_turn_coupling``, c_w) the clamp shrinks with the speed on the
+    grid ``speed_grid`` (one value per grid step, or one column per model):
+    ``max_rate (1 - c_w min(1, |v| / max_speed))``."""
     g = Grid.of(t, dt)
     m = ops.for_size(n)
     command = _delayed(np.asarray(yaw_rate_cmd, dtype=float)[g.held], delay, n, dt)
+    coupled = bool(np.any(np.asarray(coupling) > 0))
+    if coupled:
+        if speed_grid is None or len(speed_grid) < g.steps:
+            raise ValueError("a coupled turn-rate channel needs the speed on every grid step")
+        # The share of the clamp lost, per grid step, before the loop: it does not depend on
+        # the turn rate, so the loop pays one multiply per step for it.
+        share = np.minimum(np.abs(speed_grid[:g.steps]) / max_speed, 1.0)
+        if share.ndim == 1:
+            share = share[:, None]
+        top = max_rate * (1.0 - coupling * share)           # (steps, n)
     w = np.full(n, float(omega0))
     out = np.empty((g.steps, n))
     for k in range(g.steps):
         out[k] = w
-        u = m.clip(command(k), -max_rate, max_rate)
+        limit = top[k] if coupled else max_rate
+        u = m.clip(command(k), -limit, limit)
         _, w, _, _ = _channel(m, w, u, bandwidth, accel, decel, dt, both=False)
     return out[g.sample_step], out
 
@@ -69,7 +89,8 @@ def speed(t: np.ndarray, speed_cmd: np.ndarray, omega_grid: np.ndarray, n: int, 
           v0: float, delay, bandwidth, max_speed, accel, decel, coupling,
           max_yaw_rate) -> np.ndarray:
     """The speed of ``n`` models at the samples ``t``, given the turn rate on the grid (one
-    column, the fitted turn-rate model's, or one per model)."""
+    column, the fitted turn-rate model's, or one per model), which the coupling (the speed
+    clamp lost while turning) reads."""
     g = Grid.of(t, dt)
     m = ops.for_size(n)
     command = _delayed(np.asarray(speed_cmd, dtype=float)[g.held], delay, n, dt)

@@ -8,8 +8,13 @@ The model is :func:`companion.sim.response.respond` (per channel: delay -> clamp
 the model the simulations and the bundled plant run; the search steps one channel at a time
 (:mod:`companion.ident.channels`, respond's model step for step, at half the cost) and the
 figures reported come from ``respond`` itself. The turn-rate channel is fitted first
-(delay, lag, clamp, accel, decel: it does not depend on speed), then the speed channel (delay,
-lag, clamp, accel, decel, coupling) with the turn rate the fitted turn-rate model produces.
+(delay, lag, clamp, accel, decel, and ``speed_turn_coupling``: the clamp it loses with speed,
+driven by the *measured* speed, so it needs no speed model yet), then the speed channel (delay,
+lag, clamp, accel, decel, ``turn_speed_coupling``) with the turn rate the fitted turn-rate model
+produces. The turn-rate coupling is a share of the clamp at top speed, and top speed is fitted
+after it: the turn-rate search measures the speed against a fixed scale (the prior's top speed,
+else the fastest measured), and the share is rescaled to the fitted top speed at the end (the
+same loss per m/s below top speed).
 
 Search (per channel): every parameter is mapped onto [0, 1] (log scale for lags and limits,
 linear for delays and the coupling share); a uniform random population plus the prior, then
@@ -22,7 +27,7 @@ is one vectorised simulation of all chains' populations; the rounds on a 20 ms g
 objective is the RMS of simulated minus measured output over the log.
 
 What the log does not determine: around the best, each parameter is moved by a clear step
-(lags and limits x1.5 and /1.5, delays 50 ms, the coupling 0.15). If the RMS moves by less than
+(lags and limits x1.5 and /1.5, delays 50 ms, the couplings 0.15). If the RMS moves by less than
 ``tol`` (2 %) either way, or, for a clamp or a rate limit, when raising it changes nothing (the
 limit never bound: the log gives only a lower bound), the parameter is *undetermined*: it moves
 towards its prior (:mod:`companion.ident.priors`) as far as the log allows (the RMS within
@@ -49,6 +54,8 @@ LIMITS = {"max_speed", "max_accel", "max_decel", "max_yaw_rate", "max_yaw_accel"
 LAGS = {"w_c", "w_c_yaw"}
 DELAYS = {"speed_delay", "yaw_delay"}
 COUPLING = "turn_speed_coupling"
+TURN_COUPLING = "speed_turn_coupling"
+COUPLINGS = {COUPLING, TURN_COUPLING}
 MIN_COMMAND = 1e-3        # a channel whose setpoints never exceed this was not driven at all
 
 
@@ -81,8 +88,10 @@ class Search:
     per chain, grid step) per round, the first uniform, the rest around the best; ``dt`` is the
     grid of the final figures."""
 
+    # (the first round's 200 per chain: with six parameters per channel, 150 left a chain in
+    # the delay-against-lag valley's far end now and then)
     schedule: tuple[tuple[int, float], ...] = (
-        ((150, 0.02),) + ((100, 0.02),) * 10 + ((40, 0.01),))
+        ((200, 0.02),) + ((100, 0.02),) * 10 + ((40, 0.01),))
     chains: int = 3                # independent searches, evaluated in the same calls
     check_dt: float = 0.02         # grid of the determinacy check
     dt: float = 0.01
@@ -130,7 +139,7 @@ class _Dim:
         """(raised, lowered): a change the log should show if it determines this parameter."""
         if self.name in DELAYS:
             return value + 0.05, max(value - 0.05, 0.0)
-        if self.name == COUPLING:
+        if self.name in COUPLINGS:
             return min(value + 0.15, 1.0), max(value - 0.15, 0.0)
         return value * 1.5, value / 1.5
 
@@ -149,7 +158,7 @@ def _dims(fields: tuple[str, ...], series: Series) -> list[_Dim]:
         "max_speed": (max(0.7 * v_meas, 0.05), max(1.5 * v_cmd, 1.2 * v_meas, 0.1), True),
         "max_yaw_accel": (0.1, 50.0, True), "max_yaw_decel": (0.1, 50.0, True),
         "max_accel": (0.05, 20.0, True), "max_decel": (0.05, 20.0, True),
-        COUPLING: (0.0, 1.0, False),
+        COUPLING: (0.0, 1.0, False), TURN_COUPLING: (0.0, 1.0, False),
     }
     return [_Dim(name, *ranges[name]) for name in fields]
 
@@ -160,27 +169,40 @@ class _Channel:
     Runs only that channel (:mod:`companion.ident.channels`, respond's model step for step);
     the speed channel sees the turn rate of the turn-rate model in ``base``."""
 
-    def __init__(self, series: Series, base: RoverParams, which: int):
+    def __init__(self, series: Series, base: RoverParams, which: int, speed_scale: float):
         self.series, self.base, self.which = series, base, which
+        self.speed_scale = speed_scale      # the top speed the turn-rate coupling is a share of
         self.measured = series.yaw_rate if which == 1 else series.speed
         self.evaluations = 0
         self._omega: dict[float, np.ndarray] = {}
+        self._speed: dict[float, np.ndarray] = {}
+
+    def _speed_grid(self, dt: float) -> np.ndarray:
+        """The measured speed on the grid (linear between samples): what the turn-rate
+        coupling reads in place of a speed model not yet fitted."""
+        if dt not in self._speed:
+            s = self.series
+            g = channels.Grid.of(s.t, dt)
+            self._speed[dt] = np.interp(s.t[0] + dt * np.arange(g.steps), s.t, s.speed)
+        return self._speed[dt]
+
+    def _turn_rate(self, p: RoverParams, n: int, dt: float) -> tuple[np.ndarray, np.ndarray]:
+        s = self.series
+        return channels.turn_rate(s.t, s.yaw_rate_cmd, n, dt, float(s.yaw_rate[0]),
+                                  p.yaw_delay, p.yaw_bandwidth, p.max_yaw_rate,
+                                  p.max_yaw_accel, p.yaw_decel, p.speed_turn_coupling,
+                                  self._speed_grid(dt), self.speed_scale)
 
     def _omega_grid(self, dt: float) -> np.ndarray:
         if dt not in self._omega:
-            s, p = self.series, self.base
-            self._omega[dt] = channels.turn_rate(
-                s.t, s.yaw_rate_cmd, 1, dt, float(s.yaw_rate[0]), p.yaw_delay, p.yaw_bandwidth,
-                p.max_yaw_rate, p.max_yaw_accel, p.yaw_decel)[1][:, 0]
+            self._omega[dt] = self._turn_rate(self.base, 1, dt)[1][:, 0]
         return self._omega[dt]
 
     def cost(self, values: dict[str, np.ndarray], n: int, dt: float) -> np.ndarray:
         s = self.series
         p = self.base.with_(**values)
         if self.which == 1:
-            out, _ = channels.turn_rate(s.t, s.yaw_rate_cmd, n, dt, float(s.yaw_rate[0]),
-                                        p.yaw_delay, p.yaw_bandwidth, p.max_yaw_rate,
-                                        p.max_yaw_accel, p.yaw_decel)
+            out, _ = self._turn_rate(p, n, dt)
         else:
             out = channels.speed(s.t, s.speed_cmd, self._omega_grid(dt), n, dt,
                                  float(s.speed[0]), p.speed_delay, p.w_c, p.max_speed,
@@ -312,10 +334,18 @@ def _prior_value(prior: RoverParams, name: str, values: dict[str, float]) -> flo
     return float(value)
 
 
+def _speed_scale(series: Series, prior: RoverParams) -> float:
+    """The top speed the turn-rate search measures the coupling against (module docstring)."""
+    top = float(prior.max_speed)
+    if math.isfinite(top) and top > 0:
+        return top
+    return max(float(np.max(np.abs(series.speed))), 0.1)
+
+
 def _fit_channel(series: Series, base: RoverParams, prior: RoverParams, fields: tuple[str, ...],
                  which: int, cfg: Search, rng: np.random.Generator,
                  ) -> tuple[dict[str, float], dict[str, str], int]:
-    channel = _Channel(series, base, which)
+    channel = _Channel(series, base, which, _speed_scale(series, prior))
     commands = series.yaw_rate_cmd if which == 1 else series.speed_cmd
     start: dict[str, float] = {}
     for name in fields:
@@ -363,5 +393,12 @@ def fit(series: Series, prior: RoverParams, search: Search = Search(),
     base = prior.with_(**yaw)
     speed, speed_status, n_speed = _fit_channel(series, base, prior, SPEED_FIELDS, 0, search, rng)
     params = base.with_(**speed)
+    if yaw_status[TURN_COUPLING] != PRIOR:
+        # The share was of the search's speed scale; the model's is of the fitted top speed.
+        scale = _speed_scale(series, prior)
+        top = float(params.max_speed)
+        if math.isfinite(top) and top != scale:
+            share = float(np.clip(yaw[TURN_COUPLING] * top / scale, 0.0, 1.0))
+            params = params.with_(**{TURN_COUPLING: share})
     speed_rms, yaw_rms = rms(params, series, search.dt)
     return Fit(params, speed_rms, yaw_rms, {**yaw_status, **speed_status}, n_yaw + n_speed + 1)

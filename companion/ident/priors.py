@@ -6,7 +6,7 @@ autopilot's own limit parameters when they are known (read live with PARAM_REQUE
 found as PARAM_VALUE in a .tlog), otherwise from :data:`DEFAULTS`, a stock ArduPilot Rover's
 values (``vehicle-interfaces.md``: ATC_ACCEL_MAX 1 m/s^2, ATC_STR_ACC_MAX 120 deg/s^2,
 ATC_STR_RAT_MAX 120 deg/s, about 4 m/s top speed) and, for what no parameter states (delays,
-lags, coupling), deliberately sluggish values: a model that assumes a slower vehicle than the
+lags, the couplings), deliberately sluggish values: a model that assumes a slower vehicle than the
 real one makes a tuner cautious, not unstable.
 
 How ArduPilot Rover's parameters map onto :class:`companion.sim.plant.RoverParams`
@@ -39,15 +39,18 @@ AUTOPILOT_PARAMS = ("ATC_ACCEL_MAX", "ATC_DECEL_MAX", "ATC_STR_ACC_MAX", "ATC_ST
                     "MOT_STR_THR_MIX")
 
 # The fields identification fits, turn-rate channel first (the speed channel's coupling needs
-# the turn rate), with the vehicle file's names for people.
-YAW_FIELDS = ("yaw_delay", "w_c_yaw", "max_yaw_rate", "max_yaw_accel", "max_yaw_decel")
+# the turn rate; the turn-rate channel's coupling is driven by the measured speed), with the
+# vehicle file's names for people.
+YAW_FIELDS = ("yaw_delay", "w_c_yaw", "max_yaw_rate", "max_yaw_accel", "max_yaw_decel",
+              "speed_turn_coupling")
 SPEED_FIELDS = ("speed_delay", "w_c", "max_speed", "max_accel", "max_decel", "turn_speed_coupling")
 FILE_NAMES = {"speed_delay": "speed.delay_s", "w_c": "speed.lag_s", "max_speed": "speed.max_m_s",
               "max_accel": "speed.accel_max_m_s2", "max_decel": "speed.decel_max_m_s2",
               "yaw_delay": "turn_rate.delay_s", "w_c_yaw": "turn_rate.lag_s",
               "max_yaw_rate": "turn_rate.max_rad_s", "max_yaw_accel": "turn_rate.accel_max_rad_s2",
               "max_yaw_decel": "turn_rate.decel_max_rad_s2",
-              "turn_speed_coupling": "coupling.turn_speed"}
+              "turn_speed_coupling": "coupling.turn_speed",
+              "speed_turn_coupling": "coupling.speed_turn"}
 
 DEFAULTS = RoverParams(
     w_c=1.0 / 0.4, w_c_yaw=1.0 / 0.15,           # lags: 0.4 s speed, 0.15 s turn rate
@@ -55,7 +58,10 @@ DEFAULTS = RoverParams(
     max_speed=4.0, max_yaw_rate=math.radians(120.0),
     max_accel=1.0, max_decel=None,                 # None: as the identified acceleration
     max_yaw_accel=math.radians(120.0), max_yaw_decel=None,
-    turn_speed_coupling=0.5)                       # skid-steer mixing, MOT_STR_THR_MIX's default
+    turn_speed_coupling=0.5,                       # skid-steer mixing, MOT_STR_THR_MIX's default
+    # and the turn rate it gives up at full speed: 2.1 rad/s in place, about 1.8 at full
+    # throttle on ArduPilot SITL rover-skid (the cautious side of none)
+    speed_turn_coupling=0.15)
 
 
 @dataclass(frozen=True)

@@ -56,7 +56,7 @@ def _number(value: float) -> float | None:
 def parameter_table(params: RoverParams) -> dict[str, dict[str, float | None]]:
     """{"speed": {"delay_s": ...}, "turn_rate": {...}, "coupling": {...}} (None: no limit)."""
     out: dict[str, dict[str, float | None]] = {}
-    for name in YAW_FIELDS + SPEED_FIELDS:
+    for name in SPEED_FIELDS + YAW_FIELDS:        # the vehicle file's order: turn_speed first
         section, key = FILE_NAMES[name].split(".")
         out.setdefault(section, {})[key] = _number(file_value(params, name))
     return {k: out[k] for k in ("speed", "turn_rate", "coupling")}

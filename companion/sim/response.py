@@ -24,7 +24,9 @@ def respond(params: RoverParams, t: Sequence[float], speed_cmd: Sequence[float],
 
     ``speed_cmd[k]`` / ``yaw_rate_cmd[k]`` is the setpoint given at ``t[k]`` and held until
     ``t[k+1]``. The channels are stepped on a ``dt`` grid from ``t[0]``; each sample is read at
-    the grid point at or just before its time. Returns two arrays of shape ``(len(t), n)``.
+    the grid point at or just before its time, and a setpoint is in force from the grid point
+    at or just after its time (both to within 1e-9 of a step: float rounding of the times).
+    Returns two arrays of shape ``(len(t), n)``.
     """
     t = np.asarray(t, dtype=float)
     u_in = np.asarray(speed_cmd, dtype=float)
@@ -39,7 +41,10 @@ def respond(params: RoverParams, t: Sequence[float], speed_cmd: Sequence[float],
     m = model._m
     steps = int(np.floor((t[-1] - t[0]) / dt)) + 1
     grid = t[0] + dt * np.arange(steps)
-    held = np.searchsorted(t, grid, side="right") - 1        # the setpoint in force at each step
+    # The setpoint in force at each step; a setpoint sent at a grid point's time (up to float
+    # rounding of both: 0.02 + 0.02 + ... is not 0.06) is in force from that point, not one
+    # step later, as each sample is read at its own grid point below.
+    held = np.searchsorted(t, grid + 1e-9 * dt, side="right") - 1
     sample_step = np.minimum(((t - t[0]) / dt + 1e-9).astype(int), steps - 1)
     v = np.full(n, float(v0))
     w = np.full(n, float(omega0))
