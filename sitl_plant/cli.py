@@ -109,6 +109,8 @@ def build_parser() -> argparse.ArgumentParser:
     veh.add_argument("--yaw-delay", type=_non_negative, metavar="S")
     veh.add_argument("--turn-speed-coupling", type=_probability, metavar="C",
                      help="share of top speed lost at full turn rate (skid-steer mixing)")
+    veh.add_argument("--speed-turn-coupling", type=_probability, metavar="C",
+                     help="share of the turn rate lost at top speed (skid-steer mixing)")
     veh.add_argument("--start", type=_finite, nargs=3, metavar=("X", "Y", "YAW"),
                      default=(0.0, 0.0, 0.0), help="start pose: north m, east m, yaw rad")
     tel = p.add_argument_group("telemetry")
@@ -139,7 +141,8 @@ def config_from_args(args: argparse.Namespace) -> PlantConfig:
     params = load_vehicle(args.vehicle).params if args.vehicle else preset(args.preset)
     overrides = {name: getattr(args, name) for name in
                  ("d_cen", "w_c", "w_c_yaw", "max_speed", "max_yaw_rate", "max_accel", "max_decel",
-                  "max_yaw_accel", "speed_delay", "yaw_delay", "turn_speed_coupling")
+                  "max_yaw_accel", "speed_delay", "yaw_delay", "turn_speed_coupling",
+                  "speed_turn_coupling")
                  if getattr(args, name) is not None}
     params = params.with_(**overrides)
     vehicle = VehicleConfig(params=params, autopilot=Autopilot(args.autopilot),

@@ -180,7 +180,8 @@ def _print(report, as_json: bool, flight: dict[str, Any] | None = None) -> None:
         f"turn rate   delay {num(w['delay_s'], 's')}, lag {num(w['lag_s'], 's')}, "
         f"max {num(w['max_rad_s'], 'rad/s')}, accel {num(w['accel_max_rad_s2'], 'rad/s^2')}, "
         f"decel {num(w['decel_max_rad_s2'], 'rad/s^2')}",
-        f"coupling    {table['coupling']['turn_speed']:.3g} of top speed lost at full turn rate",
+        f"coupling    {table['coupling']['turn_speed']:.3g} of top speed lost at full turn rate, "
+        f"{table['coupling'].get('speed_turn', 0.0):.3g} of the turn rate at full speed",
         f"RMS         speed {f.speed_rms:.3f} m/s, turn rate {f.yaw_rate_rms:.3f} rad/s "
         "(model minus measured, fitted log)",
     ]
