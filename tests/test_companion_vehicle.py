@@ -80,3 +80,20 @@ def test_gains_for_another_vehicle_file_are_not_used(tmp_path):
     vehicle_file.save(vehicle_file.VehicleFile(ROVER.with_(max_accel=0.5)), vpath)  # re-identified
     assert vehicle_gains.find_beside(vpath, 40.0) is None
     assert gains_mod.load(tmp_path / "gains.toml").vehicle_sha256 != vehicle_gains.digest(vpath)
+
+
+def test_the_shipped_preset_has_gains_tuned_for_it_and_the_demo_flies_them(tmp_path):
+    from companion.sim.vehicle_file import preset_path
+    from companion_harness import ROOT
+    import json
+    import subprocess
+    import sys
+    shipped = vehicle_gains.find_beside(preset_path("ardupilot-skid"), 40.0)
+    assert shipped is not None, "re-tune the preset's gains: its vehicle file changed"
+    assert shipped.pzc.lead_tau == 0.0
+    p = subprocess.run([sys.executable, "-m", "companion", "demo", "--preset", "ardupilot-skid",
+                        "--duration", "10", "--json", "--no-plot", "--no-zenoh", "--no-log", "-q"],
+                       capture_output=True, text=True, timeout=120, cwd=ROOT)
+    assert p.returncode == 0, p.stderr
+    r = json.loads(p.stdout.splitlines()[-1])
+    assert r["gains_source"] == f"vehicle {shipped.source}"
