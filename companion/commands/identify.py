@@ -111,7 +111,7 @@ def run(args) -> int:
 
 
 def identify_log(path: str, args, autopilot: dict[str, float],
-                 log=lambda text: None, label: str | None = None):
+                 log=lambda text: None, label: str | None = None, prior=None):
     """Read, fit, check, write, plot: the offline half (the live half ends here too).
     ``label`` names the log in the file when the path is not worth keeping (``--no-log``)."""
     from ..ident.data import autopilot_params, read_series
@@ -124,6 +124,10 @@ def identify_log(path: str, args, autopilot: dict[str, float],
     check = read_series(args.check)[0] if args.check else None   # a bad one fails before the fit
     autopilot = {**autopilot_params(path, AUTOPILOT_PARAMS), **autopilot}
     priors = from_autopilot(autopilot)
+    if prior is not None:       # an earlier fit of this vehicle: what this log leaves open
+        from ..ident.priors import Priors
+        from dataclasses import fields
+        priors = Priors(prior, {f.name: "the earlier fit" for f in fields(prior)})
     log(f"fitting {len(series.t)} samples ({series.duration:.1f} s)")
     t0 = time.perf_counter()
     result = fit(series, priors.params, progress=lambda what: log(f"fitting the {what}"))

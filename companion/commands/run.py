@@ -253,18 +253,28 @@ def load_mission(path: str, origin_text: str | None):
 
 
 def run(args) -> int:
+    mission = load_mission(args.mission, args.origin)
+    result, paths = fly_mission(args, mission)
+    if result.exit_code == 2:
+        raise UserError(result.reason)
+    print_result(result, args.json, {"tlog": paths.tlog, "csv": paths.csv} if paths else None)
+    return result.exit_code
+
+
+def fly_mission(args, mission):
+    """Fly ``mission`` with run's flags: (the result, the flight log's paths or None). Also used
+    by ``calibrate`` for its refining flight."""
     from ..bus import open_bus, shut
     from ..progress import ProgressSink
     from ..live.session import StopSwitch, fly
     from .zenoh_args import bus_options
 
-    mission = load_mission(args.mission, args.origin)
     key = signing_key(args)
     log = logger("companion run", args.quiet)
     vehicle = vehicle_choice(args, mission, log)     # before connecting: may tune for a minute
     switch = StopSwitch()
     restore = install_signals(switch)
-    bus, log_sinks = None, []
+    bus, log_sinks, paths = None, [], None
     try:
         bus = open_bus(bus_options(args), log)   # inside the try: closed on every path out
         # The flight log once every flag has been checked: a bad one leaves no empty log.
@@ -281,7 +291,4 @@ def run(args) -> int:
         restore()
         for sink in log_sinks:
             sink.close()    # idempotent: the loop closed it unless the set-up failed
-    if result.exit_code == 2:
-        raise UserError(result.reason)
-    print_result(result, args.json, {"tlog": paths.tlog, "csv": paths.csv} if paths else None)
-    return result.exit_code
+    return result, paths
