@@ -158,18 +158,22 @@ def _text(table: dict, key: str, where: str) -> str | None:
     return table[key]
 
 
-def load(path: str | Path) -> TunedGains:
-    """Read a tuned-gains file; any problem is a one-line :class:`UserError` naming file and key."""
+def read_toml(path: str | Path, missing: str = "no such file") -> dict:
+    """A TOML file's table; a missing, unreadable or malformed file is one line (UserError)."""
     path = Path(path)
     try:
-        data = tomllib.loads(path.read_text())
+        return tomllib.loads(path.read_text())
     except FileNotFoundError:
-        raise UserError(f"{path}: no such file") from None
+        raise UserError(f"{path}: {missing}") from None
     except (OSError, UnicodeDecodeError) as exc:
         raise UserError(f"{path}: cannot read: {exc}") from None
     except tomllib.TOMLDecodeError as exc:
         raise UserError(f"{path}: not valid TOML: {exc}") from None
-    return parse(data, str(path))
+
+
+def load(path: str | Path) -> TunedGains:
+    """Read a tuned-gains file; any problem is a one-line :class:`UserError` naming file and key."""
+    return parse(read_toml(path), str(path))
 
 
 def tuned_path(rate_hz: float, w_c: float, d_cen: float = 0.0) -> Path:

@@ -198,16 +198,7 @@ class RoverModel:
         v_mid, v_end, _, _ = _channel(m, s.v, u, p.w_c, p.max_accel, p.decel, h, integrals=False)
         w_mid, w_end, i_mid, i_end = _channel(m, s.omega, w, p.yaw_bandwidth, p.max_yaw_accel,
                                               p.yaw_decel, h)
-        yaw_mid, yaw_end = s.yaw + i_mid, s.yaw + i_end
-        c0, s0 = self._trig(s.yaw)
-        c1, s1 = m.cos(yaw_mid), m.sin(yaw_mid)
-        c2, s2 = self._trig(yaw_end)
-        d = p.d_cen
-        lat0, lat1, lat2 = d * s.omega, d * w_mid, d * w_end
-        h6 = h / 6.0
-        x = s.x + h6 * ((s.v * c0 - lat0 * s0) + 4.0 * (v_mid * c1 - lat1 * s1) + (v_end * c2 - lat2 * s2))
-        y = s.y + h6 * ((s.v * s0 + lat0 * c0) + 4.0 * (v_mid * s1 + lat1 * c1) + (v_end * s2 + lat2 * c2))
-        return RoverState(x, y, yaw_end, v_end, w_end)
+        return self._simpson(s, s.yaw + i_mid, s.yaw + i_end, v_mid, v_end, w_mid, w_end, h)
 
     def _decays(self, h: float):
         """e^{-w_c h/2}, e^{-w_c h} and the yaw-loop equivalents, cached for the step size."""
@@ -227,10 +218,17 @@ class RoverModel:
         # phi(t) = phi0 + w t + (omega0 - w)(1 - e^{-b t}) / b
         yaw_mid = s.yaw + w * (0.5 * h) + dw * ((1.0 - eb_half) / b)
         yaw_end = s.yaw + w * h + dw * ((1.0 - eb) / b)
+        return self._simpson(s, yaw_mid, yaw_end, v_mid, v_end, w_mid, w_end, h)
+
+    def _simpson(self, s: RoverState, yaw_mid, yaw_end, v_mid, v_end, w_mid, w_end,
+                 h: float) -> RoverState:
+        """x, y by Simpson's rule over the step from the heading, speed and turn rate at its
+        start, middle and end (each exact); eq. (1) with the d_cen term."""
+        m = self._m
         c0, s0 = self._trig(s.yaw)
-        c1, s1 = self._m.cos(yaw_mid), self._m.sin(yaw_mid)
+        c1, s1 = m.cos(yaw_mid), m.sin(yaw_mid)
         c2, s2 = self._trig(yaw_end)
-        d = p.d_cen
+        d = self.params.d_cen
         lat0, lat1, lat2 = d * s.omega, d * w_mid, d * w_end
         h6 = h / 6.0
         x = s.x + h6 * ((s.v * c0 - lat0 * s0) + 4.0 * (v_mid * c1 - lat1 * s1) + (v_end * c2 - lat2 * s2))

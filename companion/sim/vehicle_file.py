@@ -38,12 +38,12 @@ the simulation uses; :func:`to_params` / :func:`from_params` convert.
 from __future__ import annotations
 
 import math
-import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 from ..errors import UserError
+from .gains import read_toml
 from .plant import RoverParams
 
 SCHEMA = "pzc-rover/vehicle/1"
@@ -124,16 +124,7 @@ def parse(data: dict[str, Any], where: str) -> VehicleFile:
 
 def load(path: str | Path) -> VehicleFile:
     """Read a vehicle file; any problem is one line naming the file and the key."""
-    path = Path(path)
-    try:
-        data = tomllib.loads(path.read_text())
-    except FileNotFoundError:
-        raise UserError(f"{path}: no such vehicle file") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise UserError(f"{path}: cannot read: {exc}") from None
-    except tomllib.TOMLDecodeError as exc:
-        raise UserError(f"{path}: not valid TOML: {exc}") from None
-    return parse(data, str(path))
+    return parse(read_toml(path, "no such vehicle file"), str(path))
 
 
 def _fmt(value: Any) -> str:
