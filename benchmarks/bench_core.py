@@ -151,8 +151,8 @@ def main() -> int:
     duration = 2.0 if quick else 6.0
     for label, full, dt in (("linear plant, 1 ms steps (the paper's)", False, 1e-3),
                             ("full vehicle model, 1 ms steps", True, 1e-3),
-                            ("full vehicle model, 5 ms steps", True, 5e-3),
-                            ("full vehicle model, 10 ms steps (the tuner's)", True, 1e-2)):
+                            ("full vehicle model, 10 ms steps", True, 1e-2),
+                            ("full vehicle model, 20 ms steps (the tuner's)", True, 2e-2)):
         rate = vehicle_seconds(10000, full, dt, duration)
         target = "  (target >= 50,000)" if "tuner" in label else ""
         print(f"  {label:46s} {rate:9,.0f}{target}")
