@@ -52,7 +52,7 @@ def test_calibrate_identifies_tunes_and_says_how_to_fly(tmp_path):
     # (kept only when it still predicts the manoeuvre; on this plant the manoeuvre's own fit is
     # already the true model, so either outcome is right, but the rule must have been applied)
     refine = r["refine"]
-    within = refine["check_speed_rms_m_s"] <= 0.15 and refine["check_yaw_rate_rms_rad_s"] <= 0.15
+    within = refine["check_speed_rms_m_s"] <= 0.25 and refine["check_yaw_rate_rms_rad_s"] <= 0.25
     assert refine["refined"] == within, refine
     assert Path(refine["tlog"]).exists() and not (out / "vehicle-refit.toml").exists()
     assert r["next"].startswith("companion run --connect") and "--vehicle" in r["next"]

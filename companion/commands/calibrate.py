@@ -8,7 +8,7 @@
    on two cores): ``DIR/gains.toml``, recorded with the vehicle file's SHA-256;
 3. refines: flies the paper's ellipse at 0.08 Hz (shrunk to ``--space``) for 30 s with those
    gains, fits the model to that tracking log with the manoeuvre's log as the check, and keeps
-   the refit (then re-tunes) when it predicts the manoeuvre within 0.15 m/s and 0.15 rad/s:
+   the refit (then re-tunes) when it still predicts the manoeuvre within 0.25 m/s and 0.25 rad/s:
    measured on ArduPilot SITL, a model fitted to tracking predicts tracking better than one
    fitted to the manoeuvre alone (``--no-refine`` skips this step; it needs the flight logs);
 4. prints the ``companion run --vehicle DIR/vehicle.toml`` command that flies with them.
@@ -57,7 +57,10 @@ def _folder(text: str) -> Path:
 
 REFINE_S = 30.0             # s of tracking flown to refine the model
 REFINE_F_R = 0.08           # Hz: the paper's ellipse at the speed that tests the inner loops
-CHECK_LIMIT = (0.15, 0.15)  # m/s, rad/s: the refit must still predict the manoeuvre this well
+# m/s, rad/s: the refit must still predict the manoeuvre this well (a sanity bound, not a
+# held-out criterion: a tracking fit predicting the manoeuvre, a different regime, to 0.13-0.17
+# m/s on SITL still predicts tracking better than the manoeuvre's own fit)
+CHECK_LIMIT = (0.25, 0.25)
 
 
 def _refine_mission(space: float):
