@@ -8,15 +8,18 @@ from __future__ import annotations
 
 import sys
 import time
+from contextlib import contextmanager
 
 from .live.events import LoopRecord, StatusEvent
 
 
+@contextmanager
 def progress_bar(label: str, enabled: bool = True):
-    """A tqdm bar on stderr and the ``progress(fraction)`` that moves it; (None, None) when
-    disabled. The caller closes the bar."""
+    """``with progress_bar(label) as progress:``: a tqdm bar on stderr moved by
+    ``progress(fraction)``, closed on the way out; ``progress`` is None when disabled."""
     if not enabled:
-        return None, None
+        yield None
+        return
     from tqdm import tqdm
     bar = tqdm(total=100, desc=label, file=sys.stderr, mininterval=0.5,
                bar_format="{desc} {percentage:3.0f}%|{bar}| {elapsed}<{remaining}")
@@ -24,7 +27,10 @@ def progress_bar(label: str, enabled: bool = True):
     def progress(frac: float) -> None:
         if 100 * frac > bar.n:
             bar.update(round(100 * frac - bar.n, 1))
-    return bar, progress
+    try:
+        yield progress
+    finally:
+        bar.close()
 
 
 class ProgressSink:

@@ -29,14 +29,12 @@ import atexit
 import contextlib
 import errno
 import fcntl
-import json
 import math
 import os
 import select
 import signal
 import socket
 import subprocess
-import sys
 import tempfile
 import threading
 import time
@@ -48,7 +46,7 @@ import pytest
 os.environ["MAVLINK20"] = "1"
 from pymavlink import mavutil  # noqa: E402
 
-from companion_harness import ROOT  # noqa: E402
+from companion_harness import ROOT, Companion  # noqa: E402,F401  (ROOT: the tests use it from here)
 
 SKIP_REASON = ("ArduPilot SITL not configured: set ARDUPILOT_SITL (the ardurover binary) or "
                "ARDUPILOT_DIR (an ArduPilot tree with build/sitl/bin/ardurover)")
@@ -411,40 +409,11 @@ def ground_speed(msg: Any) -> float:
 
 # --------------------------------------------------------------------------- the companion
 
-class CompanionProcess:
-    """``python -m companion run --connect URL ARGS`` as an OS process for a ``with`` block;
-    killed on exit if still running."""
+class CompanionProcess(Companion):
+    """``python -m companion run --connect URL ARGS`` (SITL's TCP port) for a ``with`` block."""
 
     def __init__(self, url: str, *args: str):
-        self.argv = [sys.executable, "-m", "companion", "run", "--connect", url, *args]
-        self.proc: subprocess.Popen | None = None
-        self.stdout = self.stderr = ""
-        self.started_at = 0.0
-
-    def __enter__(self) -> "CompanionProcess":
-        self.proc = subprocess.Popen(self.argv, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                                     text=True, cwd=ROOT)
-        self.started_at = time.monotonic()
-        return self
-
-    def __exit__(self, *exc) -> None:
-        if self.proc is not None and self.proc.poll() is None:
-            self.proc.kill()
-            self.proc.communicate()
-
-    def wait(self, timeout: float) -> int:
-        try:
-            self.stdout, self.stderr = self.proc.communicate(timeout=timeout)
-        except subprocess.TimeoutExpired:
-            self.proc.kill()
-            self.stdout, self.stderr = self.proc.communicate()
-            raise AssertionError(f"companion still running after {timeout} s:\n{self.stderr}")
-        return self.proc.returncode
-
-    def result(self) -> dict[str, Any]:
-        lines = [line for line in self.stdout.splitlines() if line.startswith("{")]
-        assert lines, f"no JSON result; stdout:\n{self.stdout}\nstderr:\n{self.stderr}"
-        return json.loads(lines[-1])
+        super().__init__(None, *args, url=url)
 
 
 def circle_mission(path: Path, duration: float, radius: float = 3.0, speed: float = 1.0) -> Path:

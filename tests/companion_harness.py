@@ -35,17 +35,21 @@ def ellipse_mission(path: Path, duration: float, f_r: float = 0.12) -> Path:
 
 
 class Companion:
-    """``python -m companion run --connect udpin:127.0.0.1:PORT ARGS`` for a ``with`` block."""
+    """``python -m companion run --connect udpin:127.0.0.1:PORT ARGS`` (or ``url=``) for a
+    ``with`` block; killed on exit if still running."""
 
-    def __init__(self, port: int, *args: str, command: str = "run"):
+    def __init__(self, port: int | None, *args: str, command: str = "run",
+                 url: str | None = None):
         self.argv = [sys.executable, "-m", "companion", command,
-                     "--connect", f"udpin:127.0.0.1:{port}", *args]
+                     "--connect", url or f"udpin:127.0.0.1:{port}", *args]
         self.proc: subprocess.Popen | None = None
         self.stdout = self.stderr = ""
+        self.started_at = 0.0
 
     def __enter__(self) -> "Companion":
         self.proc = subprocess.Popen(self.argv, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                                      text=True, cwd=ROOT)
+        self.started_at = time.monotonic()
         return self
 
     def __exit__(self, *exc) -> None:

@@ -74,15 +74,9 @@ def _refine_mission(space: float):
 
 
 def _tune(vehicle: Path, rate: float, command: str, args, log):
-    from ..progress import progress_bar
-    from ..sim.vehicle_gains import gains_for
-    bar, progress = progress_bar(f"tuning for {vehicle}", not args.quiet and not args.json)
-    try:
-        return gains_for(vehicle, rate, command, progress, log, population=args.population,
-                         rounds=args.rounds)
-    finally:
-        if bar is not None:
-            bar.close()
+    from .run import gains_for_vehicle
+    return gains_for_vehicle(vehicle, rate, command, not args.quiet and not args.json, log,
+                             population=args.population, rounds=args.rounds)
 
 
 def _refine(args, vehicle: Path, report, log) -> dict:

@@ -23,8 +23,8 @@ from dataclasses import replace
 from pathlib import Path
 
 from ..errors import UserError
-from .run import (add_gain_arguments, add_safety_arguments, install_signals, logger, non_negative,
-                  open_flight_log, positive, print_result, signing_key)
+from .run import (add_gain_arguments, add_safety_arguments, gains_for_vehicle, install_signals,
+                  logger, non_negative, open_flight_log, positive, print_result, signing_key)
 
 DEFAULT_D_CEN = 0.3
 
@@ -122,17 +122,10 @@ def run(args) -> int:
     own_file = args.vehicle or vehicle_file.preset_path(args.preset)
     own_gains = None
     if own_file is not None and not args.gains:
-        from ..progress import progress_bar
-        from ..sim.vehicle_gains import gains_for
-        bar, progress = progress_bar(f"tuning for {Path(own_file).name}",
-                                     not args.quiet and not args.json)
-        try:
-            own_gains = gains_for(own_file, args.rate or mission.rate_hz or 40.0,
-                                  f"companion demo --vehicle {own_file} (tuned on first use)",
-                                  progress, log)
-        finally:
-            if bar is not None:
-                bar.close()
+        own_gains = gains_for_vehicle(
+            own_file, args.rate or mission.rate_hz or 40.0,
+            f"companion demo --vehicle {own_file} (tuned on first use)",
+            not args.quiet and not args.json, log)
     # The companion's limits: the flags, else the mission's, else the plant's own (so the
     # anti-windup knows where the vehicle saturates), else the default ceiling.
     base = mission.limits or DEFAULT_LIMITS

@@ -151,21 +151,23 @@ def vehicle_choice(args, mission, log) -> tuple[object, object]:
     if path is None:
         return None, None
     from ..sim import vehicle_file
-    from ..sim.vehicle_gains import gains_for, vehicle_limits
+    from ..sim.vehicle_gains import vehicle_limits
     vehicle = vehicle_file.load(path).params
     limits = vehicle_limits(vehicle)
     if args.gains:
         return None, limits
     rate = args.rate or mission.rate_hz or 40.0
-    command = f"companion run --vehicle {path} (tuned on first use)"
+    return gains_for_vehicle(path, rate, f"companion run --vehicle {path} (tuned on first use)",
+                             not getattr(args, "quiet", False), log), limits
+
+
+def gains_for_vehicle(path, rate: float, command: str, show_bar: bool, log, **search):
+    """The gains tuned for a vehicle file (found beside it, else tuned now and stored there,
+    with a progress bar): shared by run, demo and calibrate."""
     from ..progress import progress_bar
-    bar, progress = progress_bar(f"tuning for {Path(path).name}",
-                                  not getattr(args, "quiet", False))
-    try:
-        return gains_for(path, rate, command, progress, log), limits
-    finally:
-        if bar is not None:
-            bar.close()
+    from ..sim.vehicle_gains import gains_for
+    with progress_bar(f"tuning for {Path(path).name}", show_bar) as progress:
+        return gains_for(path, rate, command, progress, log, **search)
 
 
 def settings_from_args(args, mission, url: str, key: bytes | None = None,

@@ -94,6 +94,18 @@ def check(args) -> tuple[float, ...]:
     return _frequencies(args.f_r)
 
 
+def _save(gains, d: dict, args) -> bool:
+    """Write ``--out``; with ``--json`` print ``d`` (plus "out") and say the report is done."""
+    if args.out:
+        gains.save(args.out)
+    if not args.json:
+        return False
+    if args.out:
+        d["out"] = args.out
+    print(json.dumps(d))
+    return True
+
+
 def _describe(result) -> dict:
     return {**_describe_gains(result.gains),
             "f_r": list(result.f_r),
@@ -137,20 +149,10 @@ def run(args) -> int:
                      limits=Limits(max_speed=args.max_speed, max_yaw_rate=args.max_yaw_rate),
                      max_accel=args.max_accel, population=args.population, rounds=args.rounds,
                      seed=args.seed)
-    bar, progress = progress_bar(f"tune {args.rate:g} Hz", not args.no_progress)
-    try:
+    with progress_bar(f"tune {args.rate:g} Hz", not args.no_progress) as progress:
         result = tune(cfg, progress)
-    finally:
-        if bar is not None:
-            bar.close()
-
-    if args.out:
-        result.gains.save(args.out)
     d = _describe(result)
-    if args.json:
-        if args.out:
-            d["out"] = args.out
-        print(json.dumps(d))
+    if _save(result.gains, d, args):
         return 0
     print(f"tuned for {args.rate:g} Hz, w_c {args.w_c:g} rad/s, d_cen {args.d_cen:g} m, "
           f"limits {args.max_speed:g} m/s, {args.max_yaw_rate:g} rad/s "
@@ -213,29 +215,20 @@ def run_robust(args) -> int:
     refs, duration = mission_references(args.mission)
     cfg = config_for(args.vehicle, rate, refs, duration, population=args.population,
                      rounds=args.rounds, neighbours=args.neighbours, seed=args.seed)
-    bar, progress = progress_bar(f"robust tune {rate:g} Hz", not args.no_progress)
-    try:
-        result = robust_tune(cfg, progress)
-    except RuntimeError as exc:
-        raise UserError(str(exc)) from None
-    finally:
-        if bar is not None:
-            bar.close()
+    with progress_bar(f"robust tune {rate:g} Hz", not args.no_progress) as progress:
+        try:
+            result = robust_tune(cfg, progress)
+        except RuntimeError as exc:
+            raise UserError(str(exc)) from None
     command = "companion tune " + " ".join(sys.argv[2:]) if sys.argv[1:2] == ["tune"] else \
         f"companion tune --vehicle {args.vehicle}"
     gains = record(result, cfg, args.vehicle, command)
-    if args.out:
-        gains.save(args.out)
-    d = {**{k: v for k, v in _describe_gains(gains).items()},
-         "vehicle": args.vehicle, "references": result.references,
+    d = {**_describe_gains(gains), "vehicle": args.vehicle, "references": result.references,
          "steady_rms": result.nominal_steady_rms, "worst_steady_rms": result.worst_steady_rms,
          "f_cost": result.nominal_f_cost, "worst_yaw_at_limit": result.worst_yaw_at_limit,
          "ensemble": len(result.vehicles), "evaluated": result.evaluated,
          "rejected": result.rejected}
-    if args.json:
-        if args.out:
-            d["out"] = args.out
-        print(json.dumps(d))
+    if _save(gains, d, args):
         return 0
     print(f"robust tune for {args.vehicle} at {rate:g} Hz: the vehicle and "
           f"{len(result.vehicles) - 1} neighbours, {result.evaluated} gain sets simulated "

@@ -127,6 +127,7 @@ def simulate(trackers: Tracker | Sequence[tuple[Tracker, slice]], params: RoverP
     trace: dict[str, list] = {}
     report_every = max(1, n_control // 100)
     speed_cmd = yaw_rate_cmd = zero
+    last_speed = last_yaw_rate = zero      # the previous step's commands (for the variation)
     step_index = 0
 
     for k in range(n_control):
