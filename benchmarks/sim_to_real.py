@@ -48,12 +48,14 @@ def at_limit_share(csv_path: str, limit: float, duration: float = 60.0) -> float
     return sum(values) / len(values) if values else math.nan
 
 
-def _companion(argv: list[str], timeout: float) -> dict:
+def companion(argv: list[str], timeout: float) -> dict:
+    """``companion ARGV`` as a process; its JSON result (the last stdout line), or exit with
+    the tail of its stderr."""
     p = subprocess.run([sys.executable, "-m", "companion", *argv], capture_output=True,
                        text=True, timeout=timeout, cwd=ROOT)
     if p.returncode != 0:
-        raise RuntimeError(f"companion {argv[0]} exit {p.returncode}: {p.stderr.strip()[-400:]}")
-    return json.loads(p.stdout)
+        raise SystemExit(f"companion {argv[0]}: exit {p.returncode}: {p.stderr.strip()[-600:]}")
+    return json.loads(p.stdout.strip().splitlines()[-1])
 
 
 def limit_flags(vehicle) -> list[str]:
@@ -66,7 +68,7 @@ def limit_flags(vehicle) -> list[str]:
 
 
 def on_plant(vehicle_path: str, gains: str, f_r: float, logs: Path, limits: list[str]) -> dict:
-    r = _companion(["demo", "--vehicle", vehicle_path, "--mission",
+    r = companion(["demo", "--vehicle", vehicle_path, "--mission",
                     str(ROOT / "missions" / MISSIONS[f_r]), "--gains", gains, *limits,
                     "--d-cen", "0", "--json", "--no-plot", "--no-zenoh", "--log-dir", str(logs),
                     "-q"], timeout=300)
@@ -74,7 +76,7 @@ def on_plant(vehicle_path: str, gains: str, f_r: float, logs: Path, limits: list
 
 
 def on_sitl(url: str, gains: str, f_r: float, logs: Path, limits: list[str]) -> dict:
-    return _companion(["run", "--connect", url, "--mission", str(ROOT / "missions" / MISSIONS[f_r]),
+    return companion(["run", "--connect", url, "--mission", str(ROOT / "missions" / MISSIONS[f_r]),
                        "--gains", gains, *limits, "--arm", "--json", "--no-zenoh",
                        "--log-dir", str(logs), "-q"], timeout=400)
 

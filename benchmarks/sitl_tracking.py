@@ -19,7 +19,6 @@ from __future__ import annotations
 import argparse
 import json
 import math
-import subprocess
 import sys
 import tempfile
 import time
@@ -30,15 +29,7 @@ sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "tests"))
 sys.path.insert(0, str(ROOT / "benchmarks"))
 
-from sim_to_real import MISSIONS, at_limit_share  # noqa: E402
-
-
-def companion(argv: list[str], timeout: float) -> dict:
-    p = subprocess.run([sys.executable, "-m", "companion", *argv], capture_output=True,
-                       text=True, timeout=timeout, cwd=ROOT)
-    if p.returncode != 0:
-        raise SystemExit(f"companion {argv[0]}: exit {p.returncode}: {p.stderr.strip()[-600:]}")
-    return json.loads(p.stdout.strip().splitlines()[-1])
+from sim_to_real import MISSIONS, at_limit_share, companion  # noqa: E402
 
 
 def main() -> int:
