@@ -68,3 +68,17 @@ def closest_approaches(global_positions: Iterable[Any],
     fixes = [(m.lat * 1e-7, m.lon * 1e-7) for m in global_positions]
     assert fixes, "no GLOBAL_POSITION_INT from the vehicle"
     return [min(metres_between(f, wp) for f in fixes) for wp in waypoints]
+
+
+def path_distances(plan: Path, waypoints: list[tuple[float, float]]) -> list[float]:
+    """How close the companion's reference path itself passes each waypoint (m): its corners
+    are arcs of up to 2 m radius, so a sharp corner is passed inside, by design."""
+    from companion import mission as missions
+    from companion.mission import geo
+    m = missions.load(plan)          # around the plan's home
+    refs = [m.trajectory.sample(m.duration * k / 4000) for k in range(4001)]
+    out = []
+    for wp in waypoints:
+        north, east = geo.ne_from_latlon(*wp, m.datum)
+        out.append(min(math.hypot(r.x - north, r.y - east) for r in refs))
+    return out

@@ -276,6 +276,10 @@ def print_result(result, as_json: bool, extra: dict | None = None) -> None:
         f"HOLD {'confirmed' if d['hold_confirmed'] else 'not confirmed'}",
         f"gains       {d['gains_source']}",
     ]
+    if d.get("ekf_origin"):
+        o = d["ekf_origin"]
+        lines.append(f"origin      {o['lat']:.7f}, {o['lon']:.7f} ({o['source']}): the mission "
+                     "placed around it")
     for key in ("plot", "tlog", "csv"):
         if key in d:
             lines.append(f"{key:<11} {d[key]}")
