@@ -259,3 +259,67 @@ def test_a_geodetic_file_gone_before_placing_is_a_user_error(tmp_path):
     plan.unlink()
     with pytest.raises(UserError, match="no such file"):
         mission.at_origin(BOOT)
+
+
+# --------------------------------------------------------------------------- load-mission
+
+
+def _geo_line(start_north: float) -> str:
+    return (f'name = "geo line"\nframe = "geodetic"\norigin = [{CMAC[0]}, {CMAC[1]}]\n'
+            f'[trajectory]\nkind = "line"\nstart = [{start_north}, 0.0]\n'
+            f'end = [{start_north + 10.0}, 0.0]\nspeed = 1.0\n')
+
+
+def _fly_in_thread(settings, control):
+    import threading
+    from companion.live.session import fly
+    out: dict = {}
+    worker = threading.Thread(target=lambda: out.setdefault("r", fly(settings, control=control)))
+    worker.start()
+    return worker, out
+
+
+def test_load_mission_places_a_geodetic_mission_around_the_vehicles_origin(tmp_path):
+    """A remote load-mission (TOML text) is placed around the origin the run read, and held to
+    the start limit; a run that read no origin (a local mission) refuses a geodetic one."""
+    import json
+    import time
+    from companion.live.events import ControlChannel
+    from companion.live.link import LinkConfig
+    from companion.live.runner import RunnerConfig
+    from companion.live.session import RunSettings
+
+    def ready(control):
+        deadline = time.monotonic() + 20.0
+        while time.monotonic() < deadline:
+            ok, text = control.submit("status", timeout=5.0)
+            if ok and json.loads(text)["state"] == "ready":
+                return
+            time.sleep(0.05)
+        raise AssertionError("never ready")
+
+    plan = tmp_path / "gentle.plan"
+    write_plan(plan, CMAC)
+    for first, expect_origin in ((missions.load(plan), True),
+                                 (missions.paper_ellipse(0.12, 30.0), False)):
+        control = ControlChannel()
+        with PlantProcess(ORIGIN_ARG, *PLAN_START, "--speedup", "4") as plant:
+            settings = RunSettings(
+                link=LinkConfig(url=f"udpin:127.0.0.1:{plant.port}"), mission=first,
+                runner=RunnerConfig(arm=True, autostart=False, max_start_distance=25.0))
+            worker, out = _fly_in_thread(settings, control)
+            try:
+                ready(control)
+                # 100 m north of the plan's home is 150 m from the rover standing there
+                far = control.submit("load-mission", _geo_line(100.0), timeout=5.0)
+                near = control.submit("load-mission", _geo_line(3.0), timeout=5.0)
+            finally:
+                control.submit("abort")
+                worker.join(15.0)
+        assert not worker.is_alive()
+        if expect_origin:
+            assert not far[0] and "'geo line' starts 100.0 m from the rover" in far[1], far
+            assert near[0], near
+            assert out["r"].extra["ekf_origin"]["source"] == "GPS_GLOBAL_ORIGIN"
+        else:
+            assert not far[0] and not near[0] and "EKF origin" in near[1], near
