@@ -164,12 +164,13 @@ def test_no_origin_within_the_timeout_is_one_clear_line(tmp_path):
     write_plan(plan, CMAC)
     with PlantProcess("--origin-delay", "100000") as plant, \
             Companion(plant.port, "--mission", str(plan), "--arm", "--no-zenoh", "--no-log",
-                      "--origin-timeout", "1.5") as comp:
+                      "--origin-timeout", "2.5") as comp:
         code = comp.wait(60.0)
     errors = _errors(comp.stderr)
     assert code == 2 and len(errors) == 1, comp.stderr
+    assert "waiting for the vehicle's EKF origin (no GPS fix yet?), up to 2.5 s" in comp.stderr
     assert ("the vehicle reported no EKF origin (GPS_GLOBAL_ORIGIN / HOME_POSITION) within "
-            "1.5 s" in errors[0]) and "--origin-timeout" in errors[0]
+            "2.5 s" in errors[0]) and "--origin-timeout" in errors[0]
 
 
 # --------------------------------------------------------------------------- the plant's side

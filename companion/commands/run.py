@@ -18,9 +18,11 @@ mission's rate_hz > the --gains file's > 40 Hz. Limits: flags > the mission's [l
 6 rad/s.
 
 exit codes: 0 mission done, or stopped on SIGTERM / Ctrl-C / abort after stopping the rover;
-2 a user error (bad flag or file, no vehicle, no telemetry); 3 stopped by a fault (telemetry
-lost for --lost-timeout, vehicle restarted, non-finite command, mode or arming refused, pilot
-took over). The rover is stopped (zero setpoint, then HOLD) whenever the companion stops it.
+2 a user error (bad flag or file, no vehicle, no telemetry, no EKF origin for a mission placed
+by latitude / longitude, --origin far from the vehicle's, the mission's start too far); 3
+stopped by a fault (telemetry lost for --lost-timeout, vehicle restarted, non-finite command,
+mode or arming refused, pilot took over). The rover is stopped (zero setpoint, then HOLD)
+whenever the companion stops it.
 """
 
 

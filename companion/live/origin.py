@@ -34,6 +34,7 @@ MAV_CMD_REQUEST_MESSAGE = 512
 ASK_EVERY = 1.0          # wall s between requests while waiting
 HOME_GRACE = 3.0         # wall s to still wait for GPS_GLOBAL_ORIGIN once HOME_POSITION came
 ORIGIN_TOLERANCE = 5.0   # m: --origin must lie this close to the vehicle's EKF origin
+SAY_WAITING = 2.0        # wall s: say that we wait for the origin once it takes this long
 
 
 @dataclass(frozen=True)
@@ -76,7 +77,8 @@ def from_message(msg: Any) -> EkfOrigin | None:
 
 
 def read_origin(link: Any, timeout: float,
-                should_stop: Callable[[], bool] = lambda: False) -> EkfOrigin | None:
+                should_stop: Callable[[], bool] = lambda: False,
+                log: Callable[[str], None] = lambda text: None) -> EkfOrigin | None:
     """The vehicle's EKF origin, asking once a second, or None after ``timeout`` wall s.
 
     Other messages read meanwhile are dropped: only for set-up, before the control loop.
@@ -86,9 +88,13 @@ def read_origin(link: Any, timeout: float,
     next_ask = start
     home: EkfOrigin | None = None
     home_at = 0.0
+    said_waiting = False
     while (now := time.monotonic()) < deadline and not should_stop():
         if home is not None and now - home_at >= HOME_GRACE:
             return home
+        if not said_waiting and now - start >= SAY_WAITING:
+            said_waiting = True
+            log(f"waiting for the vehicle's EKF origin (no GPS fix yet?), up to {timeout:g} s")
         if now >= next_ask:
             for msg_id in (GPS_GLOBAL_ORIGIN, HOME_POSITION):
                 link.command(MAV_CMD_REQUEST_MESSAGE, msg_id)
@@ -120,7 +126,7 @@ def place(mission: Any, link: Any, override: tuple[float, float] | None, timeout
     there is no ``override``, or when ``override`` is more than :data:`ORIGIN_TOLERANCE` from
     the vehicle's.
     """
-    told = read_origin(link, timeout, should_stop)
+    told = read_origin(link, timeout, should_stop, log)
     if told is None:
         if override is None:
             raise UserError(
