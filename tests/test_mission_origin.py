@@ -249,6 +249,8 @@ def test_geodetic_missions_are_placed_again_exactly_around_another_origin(tmp_pa
             assert (a.x, a.y) == (b.x, b.y)
         start = placed.trajectory.sample(0.0)
         assert start.x == pytest.approx(first.trajectory.sample(0.0).x - 50.0, abs=0.01)
+    from dataclasses import replace
+    assert replace(first, duration=5.0).at_origin(BOOT).duration == 5.0   # demo --duration
     local = missions.load("missions/circle.toml")
     assert not local.geodetic and local.at_origin(BOOT) is local
 

@@ -100,7 +100,10 @@ class Mission:
         since is a UserError, still before anything moves."""
         if not self.geodetic or self.placer is None:
             return self
-        return self.placer(origin=origin)
+        placed = self.placer(origin=origin)
+        # a duration set since loading (companion demo --duration) is kept
+        return placed if placed.duration == self.duration else replace(placed,
+                                                                         duration=self.duration)
 
     def anchored(self, x0: float, y0: float, yaw0: float) -> Trajectory:
         """The trajectory in the vehicle's local NED frame for a start pose (identity for frame
