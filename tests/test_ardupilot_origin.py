@@ -95,6 +95,7 @@ def test_a_plan_flies_where_drawn_on_ardupilot_booted_50_m_away(ardupilot, tmp_p
         assert len(errors) == 1 and "starts 5" in errors[0] and "--max-start-distance 25" in errors[0]
         assert "Traceback" not in comp.stderr
         assert "EKF origin" in comp.stderr                     # it did learn the origin first
+        refusal = errors[0]
 
         # Drive the rover to the plan's start (as a user would), then fly the plan.
         _arm_in_guided(gs)
@@ -110,7 +111,8 @@ def test_a_plan_flies_where_drawn_on_ardupilot_booted_50_m_away(ardupilot, tmp_p
         fixes = gs.messages("GLOBAL_POSITION_INT", after=t0)
         approaches = closest_approaches(fixes, waypoints)
         with capsys.disabled():
-            print(f"\n{which}: stopped {stopped_at:.2f} m from the plan's home; EKF origin "
+            print(f"\n{which}: refused where it booted: {refusal}")
+            print(f"{which}: stopped {stopped_at:.2f} m from the plan's home; EKF origin "
                   f"{metres_between(origin, BOOT):.2f} m from --home; steady RMS "
                   f"{r['steady_rms']:.3f} m; closest approach per waypoint (m): "
                   + ", ".join(f"{a:.2f}" for a in approaches) + "; the path's own: "
