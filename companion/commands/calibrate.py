@@ -38,9 +38,11 @@ def register(subparsers) -> None:
     p.add_argument("--out", required=True, metavar="DIR",
                    help="folder for vehicle.toml and gains.toml (created if missing)")
     t = p.add_argument_group("tuning")
-    t.add_argument("--population", type=int, default=160, metavar="N",
-                   help="gain sets simulated per round (default 160)")
-    t.add_argument("--rounds", type=int, default=5, metavar="N", help="search rounds (default 5)")
+    from ..sim.robust import RobustConfig
+    t.add_argument("--population", type=int, default=RobustConfig.population, metavar="N",
+                   help=f"gain sets simulated per round (default {RobustConfig.population})")
+    t.add_argument("--rounds", type=int, default=RobustConfig.rounds, metavar="N",
+                   help=f"search rounds (default {RobustConfig.rounds})")
     t.add_argument("--mission", metavar="FILE", default="missions/paper_ellipse_004.toml",
                    help="the mission named in the printed run command")
     t.add_argument("--no-refine", dest="refine", action="store_false",

@@ -53,9 +53,10 @@ def register(subparsers) -> None:
                    help="command yaw-rate limit (default 6, the companion's default)")
     p.add_argument("--max-accel", type=float, default=math.inf, metavar="M_S2",
                    help="the rover's acceleration limit (default none)")
-    p.add_argument("--population", type=int, default=128, metavar="N",
-                   help="gain sets simulated per round (default 128)")
-    p.add_argument("--rounds", type=int, default=4, metavar="N", help="search rounds (default 4)")
+    p.add_argument("--population", type=int, metavar="N",
+                   help="gain sets simulated per round (default 128; with --vehicle 256)")
+    p.add_argument("--rounds", type=int, metavar="N",
+                   help="search rounds (default 4; with --vehicle 6)")
     p.add_argument("--seed", type=int, default=1, help="random seed (default 1)")
     p.add_argument("--out", metavar="FILE", help="write the gains to this TOML file")
     p.add_argument("--json", action="store_true", help="print one JSON object")
@@ -140,6 +141,8 @@ def run(args) -> int:
         raise UserError("--mission needs --vehicle (the linear tuner uses the paper's ellipse)")
     if args.rate is None:
         raise UserError("--rate is required (or --vehicle FILE for a robust tune)")
+    args.population = 128 if args.population is None else args.population
+    args.rounds = 4 if args.rounds is None else args.rounds
     f_r = check(args)
     from ..core.limits import Limits
     from ..sim.tuning import TuneConfig, tune
@@ -200,7 +203,9 @@ def mission_references(paths: list[str]) -> tuple[list[tuple[str, object]], floa
 
 
 def run_robust(args) -> int:
-    from ..sim.robust import tune as robust_tune
+    from ..sim.robust import RobustConfig, tune as robust_tune
+    args.population = RobustConfig.population if args.population is None else args.population
+    args.rounds = RobustConfig.rounds if args.rounds is None else args.rounds
     rate = 40.0 if args.rate is None else args.rate
     require_positive("--rate", rate)
     if args.population < 8:
