@@ -14,12 +14,14 @@ from __future__ import annotations
 
 import argparse
 import configparser
+import os
 import re
 import shlex
 import shutil
 import signal
 import subprocess
 import sys
+import tempfile
 import tomllib
 from pathlib import Path
 
@@ -212,3 +214,42 @@ def test_sysusers_file_creates_the_units_user(tmp_path):
     assert proc.returncode == 0 and conf.name not in out, out
     assert f"Creating user '{user}'" in out, out
     assert re.search(rf"^m\s+{user}\s+dialout\s*$", SYSUSERS.read_text(), re.M)
+
+
+def _fly_as_nobody(caps: list[str], tmp_dir: Path) -> str:
+    """``companion run --realtime`` as user nobody with these ambient capabilities, against
+    sitl-plant for a second; its stderr."""
+    from companion_harness import ellipse_mission
+    from sitl_plant.testing import PlantProcess
+    mission = ellipse_mission(tmp_dir / "m.toml", 1.0)
+    mission.chmod(0o644)
+    setpriv = ["setpriv", "--reuid=65534", "--regid=65534", "--clear-groups"]
+    if caps:
+        names = ",".join("+" + c.lower().removeprefix("cap_") for c in caps)
+        setpriv += [f"--inh-caps={names}", f"--ambient-caps={names}"]
+    with PlantProcess("--loop-rate", "100") as plant:
+        proc = subprocess.run(
+            [*setpriv, sys.executable, "-m", "companion", "run", "--connect",
+             f"udpin:127.0.0.1:{plant.port}", "--mission", str(mission), "--arm", "--realtime",
+             "--no-log", "--no-zenoh"],
+            capture_output=True, text=True, timeout=120, cwd=tmp_dir,
+            env={**os.environ, "PYTHONPATH": str(ROOT)})
+    assert proc.returncode == 0, proc.stderr
+    return proc.stderr
+
+
+def test_the_units_capability_is_what_realtime_needs():
+    """As an unprivileged user, --realtime gets SCHED_FIFO with the unit's ambient
+    capabilities and not without them."""
+    if os.geteuid() != 0 or shutil.which("setpriv") is None:
+        pytest.skip("needs root and setpriv (util-linux) to run the companion as another user")
+    caps = unit_service()["AmbientCapabilities"].split()
+    tmp_dir = Path(tempfile.mkdtemp(prefix="pzc-deploy-"))
+    try:
+        tmp_dir.chmod(0o755)     # nobody reads the mission here
+        granted = _fly_as_nobody(caps, tmp_dir)
+        refused = _fly_as_nobody([], tmp_dir)
+    finally:
+        shutil.rmtree(tmp_dir)
+    assert "control loop under SCHED_FIFO" in granted, granted
+    assert "SCHED_FIFO not granted" in refused, refused
