@@ -28,6 +28,9 @@ from dataclasses import dataclass
 from typing import Any, Callable, Sequence
 
 os.environ["MAVLINK20"] = "1"   # before pymavlink.mavutil is imported: MAVLink 2 frames
+# Every connection here says dialect="ardupilotmega"; without this mavutil would first load
+# its default "all" dialect too (about 7 MB resident that nothing uses).
+os.environ.setdefault("MAVLINK_DIALECT", "ardupilotmega")
 from pymavlink import mavutil  # noqa: E402
 
 from ..mav import signing  # noqa: E402
