@@ -31,6 +31,7 @@ os.environ["MAVLINK20"] = "1"   # before pymavlink.mavutil is imported: MAVLink 
 from pymavlink import mavutil  # noqa: E402
 
 from ..mav import signing  # noqa: E402
+from ..mav.connection import open_connection  # noqa: E402
 from ..mav.sockets import size_receive_buffer  # noqa: E402
 from ..errors import UserError  # noqa: E402
 from ..core.signals import Command  # noqa: E402
@@ -62,6 +63,7 @@ class LinkConfig:
     ack_timeout: float = 1.0          # s to wait for one COMMAND_ACK
     signing_key: bytes | None = None  # 32 bytes: sign outgoing, refuse unsigned
     tlog: str | None = None           # path of a .tlog to record (pymavlink's format)
+    baud: int | None = None           # serial devices only; None: DEVICE,BAUD's or 115200
 
 
 @dataclass(frozen=True)
@@ -77,12 +79,10 @@ class Link:
 
     def __init__(self, config: LinkConfig):
         self.config = config
-        try:
-            self.master = mavutil.mavlink_connection(
-                config.url, source_system=config.source_system,
-                source_component=config.source_component, dialect="ardupilotmega")
-        except Exception as exc:   # pymavlink raises anything from ValueError to OSError
-            raise UserError(f"cannot open {config.url!r}: {exc}") from None
+        # A URL or a serial device (DEVICE[,BAUD] or config.baud); one-line UserError if not.
+        self.master = open_connection(
+            config.url, baud=config.baud, source_system=config.source_system,
+            source_component=config.source_component, dialect="ardupilotmega")
         self.mav = self.master.mav
         self.recv_buffer = size_receive_buffer(self.master)
         if config.signing_key is not None:
