@@ -82,6 +82,8 @@ def add_live_arguments(p: argparse.ArgumentParser, title: str, required: bool = 
     o.add_argument("-q", "--quiet", action="store_true", help="no log lines on stderr")
     from .zenoh_args import add_zenoh_arguments
     add_zenoh_arguments(p)
+    from .config_file import add_config_arguments
+    add_config_arguments(p)
     # run's settings builder reads these; identify flies no PZC gains.
     p.set_defaults(gains=None, k_df=None, lambda_f=None, k_dc=None, lambda_c=None,
                    log_path=None, check=None, plot=None, name=None)

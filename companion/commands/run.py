@@ -154,6 +154,8 @@ def register(subparsers) -> None:
     o.add_argument("-q", "--quiet", action="store_true", help="no log lines on stderr")
     from .zenoh_args import add_zenoh_arguments
     add_zenoh_arguments(p)
+    from .config_file import add_config_arguments
+    add_config_arguments(p)    # every flag above (and any added later) is a config key
     p.set_defaults(func=run)
 
 
