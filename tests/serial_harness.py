@@ -46,10 +46,17 @@ class PtyCable:
         return self
 
     def __exit__(self, *exc) -> None:
+        self.unplug()
+
+    def unplug(self) -> None:
+        """Cut the cable: both ptys hang up, as a USB serial device does when it vanishes
+        (a process reading its end gets EIO)."""
         self._stop.set()
-        self._thread.join(2.0)
+        if self._thread.is_alive():
+            self._thread.join(2.0)
         for fd in self._fds:
             os.close(fd)
+        self._fds = []
 
     def _queued(self, direction: int) -> int:
         return sum(len(chunk) for _, chunk in self._queues[direction])

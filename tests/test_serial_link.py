@@ -89,6 +89,28 @@ def test_the_paper_ellipse_over_a_115200_baud_serial_link(tmp_path):
     assert r["setpoints_sent"] >= 2400
 
 
+def test_an_unplugged_device_stops_the_run_with_exit_3():
+    """The cable is cut mid-mission (a USB autopilot rebooting): the telemetry failsafes stop
+    the rover and the run ends with exit 3 after --lost-timeout; stdout stays the one JSON
+    result (pymavlink would print "Device ... is dead" there)."""
+    with PtyCable(baud=115200) as cable, plant_on(cable.paths[0]), \
+            Companion(None, "--mission", MISSION, "--arm", "--json", "--no-log",
+                      "--lost-timeout", "2", url=cable.paths[1]) as comp:
+        time.sleep(8.0)     # start-up, GUIDED, armed, tracking (checked below: cycles)
+        assert comp.proc.poll() is None, "the run ended before the cut"
+        cable.unplug()
+        cut = time.monotonic()
+        code = comp.wait(30.0)
+        took = time.monotonic() - cut
+    assert code == 3, comp.stderr
+    assert comp.stdout.strip().startswith("{") and len(comp.stdout.strip().splitlines()) == 1
+    r = comp.result()
+    assert r["reason"] == "failsafe: telemetry lost for 2 s" and r["failsafes"] >= 1, r
+    assert r["cycles"] >= 40, r      # it was tracking (>= 1 s at 40 Hz) when the cable was cut
+    assert "telemetry stale" in comp.stderr
+    assert 2.0 <= took < 10.0, took
+
+
 def test_serial_target_tells_devices_from_urls(tmp_path):
     assert serial_target("udpin:0.0.0.0:14550") is None
     assert serial_target("tcp:127.0.0.1:5760") is None

@@ -106,6 +106,7 @@ class Link:
         self._frame = mavlink.MAV_FRAME_BODY_NED
         self._speed_yaw_rate = True
         self.setpoints_sent = 0
+        self._recv_failed = False                 # the last read raised (see wait)
         self.last_ack: dict[int, int] = {}        # command id -> last result
 
     def close(self) -> None:
@@ -126,8 +127,10 @@ class Link:
         """One parsed message, or None when nothing is waiting. Never blocks, never raises."""
         try:
             msg = self.master.recv_msg()
-        except OSError:
+        except OSError:   # a serial device unplugged or hung up; a UDP peer's ICMP error
+            self._recv_failed = True
             return None
+        self._recv_failed = False
         if (msg is not None and msg.get_type() == "HEARTBEAT" and self.vehicle is not None
                 and self.is_vehicle_heartbeat(msg)):
             self._note_heartbeat(msg)
@@ -141,7 +144,9 @@ class Link:
         """Sleep until data arrives or ``timeout`` seconds pass (pymavlink's select)."""
         for hook in self.on_idle:
             hook()
-        if timeout > 0:
+        if timeout > 0 and self._recv_failed:
+            time.sleep(timeout)   # a hung-up device polls readable at once: do not spin on it
+        elif timeout > 0:
             self.master.select(timeout)
 
     def is_vehicle(self, msg: Any) -> bool:

@@ -104,6 +104,10 @@ def _open_serial(mavutil: Any, device: str, baud: int, dialect: str | None = Non
                                  source_component=source_component)
     except (serial.SerialException, OSError, ValueError) as exc:
         raise UserError(f"cannot open serial device {device}: {_why(device, exc)}") from None
+    # pymavlink reads this flag only to print "Device X is dead" once, on stdout (where a
+    # command's JSON result goes), when a write fails; the companion's failsafes report a dead
+    # link on stderr.
+    conn.portdead = True
     try:
         conn.port.exclusive = True   # pyserial's flock(LOCK_EX | LOCK_NB) on the open port
     except (serial.SerialException, OSError) as exc:
