@@ -277,7 +277,7 @@ def _only_given(subs) -> Iterator[None]:
     try:
         yield
     finally:
-        for sub, defaults, actions in saved:
+        for sub, defaults, actions in reversed(saved):   # an action shared by two parsers
             sub._defaults = defaults
             for action, default, required in actions:
                 action.default, action.required = default, required
