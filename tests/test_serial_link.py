@@ -227,3 +227,41 @@ def test_not_a_terminal_and_bad_baud_are_one_line(tmp_path):
              "companion run", "two baud rates", "57600", "921600")
     p = companion("--connect", "/dev/ttyNOPE", "--baud", "-9600", *QUICK)
     assert p.returncode == 2 and "argument --baud: must be > 0" in p.stderr, p.stderr
+
+
+@pytest.mark.sitl
+@pytest.mark.slow
+def test_ardupilot_sitl_over_its_own_uart_driver(tmp_path):
+    """ArduPilot SITL's SERIAL2 is its UART driver on one end of the cable (a real autopilot's
+    serial code, MAVLink 2 at 921600), the companion on the other; SERIAL0 (TCP) is a ground
+    station, which SITL needs before it boots."""
+    from ardupilot_harness import ArduPilotSITL, GroundStation, circle_mission
+
+    class SerialSITL(ArduPilotSITL):
+        def __init__(self, workdir, device: str, **kw):
+            super().__init__(workdir, **kw)
+            self.device = device
+
+        def argv(self) -> list[str]:
+            return super().argv() + ["--serial2", f"uart:{self.device}:921600"]
+
+    speedup = 2
+    mission = circle_mission(tmp_path / "circle.toml", duration=20.0)
+    with PtyCable(baud=921600) as cable, \
+            SerialSITL(tmp_path / "ardupilot", cable.paths[0], speedup=speedup,
+                       params={"SERIAL2_PROTOCOL": 2, "SERIAL2_BAUD": 921}).start() as sitl, \
+            GroundStation(sitl, serial=0), \
+            Companion(None, "--baud", "921600", "--mission", str(mission), "--arm", "--json",
+                      "--no-zenoh", "--log-dir", str(tmp_path / "logs"), "--arm-timeout",
+                      "120", url=cable.paths[1]) as comp:
+        code = comp.wait(240.0)
+        assert code == 0, comp.stderr + sitl.log_tail()
+        r = comp.result()
+    assert r["reason"] == "mission_done" and r["hold_confirmed"], r
+    assert r["autopilot"] == "ardupilot" and r["rate_accepted_hz"] == 40.0
+    assert r["missed_cycles"] <= 0.01 * r["cycles"] and r["cycles"] >= 0.98 * 20.0 * 40.0, r
+    assert r["steady_rms"] < 0.3, r["steady_rms"]
+    assert cable.dropped == [0, 0]
+    print(f"\nArduPilot SITL over a 921600-baud pty: steady RMS {r['steady_rms']:.3f} m, "
+          f"f_cost {r['f_cost']:.3f}, {r['cycles']} cycles, missed {r['missed_cycles']}, "
+          f"loop {r['loop_rate_hz']:.1f} Hz; bytes carried {cable.carried}")
