@@ -12,6 +12,7 @@ import importlib
 import sys
 
 from . import __version__
+from .commands import config_file
 from .errors import UserError
 
 # Sub-command modules, in the order ``companion --help`` lists them.
@@ -49,7 +50,11 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
-    args = parser.parse_args(argv)
+    try:   # --config FILE fills a command's flags (companion.commands.config_file)
+        args = config_file.parse_args(parser, argv)
+    except config_file.ConfigError as err:
+        print(f"{err.prog}: error: {err}", file=sys.stderr)
+        return err.exit_code
     try:
         return int(args.func(args) or 0)
     except UserError as err:

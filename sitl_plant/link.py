@@ -32,12 +32,14 @@ def _mavutil():
 
 class Link:
     def __init__(self, url: str, sysid: int, compid: int, signing_key: bytes | None = None):
-        mavutil = _mavutil()
-        try:
-            self.conn = mavutil.mavlink_connection(
-                url, source_system=sysid, source_component=compid, dialect="ardupilotmega")
-        except Exception as exc:  # pymavlink raises anything from ValueError to SerialException
-            raise LinkError(f"cannot open {url!r}: {exc}") from None
+        _mavutil()
+        from companion.errors import UserError
+        from companion.mav.connection import open_connection
+        try:   # a URL, or a serial device (DEVICE or DEVICE,BAUD: a pty in the tests)
+            self.conn = open_connection(url, source_system=sysid, source_component=compid,
+                                        dialect="ardupilotmega")
+        except UserError as exc:
+            raise LinkError(str(exc)) from None
         self.mav = self.conn.mav
         from companion.mav import signing
         from companion.mav.sockets import size_receive_buffer

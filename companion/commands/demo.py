@@ -55,6 +55,8 @@ def register(subparsers) -> None:
     p.add_argument("-q", "--quiet", action="store_true", help="no log lines on stderr")
     from .zenoh_args import add_zenoh_arguments
     add_zenoh_arguments(p)
+    from .config_file import add_config_arguments
+    add_config_arguments(p)
     p.set_defaults(func=run)
 
 

@@ -31,8 +31,8 @@ from pathlib import Path
 from typing import Any
 
 from ..errors import UserError
-from .run import (add_safety_arguments, add_timeout_arguments, logger, open_flight_log,
-                  positive, signing_key)
+from .run import (BAUD_HELP, add_safety_arguments, add_timeout_arguments, baud_rate, logger,
+                  open_flight_log, positive, signing_key)
 
 EPILOG = """\
 exit codes: 0 done; 2 a user error (bad flag, a log that is malformed, too short or without
@@ -65,7 +65,8 @@ def add_live_arguments(p: argparse.ArgumentParser, title: str, required: bool = 
     manoeuvre's space and limits, run's timeouts, logs, signing, output and Zenoh flags."""
     live = p.add_argument_group(title)
     live.add_argument("--connect", metavar="URL", required=required,
-                      help="pymavlink connection string")
+                      help="pymavlink connection string or serial device[,baud]")
+    live.add_argument("--baud", type=baud_rate, metavar="BPS", help=BAUD_HELP)
     live.add_argument("--sysid", type=int, metavar="N", help="system id of the vehicle")
     live.add_argument("--arm", action="store_true",
                       help="arm the vehicle (retrying once a second); default: wait for it")
@@ -84,6 +85,8 @@ def add_live_arguments(p: argparse.ArgumentParser, title: str, required: bool = 
     o.add_argument("-q", "--quiet", action="store_true", help="no log lines on stderr")
     from .zenoh_args import add_zenoh_arguments
     add_zenoh_arguments(p)
+    from .config_file import add_config_arguments
+    add_config_arguments(p)
     # run's settings builder reads these; identify flies no PZC gains.
     p.set_defaults(gains=None, k_df=None, lambda_f=None, k_dc=None, lambda_c=None,
                    log_path=None, check=None, plot=None, name=None)

@@ -49,6 +49,18 @@ def non_negative(text: str) -> float:
     return value
 
 
+def baud_rate(text: str) -> int:
+    from ..mav.connection import parse_baud
+    try:
+        return parse_baud(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
+BAUD_HELP = ("serial devices only: bits per second (default: DEVICE,BAUD's, else 115200 as "
+             "pymavlink; ArduPilot companion ports usually 921600)")
+
+
 def add_gain_arguments(p: argparse.ArgumentParser) -> None:
     g = p.add_argument_group("gains and limits")
     g.add_argument("--rate", type=positive, metavar="HZ",
@@ -115,7 +127,9 @@ def register(subparsers) -> None:
                     "PZC law so the rover follows the mission.",
         epilog=EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--connect", metavar="URL", default="udpin:0.0.0.0:14550",
-                   help="pymavlink connection string (default udpin:0.0.0.0:14550)")
+                   help="pymavlink connection string or serial device, e.g. /dev/ttyAMA0 or "
+                        "/dev/ttyACM0,921600 (default udpin:0.0.0.0:14550)")
+    p.add_argument("--baud", type=baud_rate, metavar="BPS", help=BAUD_HELP)
     p.add_argument("--mission", metavar="FILE", required=True,
                    help="mission file (.toml, .plan, .waypoints)")
     g = p.add_argument_group(
@@ -156,6 +170,8 @@ def register(subparsers) -> None:
     o.add_argument("-q", "--quiet", action="store_true", help="no log lines on stderr")
     from .zenoh_args import add_zenoh_arguments
     add_zenoh_arguments(p)
+    from .config_file import add_config_arguments
+    add_config_arguments(p)    # every flag above (and any added later) is a config key
     allow_negative_pairs(p)
     p.set_defaults(func=run)
 
@@ -202,7 +218,7 @@ def settings_from_args(args, mission, url: str, key: bytes | None = None,
     return RunSettings(
         link=LinkConfig(url=url, sysid=getattr(args, "sysid", None),
                         heartbeat_timeout=getattr(args, "heartbeat_timeout", 10.0),
-                        signing_key=key, tlog=tlog),
+                        signing_key=key, tlog=tlog, baud=getattr(args, "baud", None)),
         mission=mission,
         runner=RunnerConfig(stale_timeout=getattr(args, "stale_timeout", 0.5),
                             arm=getattr(args, "arm", True),

@@ -34,6 +34,7 @@ os.environ.setdefault("MAVLINK_DIALECT", "ardupilotmega")
 from pymavlink import mavutil  # noqa: E402
 
 from ..mav import signing  # noqa: E402
+from ..mav.connection import open_connection  # noqa: E402
 from ..mav.sockets import size_receive_buffer  # noqa: E402
 from ..errors import UserError  # noqa: E402
 from ..core.signals import Command  # noqa: E402
@@ -65,6 +66,7 @@ class LinkConfig:
     ack_timeout: float = 1.0          # s to wait for one COMMAND_ACK
     signing_key: bytes | None = None  # 32 bytes: sign outgoing, refuse unsigned
     tlog: str | None = None           # path of a .tlog to record (pymavlink's format)
+    baud: int | None = None           # serial devices only; None: DEVICE,BAUD's or 115200
 
 
 @dataclass(frozen=True)
@@ -80,12 +82,10 @@ class Link:
 
     def __init__(self, config: LinkConfig):
         self.config = config
-        try:
-            self.master = mavutil.mavlink_connection(
-                config.url, source_system=config.source_system,
-                source_component=config.source_component, dialect="ardupilotmega")
-        except Exception as exc:   # pymavlink raises anything from ValueError to OSError
-            raise UserError(f"cannot open {config.url!r}: {exc}") from None
+        # A URL or a serial device (DEVICE[,BAUD] or config.baud); one-line UserError if not.
+        self.master = open_connection(
+            config.url, baud=config.baud, source_system=config.source_system,
+            source_component=config.source_component, dialect="ardupilotmega")
         self.mav = self.master.mav
         self.recv_buffer = size_receive_buffer(self.master)
         if config.signing_key is not None:
@@ -109,6 +109,7 @@ class Link:
         self._frame = mavlink.MAV_FRAME_BODY_NED
         self._speed_yaw_rate = True
         self.setpoints_sent = 0
+        self._recv_failed = False                 # the last read raised (see wait)
         self.last_ack: dict[int, int] = {}        # command id -> last result
 
     def close(self) -> None:
@@ -129,8 +130,10 @@ class Link:
         """One parsed message, or None when nothing is waiting. Never blocks, never raises."""
         try:
             msg = self.master.recv_msg()
-        except OSError:
+        except OSError:   # a serial device unplugged or hung up; a UDP peer's ICMP error
+            self._recv_failed = True
             return None
+        self._recv_failed = False
         if (msg is not None and msg.get_type() == "HEARTBEAT" and self.vehicle is not None
                 and self.is_vehicle_heartbeat(msg)):
             self._note_heartbeat(msg)
@@ -144,7 +147,9 @@ class Link:
         """Sleep until data arrives or ``timeout`` seconds pass (pymavlink's select)."""
         for hook in self.on_idle:
             hook()
-        if timeout > 0:
+        if timeout > 0 and self._recv_failed:
+            time.sleep(timeout)   # a hung-up device polls readable at once: do not spin on it
+        elif timeout > 0:
             self.master.select(timeout)
 
     def is_vehicle(self, msg: Any) -> bool:

@@ -1,0 +1,267 @@
+"""Serial links: ``sitl-plant`` and ``companion run`` on the two ends of a pseudo-terminal cable
+paced like a 115200-baud UART (tests/serial_harness.py), and the one-line errors for a device that
+is absent, busy, forbidden or not a terminal."""
+
+from __future__ import annotations
+
+import os
+import shutil
+import subprocess
+import sys
+import time
+import tty
+from contextlib import contextmanager
+from pathlib import Path
+
+import pytest
+
+from companion.errors import UserError
+from companion.mav.connection import DEFAULT_BAUD, serial_target
+from companion_harness import ROOT, Companion
+from serial_harness import PtyCable
+from test_companion_run import MISSION, batch_twin
+
+QUICK = ("--mission", "missions/circle.toml", "--no-zenoh", "--no-log",
+         "--heartbeat-timeout", "30")   # an error must come at open, long before this
+
+
+@contextmanager
+def plant_on(url: str, *args: str):
+    proc = subprocess.Popen([sys.executable, "-m", "sitl_plant", "--connect", url, *args],
+                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    try:
+        yield proc
+    finally:
+        if proc.poll() is None:
+            proc.terminate()
+        try:
+            proc.communicate(timeout=5.0)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.communicate()
+
+
+def companion(*args: str, prefix: tuple[str, ...] = ()) -> subprocess.CompletedProcess:
+    return subprocess.run([*prefix, sys.executable, "-m", "companion", "run", *args],
+                          capture_output=True, text=True, timeout=20.0, cwd=ROOT)
+
+
+def one_line(p: subprocess.CompletedProcess, prog: str, *needles: str) -> str:
+    assert p.returncode == 2, (p.returncode, p.stderr)
+    assert "Traceback" not in p.stderr, p.stderr
+    lines = p.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith(f"{prog}: error: "), p.stderr
+    for needle in needles:
+        assert needle in lines[0], lines[0]
+    return lines[0]
+
+
+@contextmanager
+def pty_device():
+    """A serial-like device path nobody else has open (the test holds the slave, raw)."""
+    master, slave = os.openpty()
+    tty.setraw(slave)
+    try:
+        yield os.ttyname(slave)
+    finally:
+        os.close(master)
+        os.close(slave)
+
+
+def test_the_paper_ellipse_over_a_115200_baud_serial_link(tmp_path):
+    """The plant names its baud pymavlink's way (DEVICE,BAUD), the companion with --baud."""
+    with PtyCable(baud=115200) as cable, \
+            plant_on(f"{cable.paths[0]},115200", "--speedup", "2", "--d-cen", "0.3") as plant, \
+            Companion(None, "--baud", "115200", "--mission", MISSION, "--arm", "--json", "-q",
+                      "--log-dir", str(tmp_path), url=cable.paths[1]) as comp:
+        code = comp.wait(120.0)
+        assert plant.poll() is None, "the plant died"
+        assert code == 0, comp.stderr
+        r = comp.result()
+    assert r["reason"] == "mission_done" and r["hold_confirmed"]
+    assert r["rate_accepted_hz"] == 40.0 and r["cycles"] == 2400
+    assert r["missed_cycles"] == 0 and sum(r["telemetry_rejected"].values()) == 0
+    assert r["steady_rms"] <= 0.3
+    assert r["f_cost"] == pytest.approx(batch_twin(r), rel=0.10)
+    # Every byte went through the cable, none was lost to its pace: 40 Hz fits in 115200 baud.
+    assert cable.dropped == [0, 0]
+    assert min(cable.carried) > 100_000, cable.carried
+    assert r["setpoints_sent"] >= 2400
+
+
+def test_an_unplugged_device_stops_the_run_with_exit_3():
+    """The cable is cut mid-mission (a USB autopilot rebooting): the telemetry failsafes stop
+    the rover and the run ends with exit 3 after --lost-timeout; stdout stays the one JSON
+    result (pymavlink would print "Device ... is dead" there)."""
+    with PtyCable(baud=115200) as cable, plant_on(cable.paths[0]), \
+            Companion(None, "--mission", MISSION, "--arm", "--json", "--no-log",
+                      "--lost-timeout", "2", url=cable.paths[1]) as comp:
+        time.sleep(8.0)     # start-up, GUIDED, armed, tracking (checked below: cycles)
+        assert comp.proc.poll() is None, "the run ended before the cut"
+        cable.unplug()
+        cut = time.monotonic()
+        code = comp.wait(30.0)
+        took = time.monotonic() - cut
+    assert code == 3, comp.stderr
+    assert comp.stdout.strip().startswith("{") and len(comp.stdout.strip().splitlines()) == 1
+    r = comp.result()
+    assert r["reason"] == "failsafe: telemetry lost for 2 s" and r["failsafes"] >= 1, r
+    assert r["cycles"] >= 40, r      # it was tracking (>= 1 s at 40 Hz) when the cable was cut
+    assert "telemetry stale" in comp.stderr
+    assert 2.0 <= took < 10.0, took
+
+
+def test_serial_target_tells_devices_from_urls(tmp_path):
+    assert serial_target("udpin:0.0.0.0:14550") is None
+    assert serial_target("tcp:127.0.0.1:5760") is None
+    assert serial_target(str(tmp_path / "flight.tlog")) is None
+    log = tmp_path / "saved"
+    log.write_bytes(b"")
+    assert serial_target(str(log)) is None                     # an existing file: a log
+    assert serial_target("/dev/ttyAMA0") == ("/dev/ttyAMA0", DEFAULT_BAUD)
+    assert serial_target("/dev/ttyAMA0,921600") == ("/dev/ttyAMA0", 921600)
+    assert serial_target("/dev/ttyAMA0", 57600) == ("/dev/ttyAMA0", 57600)
+    assert serial_target("/dev/ttyAMA0,57600", 57600) == ("/dev/ttyAMA0", 57600)
+    assert serial_target("COM3,57600") == ("COM3", 57600)
+    with pytest.raises(UserError, match="two baud rates"):
+        serial_target("/dev/ttyAMA0,57600", 921600)
+    with pytest.raises(UserError, match="bad baud rate"):
+        serial_target("/dev/ttyAMA0,fast")
+    # udev's by-path names have colons, which pymavlink alone would take for a UDP address.
+    with pty_device() as path:
+        link = tmp_path / "pci-0000:00:14.0-usb-0:1.2:1.0"
+        link.symlink_to(path)
+        assert serial_target(str(link)) == (str(link), DEFAULT_BAUD)
+        assert serial_target(f"{link},921600") == (str(link), 921600)
+
+
+def test_a_colon_named_device_is_opened_as_serial(tmp_path):
+    """Through the symlink the companion reaches the plant (it would otherwise bind UDP)."""
+    with PtyCable() as cable, plant_on(cable.paths[0], "--speedup", "4"):
+        link = tmp_path / "usb-0:1.2:1.0"
+        link.symlink_to(cable.paths[1])
+        p = companion("--connect", str(link), "--mission", "missions/circle.toml", "--no-zenoh",
+                      "--no-log", "--heartbeat-timeout", "10", "--arm-timeout", "0.5")
+    # Not armed (no --arm), so it stops once set up; it saw the vehicle, which only the serial
+    # open of the symlink's pty allows.
+    assert "ardupilot vehicle, system 1" in p.stderr, p.stderr
+    assert "cannot open" not in p.stderr and "no heartbeat" not in p.stderr, p.stderr
+
+
+def test_absent_device_is_one_line():
+    t0 = time.monotonic()
+    line = one_line(companion("--connect", "/dev/ttyNOPE", *QUICK), "companion run",
+                    "/dev/ttyNOPE", "no such device")
+    assert time.monotonic() - t0 < 10.0, line
+    one_line(companion("--connect", "/dev/ttyNOPE", "--baud", "921600", *QUICK),
+             "companion run", "/dev/ttyNOPE")
+    p = subprocess.run([sys.executable, "-m", "sitl_plant", "--connect", "/dev/ttyNOPE,57600"],
+                       capture_output=True, text=True, timeout=20.0)
+    one_line(p, "sitl-plant", "/dev/ttyNOPE", "no such device")
+
+
+def test_busy_device_is_one_line():
+    """Another process holds the port exclusively (pyserial's exclusive=True, as the companion
+    and the plant do themselves): the second opener is refused at once, not fed half the bytes."""
+    serial = pytest.importorskip("serial")
+    with pty_device() as path:
+        holder = serial.Serial(path, 115200, exclusive=True)
+        try:
+            one_line(companion("--connect", path, *QUICK), "companion run", path, "busy")
+            p = subprocess.run([sys.executable, "-m", "sitl_plant", "--connect", path],
+                               capture_output=True, text=True, timeout=20.0)
+            one_line(p, "sitl-plant", path, "busy")
+        finally:
+            holder.close()
+        # Free again once the holder lets go: the same open now gets to waiting for a vehicle.
+        p = companion("--connect", path, "--mission", "missions/circle.toml", "--no-zenoh",
+                      "--no-log", "--heartbeat-timeout", "0.5")
+        one_line(p, "companion run", "no heartbeat")
+
+
+def opened_by(pid: int, path: str) -> bool:
+    fds = Path(f"/proc/{pid}/fd")
+    try:
+        return any(os.readlink(fd) == path for fd in fds.iterdir())
+    except OSError:
+        return False
+
+
+def test_the_companion_holds_its_port_exclusively():
+    with pty_device() as path:
+        proc = subprocess.Popen([sys.executable, "-m", "companion", "run", "--connect", path,
+                                 *QUICK], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
+                                text=True, cwd=ROOT)
+        try:
+            deadline = time.monotonic() + 15.0
+            while not opened_by(proc.pid, path):
+                assert time.monotonic() < deadline and proc.poll() is None, "never opened"
+                time.sleep(0.05)
+            p = subprocess.run([sys.executable, "-m", "sitl_plant", "--connect", path,
+                                "--duration", "1"], capture_output=True, text=True, timeout=20.0)
+            one_line(p, "sitl-plant", path, "busy")
+        finally:
+            proc.kill()
+            proc.communicate()
+
+
+def test_permission_denied_is_one_line():
+    """A device the user may not open (mode 000; root runs without CAP_DAC_OVERRIDE)."""
+    prefix: tuple[str, ...] = ()
+    if os.geteuid() == 0:
+        if shutil.which("setpriv") is None:
+            pytest.skip("running as root and setpriv (util-linux) is absent: root opens anything")
+        prefix = ("setpriv", "--bounding-set=-dac_override,-dac_read_search", "--")
+    with pty_device() as path:
+        os.chmod(path, 0)
+        one_line(companion("--connect", path, *QUICK, prefix=prefix), "companion run", path,
+                 "permission denied")
+
+
+def test_not_a_terminal_and_bad_baud_are_one_line(tmp_path):
+    one_line(companion("--connect", "/dev/null", *QUICK), "companion run", "/dev/null",
+             "not a serial device")
+    one_line(companion("--connect", "/dev/ttyNOPE,fast", *QUICK), "companion run",
+             "bad baud rate", "fast")
+    one_line(companion("--connect", "/dev/ttyNOPE,57600", "--baud", "921600", *QUICK),
+             "companion run", "two baud rates", "57600", "921600")
+    p = companion("--connect", "/dev/ttyNOPE", "--baud", "-9600", *QUICK)
+    assert p.returncode == 2 and "argument --baud: must be > 0" in p.stderr, p.stderr
+
+
+@pytest.mark.sitl
+@pytest.mark.slow
+def test_ardupilot_sitl_over_its_own_uart_driver(tmp_path):
+    """ArduPilot SITL's SERIAL2 is its UART driver on one end of the cable (a real autopilot's
+    serial code, MAVLink 2 at 921600), the companion on the other; SERIAL0 (TCP) is a ground
+    station, which SITL needs before it boots."""
+    from ardupilot_harness import ArduPilotSITL, GroundStation, circle_mission
+
+    class SerialSITL(ArduPilotSITL):
+        def __init__(self, workdir, device: str, **kw):
+            super().__init__(workdir, **kw)
+            self.device = device
+
+        def argv(self) -> list[str]:
+            return super().argv() + ["--serial2", f"uart:{self.device}:921600"]
+
+    speedup = 2
+    mission = circle_mission(tmp_path / "circle.toml", duration=20.0)
+    with PtyCable(baud=921600) as cable, \
+            SerialSITL(tmp_path / "ardupilot", cable.paths[0], speedup=speedup,
+                       params={"SERIAL2_PROTOCOL": 2, "SERIAL2_BAUD": 921}).start() as sitl, \
+            GroundStation(sitl, serial=0), \
+            Companion(None, "--baud", "921600", "--mission", str(mission), "--arm", "--json",
+                      "--no-zenoh", "--log-dir", str(tmp_path / "logs"), "--arm-timeout",
+                      "120", url=cable.paths[1]) as comp:
+        code = comp.wait(240.0)
+        assert code == 0, comp.stderr + sitl.log_tail()
+        r = comp.result()
+    assert r["reason"] == "mission_done" and r["hold_confirmed"], r
+    assert r["autopilot"] == "ardupilot" and r["rate_accepted_hz"] == 40.0
+    assert r["missed_cycles"] <= 0.01 * r["cycles"] and r["cycles"] >= 0.98 * 20.0 * 40.0, r
+    assert r["steady_rms"] < 0.3, r["steady_rms"]
+    assert cable.dropped == [0, 0]
+    print(f"\nArduPilot SITL over a 921600-baud pty: steady RMS {r['steady_rms']:.3f} m, "
+          f"f_cost {r['f_cost']:.3f}, {r['cycles']} cycles, missed {r['missed_cycles']}, "
+          f"loop {r['loop_rate_hz']:.1f} Hz; bytes carried {cable.carried}")
