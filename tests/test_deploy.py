@@ -34,10 +34,6 @@ ROOT = Path(__file__).resolve().parents[1]
 UNIT = ROOT / "deploy" / "pzc-rover.service"
 SYSUSERS = ROOT / "deploy" / "pzc-rover.sysusers"
 CONFIG = ROOT / "deploy" / "rover.toml"
-# Keys another change adds to `companion run` (the serial link's baud rate); accepted here until
-# the flag exists, then checked like every other key.
-PENDING_KEYS = {"baud": int}
-PENDING_FLAGS = {"--config"}
 
 
 def unit_service() -> configparser.SectionProxy:
@@ -124,7 +120,7 @@ def test_unit_runs_as_its_own_user_with_only_the_capability_realtime_needs():
 def test_exec_start_uses_only_run_flags():
     argv = shlex.split(unit_service()["ExecStart"])
     assert Path(argv[0]).name == "companion" and argv[1] == "run"
-    known = set(run_parser()._option_string_actions) | PENDING_FLAGS
+    known = set(run_parser()._option_string_actions)
     flags = [a for a in argv[2:] if a.startswith("-")]
     assert flags and not [f for f in flags if f not in known]
 
@@ -135,10 +131,7 @@ def test_example_config_keys_are_run_flags_with_values_of_their_kind():
     assert {"connect", "mission"} <= set(config)
     for key, value in config.items():
         action = actions.get(key)
-        if action is None:
-            assert key in PENDING_KEYS, f"{CONFIG.name}: {key} is not a companion run flag"
-            assert isinstance(value, PENDING_KEYS[key]), (key, value)
-            continue
+        assert action is not None, f"{CONFIG.name}: {key} is not a companion run flag"
         if isinstance(action, (argparse._StoreTrueAction, argparse._StoreFalseAction)):
             assert isinstance(value, bool), (key, value)
         elif isinstance(action, argparse._AppendAction):
@@ -153,10 +146,8 @@ def test_example_config_keys_are_run_flags_with_values_of_their_kind():
 
 
 def test_example_config_prints_as_effective_settings(tmp_path):
-    """Once ``companion run --config`` exists: the example loads (its mission path swapped for
-    a file that exists here)."""
-    if "--config" not in run_parser()._option_string_actions:
-        pytest.skip("companion run --config is not on this branch yet (issue 13, item 2)")
+    """The example loads through ``companion run --config`` (its mission path swapped for a
+    file that exists here)."""
     text = CONFIG.read_text().replace("/etc/pzc-rover/mission.toml",
                                       str(ROOT / "missions" / "circle.toml"))
     path = tmp_path / "rover.toml"
