@@ -22,6 +22,7 @@ COMMANDS = [
     "tune",
     "identify",
     "calibrate",
+    "preflight",
     "mission",
     "simulate",
     "monitor",
