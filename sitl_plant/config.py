@@ -27,3 +27,11 @@ class PlantConfig:
     telemetry: TelemetryConfig = field(default_factory=TelemetryConfig)
     takeover_at: float | None = None  # vehicle s at which a "pilot" switches to HOLD
     signing_key: bytes | None = None  # MAVLink 2 signing: 32-byte secret
+    # Served parameters and estimator status (sitl_plant.params / status): --param overrides,
+    # the share of a PARAM_REQUEST_LIST reply lost, the EKF's start-up time, the heartbeat's
+    # MAV_TYPE (None: from FRAME_CLASS), MAVLink 1 frames out.
+    params: tuple[tuple[str, float], ...] = ()
+    param_loss: float = 0.0
+    ekf_delay: float = 0.0
+    mav_type: int | None = None
+    mavlink1: bool = False
