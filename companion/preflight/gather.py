@@ -62,7 +62,10 @@ class Probe:
         buf = msg.get_msgbuf()
         if buf:
             self.seen.mavlink_version = 2 if buf[0] == 0xFD else 1
-        self.seen.signed = self.seen.signed or bool(msg.get_signed())
+            # the frame's incompat flags say "signed" whether or not we hold the key
+            # (pymavlink's get_signed() is true only for a verified signature)
+            if buf[0] == 0xFD and len(buf) > 2 and buf[2] & 0x01:
+                self.seen.signed = True
         kind = msg.get_type()
         self.seen.latest[kind] = msg
         if kind == "STATUSTEXT":
@@ -83,8 +86,12 @@ class Probe:
     def read_params(self, timeout: float) -> dict[str, Param]:
         self.params = self.client.fetch_all(timeout=timeout)
         if not self.params:
-            raise UserError(f"no PARAM_VALUE from system {self.link.vehicle.sysid} within "
-                            f"{timeout:g} s: the parameters could not be read")
+            v = self.link.vehicle
+            if self.seen.signed and self.link.config.signing_key is None:
+                raise UserError(f"system {v.sysid} signs its messages and did not answer the "
+                                "companion's unsigned parameter requests: give --signing-key")
+            raise UserError(f"system {v.sysid} did not answer PARAM_REQUEST_LIST (asked "
+                            "repeatedly): the parameters could not be read")
         return self.params
 
     def read_status(self, timeout: float) -> None:
