@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import json
 import os
+import pty
 import subprocess
 import sys
 from pathlib import Path
@@ -134,6 +135,30 @@ def test_fix_yes_sets_reads_back_and_the_values_stay_for_the_next_run():
     for r in (fixed, after):
         s = statuses(r)
         assert [n for n, v in s.items() if v != "ok"] == ["signing"], s
+
+
+def _on_a_terminal(port: int, answer: bytes) -> subprocess.CompletedProcess:
+    """--fix without --yes, stdin a terminal (a pseudo-terminal) that answers ``answer``."""
+    master, slave = pty.openpty()
+    try:
+        os.write(master, answer)
+        return subprocess.run([sys.executable, "-m", "companion", "preflight", "--connect",
+                               f"udpin:127.0.0.1:{port}", "--json", "--fix"], stdin=slave,
+                              capture_output=True, text=True, timeout=60, cwd=ROOT)
+    finally:
+        os.close(master)
+        os.close(slave)
+
+
+def test_fix_asks_on_a_terminal_and_sets_nothing_unless_told_yes():
+    with PlantProcess("--param", "FS_ACTION=0") as plant:
+        no = _on_a_terminal(plant.port, b"n\n")
+        yes = _on_a_terminal(plant.port, b"y\n")
+    assert "FS_ACTION: 0 -> 2" in no.stderr and "[y/N]" in no.stderr
+    assert no.returncode == 1 and "fixes" not in json.loads(no.stdout)
+    assert statuses(no)["FS_ACTION"] == "warn"
+    assert {f["name"] for f in json.loads(yes.stdout)["fixes"]} == {"FS_ACTION", "FS_GCS_ENABLE"}
+    assert statuses(yes)["FS_ACTION"] == "ok"
 
 
 def test_px4_offboard_failsafes_are_fixed_through_bytewise_integers():

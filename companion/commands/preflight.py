@@ -97,28 +97,29 @@ def run(args) -> int:
         done = None
         if args.fix:
             plan = fixes(rows, {n: p.value for n, p in probe.params.items()})
-            if plan and not args.yes:
-                _confirm(plan, probe)
-            done = probe.set_params(plan) if plan else []
-            for row in done:
-                log(f"set {row['name']} {row['from']:g} -> {row['to']:g}: read back "
-                    + ("nothing" if row["read_back"] is None else f"{row['read_back']:g}"))
-            rows = run_checks(observe())
+            if plan and not args.yes and not _confirm(plan, probe):
+                log("not confirmed: nothing set")
+            else:
+                done = probe.set_params(plan) if plan else []
+                for row in done:
+                    log(f"set {row['name']} {row['from']:g} -> {row['to']:g}: read back "
+                        + ("nothing" if row["read_back"] is None else f"{row['read_back']:g}"))
+                rows = run_checks(observe())
     finally:
         link.close()
     _print(rows, done, args.json)
     return exit_code(rows)
 
 
-def _confirm(plan: dict[str, float], probe) -> None:
+def _confirm(plan: dict[str, float], probe) -> bool:
+    """Ask on the terminal (stderr, so --json stays one object on stdout)."""
     if not sys.stdin.isatty():
         raise UserError("--fix changes the autopilot's parameters: add --yes to confirm "
                         "(stdin is not a terminal)")
     for name, value in plan.items():
         print(f"  {name}: {probe.params[name].value:g} -> {value:g}", file=sys.stderr)
-    answer = input(f"set these {len(plan)} parameters? [y/N] ")
-    if answer.strip().lower() not in ("y", "yes"):
-        raise UserError("--fix: not confirmed, nothing set", exit_code=1)
+    print(f"set these {len(plan)} parameters? [y/N] ", end="", file=sys.stderr, flush=True)
+    return sys.stdin.readline().strip().lower() in ("y", "yes")
 
 
 def _print(rows, done, as_json: bool) -> None:
