@@ -79,7 +79,8 @@ def test_a_plant_set_up_wrong_fails_each_check_and_names_it():
     with PlantProcess("--preset", "paper", "--ekf-delay", "600", "--loop-rate", "20",
                       "--mavlink1", "--param", "FS_GCS_ENABLE=0", "--param", "FS_ACTION=0",
                       "--param", "FS_GCS_TIMEOUT=30", "--param", "MAV_OPTIONS=1",
-                      "--param", "MAV_GCS_SYSID=250", "--param", "FRAME_CLASS=3") as plant:
+                      "--param", "MAV_GCS_SYSID=250", "--param", "FRAME_CLASS=3",
+                      "--param", "ATC_DECEL_MAX=-1") as plant:
         r = preflight(plant.port, "--json")
     assert r.returncode == 1, r.stderr
     s, c = statuses(r), checks(r)
@@ -87,7 +88,7 @@ def test_a_plant_set_up_wrong_fails_each_check_and_names_it():
         "HEARTBEAT type": "ok", STEERING: "fail", "MAVLink": "warn", STREAMS: "warn",
         "GPS_GLOBAL_ORIGIN": "fail", "EKF_STATUS_REPORT": "fail", "SYS_STATUS pre-arm": "fail",
         "GUIDED": "ok", "FS_GCS_ENABLE": "warn", "FS_ACTION": "warn", "FS_GCS_TIMEOUT": "warn",
-        "MAV_GCS_SYSID": "fail", "ATC_ACCEL_MAX": "warn", "ATC_DECEL_MAX": "ok",
+        "MAV_GCS_SYSID": "fail", "ATC_ACCEL_MAX": "warn", "ATC_DECEL_MAX": "warn",
         "ATC_STR_RAT_MAX": "warn", "ATC_STR_ACC_MAX": "warn", TOP_SPEED: "warn",
         "signing": "warn"}
     assert c["MAVLink"]["value"] == "MAVLink 1"
@@ -163,15 +164,19 @@ def test_fix_asks_on_a_terminal_and_sets_nothing_unless_told_yes():
 
 def test_px4_offboard_failsafes_are_fixed_through_bytewise_integers():
     with PlantProcess("--autopilot", "px4", "--param", "COM_OF_LOSS_T=5",
-                      "--param", "COM_OBL_RC_ACT=0") as plant:
+                      "--param", "COM_OBL_RC_ACT=0", "--param", "CA_AIRFRAME=5") as plant:
+        before = preflight(plant.port, "--json")
         r = preflight(plant.port, "--json", "--fix", "--yes")
         again = preflight(plant.port, "--json")
+    s = statuses(before)
+    assert (s["COM_OF_LOSS_T"], s["COM_OBL_RC_ACT"], s["CA_AIRFRAME"]) == ("warn",) * 3
+    assert checks(before)["CA_AIRFRAME"]["value"].startswith("Ackermann")
     out = json.loads(r.stdout)
     assert {f["name"]: (f["from"], f["read_back"]) for f in out["fixes"]} == {
         "COM_OF_LOSS_T": (5, 1), "COM_OBL_RC_ACT": (0, 5)}
     s = statuses(again)
     assert (s["COM_OF_LOSS_T"], s["COM_OBL_RC_ACT"], s["OFFBOARD"], s["CA_AIRFRAME"]) == \
-        ("ok", "ok", "ok", "ok")
+        ("ok", "ok", "ok", "warn")                          # the frame is not --fix's to change
     assert checks(again)["COM_OBL_RC_ACT"]["value"] == "5 (Hold)"
 
 
