@@ -14,7 +14,7 @@ from pathlib import Path
 
 import pytest
 
-from sitl_plant.testing import PlantProcess, free_udp_port
+from sitl_plant.testing import PlantProcess, Pilot, free_udp_port
 
 ROOT = Path(__file__).resolve().parent.parent
 SKID = str(ROOT / "companion" / "sim" / "vehicles" / "ardupilot_skid.toml")
@@ -178,6 +178,24 @@ def test_px4_offboard_failsafes_are_fixed_through_bytewise_integers():
     assert (s["COM_OF_LOSS_T"], s["COM_OBL_RC_ACT"], s["OFFBOARD"], s["CA_AIRFRAME"]) == \
         ("ok", "ok", "ok", "warn")                          # the frame is not --fix's to change
     assert checks(again)["COM_OBL_RC_ACT"]["value"] == "5 (Hold)"
+
+
+def _interval_us(pilot: Pilot, msg_id: int) -> int:
+    pilot.mav.command_long_send(1, 1, 510, 0, msg_id, 0, 0, 0, 0, 0, 0)
+    return pilot.wait("MESSAGE_INTERVAL", cond=lambda m: m.message_id == msg_id).interval_us
+
+
+def test_the_pose_streams_get_their_rates_back_after_the_measurement():
+    """A companion already streaming on the link keeps its rates: preflight puts them back."""
+    with PlantProcess() as plant:
+        with Pilot(plant.port) as pilot:
+            pilot.wait("HEARTBEAT")
+            assert pilot.set_rate(32, 10) == 0 and pilot.set_rate(30, -1) == 0
+        r = preflight(plant.port, "--json")
+        assert "40.0 Hz" in checks(r)[STREAMS]["value"]
+        with Pilot(plant.port) as pilot:
+            pilot.wait("HEARTBEAT")
+            assert (_interval_us(pilot, 32), _interval_us(pilot, 30)) == (100_000, -1)
 
 
 def test_a_signed_vehicle_and_no_key_could_not_check_exit_2(key):

@@ -117,10 +117,10 @@ class ParamClient:
                 if p.name not in found or p.index not in by_index:
                     last_new = now
                 found[p.name] = p
-                if p.index >= 0:
+                if 0 <= p.index < 0xFFFF:      # PX4's _HASH_CHECK comes as index 65535, extra
                     by_index.add(p.index)
                 continue
-            if self.count is not None and len(by_index) >= self.count:
+            if self.count is not None and by_index.issuperset(range(self.count)):
                 break
             if now - last_new < quiet:
                 continue

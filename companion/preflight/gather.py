@@ -137,6 +137,7 @@ class Probe:
         """Ask for the pose messages at ``rate_hz``, measure them on the vehicle's clock, then
         give them back their default rate."""
         link = self.link
+        before = {mid: self._interval_us(mid) for mid in POSE.values()}
         results = {name: link.set_message_rate(mid, rate_hz) for name, mid in POSE.items()}
         stamps: dict[str, list[int]] = {name: [] for name in POSE}
         start = time.monotonic()
@@ -153,9 +154,22 @@ class Probe:
             self.observe(msg)
             if kind in stamps and link.is_vehicle(msg) and time.monotonic() >= settle:
                 stamps[kind].append(int(msg.time_boot_ms))
-        for mid in POSE.values():        # 0: the vehicle's default rate again
-            link.command_wait(mavlink.MAV_CMD_SET_MESSAGE_INTERVAL, mid, 0)
+        for mid, interval in before.items():   # as they were (unknown: the default, 0)
+            link.command_wait(mavlink.MAV_CMD_SET_MESSAGE_INTERVAL, mid,
+                              interval if interval is not None and interval != 0 else 0)
         return Streams(rate_hz, results, {k: _rate(v) for k, v in stamps.items()})
+
+    def _interval_us(self, msg_id: int, timeout: float = 1.0) -> int | None:
+        """The link's interval for ``msg_id`` (MAV_CMD_GET_MESSAGE_INTERVAL; -1 disabled), so
+        a companion already streaming on this link gets its rate back; None: no answer."""
+        old = self.seen.latest.get("MESSAGE_INTERVAL")
+        self.link.command(mavlink.MAV_CMD_GET_MESSAGE_INTERVAL, msg_id)
+
+        def answered() -> bool:
+            m = self.seen.latest.get("MESSAGE_INTERVAL")
+            return m is not None and m is not old and m.message_id == msg_id
+        self.pump(timeout, done=answered)
+        return int(self.seen.latest["MESSAGE_INTERVAL"].interval_us) if answered() else None
 
     def observed(self, streams: Streams | None, signing_key: bool, serial: bool,
                  limits: Limits | None) -> Observed:
