@@ -27,7 +27,7 @@ ALLOWED: dict[str, set[str]] = {
     "security": {"errors", "secretfile"},
     "logs": {"core", "live", "mission", "errors"},
     "ident": {"core", "sim", "live", "logs", "errors"},
-    "preflight": {"core", "sim", "ident", "live", "errors"},
+    "preflight": {"live", "errors"},
     "errors": set(),
     "secretfile": {"errors"},
     "progress": {"live"},

@@ -52,6 +52,7 @@ class Probe:
         self.seen = Seen()
         self.client = ParamClient(link, observe=self.observe)
         self.params: dict[str, Param] = {}
+        self.prearm_texts: tuple[str, ...] = ()
 
     def observe(self, msg: Any) -> None:
         """Note a message from the vehicle (any component: the EKF and the autopilot share
@@ -195,7 +196,7 @@ class Probe:
                 int(sys_status.onboard_control_sensors_present),
                 int(sys_status.onboard_control_sensors_enabled),
                 int(sys_status.onboard_control_sensors_health)),
-            prearm_texts=getattr(self, "prearm_texts", ()),
+            prearm_texts=self.prearm_texts,
             ekf=ekf,
             origin=None if origin_msg is None else (origin_msg.latitude * 1e-7,
                                                      origin_msg.longitude * 1e-7),
