@@ -205,6 +205,15 @@ def test_a_signed_vehicle_and_no_key_could_not_check_exit_2(key):
     assert "signs its messages" in r.stderr and "--signing-key" in r.stderr
 
 
+def test_a_key_the_vehicle_does_not_sign_with_could_not_check_exit_2(key, tmp_path):
+    other = tmp_path / "other"
+    other.write_bytes(os.urandom(32))
+    other.chmod(0o600)
+    with PlantProcess("--signing-key", key) as plant:
+        r = preflight(plant.port, "--signing-key", str(other), "--heartbeat-timeout", "2")
+    assert r.returncode == 2 and "check --signing-key" in r.stderr
+
+
 def test_no_vehicle_and_bad_flags_could_not_check_exit_2(tmp_path):
     r = preflight(free_udp_port(), "--heartbeat-timeout", "0.5")
     assert r.returncode == 2 and "no heartbeat" in r.stderr and "Traceback" not in r.stderr

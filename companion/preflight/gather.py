@@ -231,6 +231,13 @@ def connect(config: LinkConfig) -> tuple[Link, Probe]:
     try:
         link.wait_vehicle()
         link.send_heartbeat()
+    except UserError as err:
+        refused = link.signing_rejected
+        link.close()
+        if refused:
+            raise UserError(f"{err}; {refused} frames arrived unsigned or signed with another "
+                            "key: check --signing-key") from None
+        raise
     except BaseException:
         link.close()
         raise
