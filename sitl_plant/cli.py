@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import re
 import signal
 import socket
 import sys
@@ -17,6 +18,7 @@ from companion.sim.vehicle_file import PRESETS, preset
 from companion.sim.vehicle_file import load as load_vehicle
 
 from .config import DEFAULT_URL, PlantConfig
+from .earth import CMAC, OriginConfig
 from .modes import Autopilot
 from .telemetry import TelemetryConfig
 from .vehicle import VehicleConfig
@@ -25,6 +27,11 @@ from .vehicle import VehicleConfig
 
 class _Parser(argparse.ArgumentParser):
     """argparse whose usage errors are a single line (and exit code 2)."""
+
+    def __init__(self, *args, **kwargs):
+        super().__init__(*args, **kwargs)
+        # `--origin -35.36,149.16` is a value, as argparse already takes `-35.36` for one.
+        self._negative_number_matcher = re.compile(r"^-\d*\.?\d+(,-?\d*\.?\d+)*$")
 
     def error(self, message: str):
         self.exit(2, f"{self.prog}: error: {message} (see --help)\n")
@@ -79,6 +86,21 @@ def _mav_type(text: str) -> int:
     return value
 
 
+def _origin(text: str) -> tuple[float, float, float]:
+    from companion.mission.geo import check_latlon
+    try:
+        values = [float(part) for part in text.split(",")]
+    except ValueError:
+        values = []
+    if len(values) not in (2, 3) or not all(math.isfinite(v) for v in values):
+        raise argparse.ArgumentTypeError(f"{text!r}: must be LAT,LON or LAT,LON,ALT in degrees "
+                                         "(and metres)")
+    problem = check_latlon(values[0], values[1])
+    if problem:
+        raise argparse.ArgumentTypeError(f"{text!r}: {problem}")
+    return values[0], values[1], values[2] if len(values) == 3 else CMAC[2]
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = _Parser(prog="sitl-plant", description=(
         "A two-wheeled rover (the paper's model, companion.sim.plant) behind a MAVLink 2 autopilot "
@@ -131,6 +153,17 @@ def build_parser() -> argparse.ArgumentParser:
                      help="share of the turn rate lost at top speed (skid-steer mixing)")
     veh.add_argument("--start", type=_finite, nargs=3, metavar=("X", "Y", "YAW"),
                      default=(0.0, 0.0, 0.0), help="start pose: north m, east m, yaw rad")
+    earth = p.add_argument_group("position on the earth")
+    earth.add_argument("--origin", type=_origin, default=CMAC, metavar="LAT,LON[,ALT]",
+                       help="EKF origin, sent as GPS_GLOBAL_ORIGIN on MAV_CMD_REQUEST_MESSAGE; "
+                            "home (HOME_POSITION) is the --start position; default ArduPilot "
+                            f"SITL's home {CMAC[0]},{CMAC[1]},{CMAC[2]:g}")
+    earth.add_argument("--origin-delay", type=_non_negative, default=0.0, metavar="S",
+                       help="the origin is set (a GPS fix) S s of vehicle time after boot; "
+                            "not reported before (default 0)")
+    earth.add_argument("--global-position-rate", type=_non_negative, default=0.0, metavar="HZ",
+                       help="stream GLOBAL_POSITION_INT at HZ from boot (default 0: only when "
+                            "asked with MAV_CMD_SET_MESSAGE_INTERVAL)")
     tel = p.add_argument_group("telemetry")
     tel.add_argument("--noise-pos", type=_non_negative, default=0.0, metavar="M")
     tel.add_argument("--noise-yaw", type=_non_negative, default=0.0, metavar="RAD")
@@ -195,6 +228,9 @@ def config_from_args(args: argparse.Namespace) -> PlantConfig:
                        tick_aligned=(args.tick_aligned if args.tick_aligned is not None
                                      else args.preset == "ardupilot-skid"),
                        telemetry=telemetry, takeover_at=args.takeover_at, signing_key=key,
+                       origin=OriginConfig(*args.origin,
+                                           delay=max(args.origin_delay, args.ekf_delay)),
+                       global_position_rate=args.global_position_rate,
                        params=tuple(args.param), param_loss=args.param_loss,
                        ekf_delay=args.ekf_delay, mav_type=args.mav_type, mavlink1=args.mavlink1)
 

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+from .earth import OriginConfig
 from .telemetry import TelemetryConfig
 from .vehicle import VehicleConfig
 
@@ -27,6 +28,8 @@ class PlantConfig:
     telemetry: TelemetryConfig = field(default_factory=TelemetryConfig)
     takeover_at: float | None = None  # vehicle s at which a "pilot" switches to HOLD
     signing_key: bytes | None = None  # MAVLink 2 signing: 32-byte secret
+    origin: OriginConfig = field(default_factory=OriginConfig)   # EKF origin (lat, lon, alt)
+    global_position_rate: float = 0.0  # Hz of GLOBAL_POSITION_INT at boot (0: until asked)
     # Served parameters and estimator status (sitl_plant.params / status): --param overrides,
     # the share of a PARAM_REQUEST_LIST reply lost, the EKF's start-up time, the heartbeat's
     # MAV_TYPE (None: from FRAME_CLASS), MAVLink 1 frames out.

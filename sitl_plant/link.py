@@ -125,6 +125,19 @@ class Link:
     def local_position(self, s: PoseSample) -> None:
         self._send(self.mav.local_position_ned_send, s.time_boot_ms, s.x, s.y, 0.0, s.vx, s.vy, 0.0)
 
+    def gps_global_origin(self, lat_e7: int, lon_e7: int, alt_mm: int, time_usec: int) -> None:
+        self._send(self.mav.gps_global_origin_send, lat_e7, lon_e7, alt_mm, time_usec)
+
+    def home_position(self, lat_e7: int, lon_e7: int, alt_mm: int, x: float, y: float,
+                      time_usec: int) -> None:
+        self._send(self.mav.home_position_send, lat_e7, lon_e7, alt_mm, x, y, 0.0,
+                   [1.0, 0.0, 0.0, 0.0], 0.0, 0.0, 0.0, time_usec)
+
+    def global_position(self, time_boot_ms: int, lat_e7: int, lon_e7: int, alt_mm: int,
+                        vx: float, vy: float, heading_cdeg: int) -> None:
+        self._send(self.mav.global_position_int_send, time_boot_ms, lat_e7, lon_e7, alt_mm, 0,
+                   int(round(vx * 100)), int(round(vy * 100)), 0, heading_cdeg)
+
     def statustext(self, severity: int, text: str) -> None:
         self._send(self.mav.statustext_send, severity, text.encode("ascii", "replace")[:50])
 
@@ -143,10 +156,6 @@ class Link:
         """EKF_STATUS_REPORT from a :class:`sitl_plant.status.EkfReport`."""
         self._send(self.mav.ekf_status_report_send, r.flags, r.velocity_variance,
                    r.pos_horiz_variance, r.pos_vert_variance, r.compass_variance, 0.0)
-
-    def gps_global_origin(self, lat: float, lon: float, alt: float) -> None:
-        self._send(self.mav.gps_global_origin_send, int(round(lat * 1e7)),
-                   int(round(lon * 1e7)), int(round(alt * 1000)))
 
     def close(self) -> None:
         try:

@@ -23,6 +23,7 @@ from typing import Any, Callable
 from . import params, status, streams
 from .clock import LockstepGate, Pacer
 from .config import PlantConfig
+from .earth import Earth, e7
 from .link import Link
 from .modes import hold_mode, requested_custom_mode
 from .setpoint import Setpoint
@@ -47,7 +48,12 @@ class PlantServer:
         self.link = link
         self.vehicle = vehicle or Vehicle(config.vehicle)
         self.wall = wall
-        self.streams = streams.StreamSchedule(config.loop_rate, tick_aligned=config.tick_aligned)
+        gpi = config.global_position_rate
+        self.streams = streams.StreamSchedule(
+            config.loop_rate, tick_aligned=config.tick_aligned,
+            initial={streams.GLOBAL_POSITION_INT: int(round(1e6 / gpi)) if gpi > 0 else None})
+        self.earth = Earth(config.origin, config.vehicle.start[:2])
+        self._after_ack: list[Callable[[], None]] = []
         self.telemetry = TelemetryPipe(config.telemetry)
         self.pacer = Pacer(config.speedup)
         self.gate = LockstepGate(config.lockstep_timeout)
@@ -183,6 +189,8 @@ class PlantServer:
             elif mid == streams.SYS_STATUS:
                 link.sys_status(link.bad_data, v.setpoints_ignored.get("non-finite", 0),
                                 self._status_sensors())
+            elif mid == streams.GLOBAL_POSITION_INT:
+                self._global_position()
             else:
                 if sample is None:
                     sample = self._sample()
@@ -198,6 +206,31 @@ class PlantServer:
         s = self.vehicle.state
         vx, vy = self.vehicle.velocity()
         return self.telemetry.sample(self.t_us, s.x, s.y, s.yaw, vx, vy, s.omega)
+
+    def _global_position(self) -> None:
+        """GLOBAL_POSITION_INT of the true position (GPS-like: no telemetry faults), once the
+        origin is set."""
+        if not self.earth.origin_set(self.t_us):
+            return
+        s = self.vehicle.state
+        lat, lon = self.earth.latlon(s.x, s.y)
+        vx, vy = self.vehicle.velocity()
+        heading = int(round(math.degrees(s.yaw) * 100)) % 36000
+        self.link.global_position(self.t_us // 1000, e7(lat), e7(lon),
+                                  int(round(self.config.origin.alt * 1000)), vx, vy, heading)
+
+    def _origin_message(self, msg_id: int) -> None:
+        """GPS_GLOBAL_ORIGIN or HOME_POSITION, once the origin is set (else nothing, as
+        ArduPilot before its EKF has an origin)."""
+        earth, t_us = self.earth, self.t_us
+        if not earth.origin_set(t_us):
+            return
+        alt_mm = int(round(earth.config.alt * 1000))
+        if msg_id == streams.GPS_GLOBAL_ORIGIN:
+            self.link.gps_global_origin(e7(earth.config.lat), e7(earth.config.lon), alt_mm, t_us)
+        else:
+            lat, lon = earth.home()
+            self.link.home_position(e7(lat), e7(lon), alt_mm, *earth.home_xy, t_us)
 
     def pilot_takeover(self) -> None:
         """A pilot flips the mode switch to HOLD: the vehicle stops following setpoints."""
@@ -248,6 +281,8 @@ class PlantServer:
                 self._flush_texts()   # the reason first, then the ACK, as ArduPilot does
                 self.link.ack(msg.command, int(result), msg.get_srcSystem(),
                               msg.get_srcComponent())
+                while self._after_ack:     # a requested message follows its ACK, as in ArduPilot
+                    self._after_ack.pop(0)()
         elif kind in ("PARAM_REQUEST_LIST", "PARAM_REQUEST_READ", "PARAM_SET"):
             if self._for_us(msg) and self.params.handle(msg, self.link.param_value):
                 self._update_mav_type()
@@ -302,11 +337,12 @@ class PlantServer:
         elif msg_id in (streams.ATTITUDE, streams.LOCAL_POSITION_NED):
             self.telemetry.push(self.t_us, int(msg_id), self._sample())
         elif msg_id == status.MSG_EKF_STATUS_REPORT:
-            link.ekf_status(status.ekf_report(v.t, self.config.ekf_delay))
-        elif msg_id == status.MSG_GPS_GLOBAL_ORIGIN:
-            where = status.origin(v.t, self.config.ekf_delay)
-            if where is not None:      # no origin yet: accepted, nothing sent (as ArduPilot)
-                link.gps_global_origin(*where)
+            report = status.ekf_report(v.t, max(self.config.ekf_delay, self.config.origin.delay))
+            self._after_ack.append(lambda: link.ekf_status(report))
+        elif msg_id == streams.GLOBAL_POSITION_INT:
+            self._global_position()
+        elif msg_id in (streams.GPS_GLOBAL_ORIGIN, streams.HOME_POSITION):
+            self._after_ack.append(lambda: self._origin_message(int(msg_id)))
         else:
             return Result.DENIED
         return Result.ACCEPTED

@@ -1,19 +1,16 @@
-"""What the plant's autopilot says about its estimate and arming: EKF_STATUS_REPORT,
-GPS_GLOBAL_ORIGIN, the SYS_STATUS pre-arm bit, the PreArm text.
+"""What the plant's autopilot says about its estimate and arming: EKF_STATUS_REPORT, the
+SYS_STATUS pre-arm bit, the PreArm text (the origin itself is :mod:`sitl_plant.earth`'s).
 
-The plant's pose is exact, so its EKF is healthy from ``ekf_delay`` seconds of vehicle time on
-(ArduPilot SITL: about 20 s to an origin). Before that it has an attitude and nothing else, no
-origin, and the pre-arm checks fail, as SITL's do until its EKF runs. Pure: the server sends.
+The plant's pose is exact, so its EKF is healthy from ``--ekf-delay`` seconds of vehicle time on
+(and not before its origin is set, ``--origin-delay``; ArduPilot SITL: about 20 s to an origin,
+40 s to arming). Before that it has an attitude and nothing else, and the pre-arm checks fail,
+as SITL's do until its EKF runs. Pure: the server sends.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
 
-# ArduPilot SITL's default home (CMAC, Canberra): where its EKF origin lands unless told.
-DEFAULT_ORIGIN = (-35.363262, 149.165237, 584.0)   # lat deg, lon deg, alt m (AMSL)
-
-MSG_GPS_GLOBAL_ORIGIN = 49
 MSG_EKF_STATUS_REPORT = 193
 MAV_CMD_RUN_PREARM_CHECKS = 401
 PREARM_BIT = 0x10000000                 # MAV_SYS_STATUS_PREARM_CHECK
@@ -41,11 +38,6 @@ def ekf_report(t: float, ekf_delay: float) -> EkfReport:
     if ekf_ready(t, ekf_delay):
         return EkfReport(EKF_GOOD, 0.01, 0.01, 0.01, 0.02)
     return EkfReport(EKF_ATTITUDE_ONLY, 0.0, 0.0, 0.0, 0.0)
-
-
-def origin(t: float, ekf_delay: float) -> tuple[float, float, float] | None:
-    """The EKF origin (lat, lon, alt), or None while the EKF has none."""
-    return DEFAULT_ORIGIN if ekf_ready(t, ekf_delay) else None
 
 
 def sensors(can_arm: bool) -> tuple[int, int, int]:

@@ -21,11 +21,15 @@ HEARTBEAT = 0
 SYS_STATUS = 1
 ATTITUDE = 30
 LOCAL_POSITION_NED = 32
+GLOBAL_POSITION_INT = 33
+GPS_GLOBAL_ORIGIN = 49       # not streams: sent on MAV_CMD_REQUEST_MESSAGE
+HOME_POSITION = 242
 
 # Emission order within one tick: ATTITUDE just before LOCAL_POSITION_NED.
-STREAM_ORDER = (HEARTBEAT, SYS_STATUS, ATTITUDE, LOCAL_POSITION_NED)
+STREAM_ORDER = (HEARTBEAT, SYS_STATUS, ATTITUDE, LOCAL_POSITION_NED, GLOBAL_POSITION_INT)
 DEFAULT_INTERVAL_US = {HEARTBEAT: 1_000_000, SYS_STATUS: 1_000_000,
-                       ATTITUDE: 1_000_000, LOCAL_POSITION_NED: 1_000_000}
+                       ATTITUDE: 1_000_000, LOCAL_POSITION_NED: 1_000_000,
+                       GLOBAL_POSITION_INT: 1_000_000}
 RATE_CAP_FRACTION = 0.8
 
 ACCEPTED, DENIED, FAILED = 0, 2, 4   # MAV_RESULT
@@ -39,11 +43,12 @@ class IntervalReply:
 
 class StreamSchedule:
     def __init__(self, loop_rate_hz: float, defaults: dict[int, int] | None = None,
-                 tick_aligned: bool = False):
+                 tick_aligned: bool = False, initial: dict[int, int | None] | None = None):
         self.loop_rate_hz = loop_rate_hz
         self._tick = max(1, int(round(1e6 / loop_rate_hz))) if tick_aligned else 1
         self._defaults = dict(DEFAULT_INTERVAL_US if defaults is None else defaults)
-        self._interval: dict[int, int | None] = dict(self._defaults)
+        # `initial`: intervals at boot where they differ from the defaults (None: off until asked)
+        self._interval: dict[int, int | None] = {**self._defaults, **(initial or {})}
         self._next: dict[int, int] = {m: 0 for m in self._interval}
 
     @property
@@ -88,7 +93,7 @@ class StreamSchedule:
         """Streams due at ``now_us`` in emission order; each is scheduled for its next slot."""
         out = []
         for mid in STREAM_ORDER:
-            interval = self._interval[mid]
+            interval = self._interval.get(mid)
             if interval is None or self._slot(self._next[mid]) > now_us:
                 continue
             out.append(mid)

@@ -171,13 +171,16 @@ def _stop_all() -> None:
 
 class ArduPilotSITL:
     """One ``ardurover`` process. ``params`` are written to a .parm file appended to
-    ``--defaults`` (with ``wipe``, parameters start from the defaults every time)."""
+    ``--defaults`` (with ``wipe``, parameters start from the defaults every time); ``home``
+    boots it elsewhere than SITL's default location (``--home lat,lon,alt,yaw``)."""
 
     def __init__(self, workdir: Path, *, speedup: float = 1.0, params: dict[str, float] | None
-                 = None, model: str = "rover-skid", wipe: bool = True):
+                 = None, model: str = "rover-skid", wipe: bool = True,
+                 home: tuple[float, float, float, float] | None = None):
         self.binary, self.defaults = sitl_paths(model)
         self.workdir = Path(workdir)
         self.speedup, self.params, self.model, self.wipe = speedup, dict(params or {}), model, wipe
+        self.home = home     # (lat, lon, alt m, yaw deg) to boot at; None: SITL's default (CMAC)
         self.proc: subprocess.Popen | None = None
         self.lock: _InstanceLock | None = None
         self.instance = -1
@@ -200,6 +203,7 @@ class ArduPilotSITL:
             defaults.append(str(extra))
         return [str(self.binary), *(["-w"] if self.wipe else []), "--model", self.model,
                 "--speedup", f"{self.speedup:g}", f"-I{self.instance}",
+                *(["--home", ",".join(f"{v:.8f}" for v in self.home)] if self.home else []),
                 "--defaults", ",".join(defaults)]
 
     def start(self, timeout: float = 10.0) -> "ArduPilotSITL":

@@ -20,7 +20,7 @@ import pytest
 from companion.core.signals import Reference
 from companion.ident import channels
 from companion.ident.excite import Excitation, Plan
-from companion.ident.fit import BOUND, FITTED, PRIOR, Series, fit, rms
+from companion.ident.fit import BOUND, FITTED, PRIOR, Series, fit, join, rms
 from companion.ident.priors import DEFAULTS, from_autopilot
 from companion.live.flightlog import CSV_FIELDS
 from companion.sim.plant import RoverModel, RoverParams, RoverState
@@ -56,13 +56,15 @@ def steps(rng: np.random.Generator, t: np.ndarray, low: float, high: float, hold
 
 
 def synthetic(params: RoverParams, seconds: float, speed_amp: float, rate_amp: float,
-              seed: int = 1, noise: float = 0.02) -> Series:
-    """ArduPilot-like 20/20/20/40 ms samples, random setpoint steps, the model's response on a
-    1 ms grid plus measurement noise."""
+              seed: int = 1, noise: float = 0.02, stop: float = 0.0) -> Series:
+    """ArduPilot-like 20/20/20/40 ms samples, random setpoint steps (zero for the last ``stop``
+    seconds), the model's response on a 1 ms grid plus measurement noise."""
     rng = np.random.default_rng(seed)
     t = np.concatenate([[0.0], np.cumsum(np.tile([0.02, 0.02, 0.02, 0.04], int(seconds / 0.1)))])
     u = np.clip(steps(rng, t, -0.5 * speed_amp, speed_amp, 2.5), -2.0, None)
     w = steps(rng, t, -rate_amp, rate_amp, 1.7)
+    u[t > t[-1] - stop] = 0.0
+    w[t > t[-1] - stop] = 0.0
     v, om = respond(params, t, u, w, 1, 0.001)
     return Series(t, u, w, v[:, 0] + noise * rng.standard_normal(len(t)),
                   om[:, 0] + noise * rng.standard_normal(len(t)))
@@ -125,6 +127,24 @@ def test_fit_recovers_known_parameters_from_noisy_data():
     # The RMS is the noise's (0.02), not the model's error.
     assert result.speed_rms < 0.026 and result.yaw_rate_rms < 0.026
     assert rms(TRUE, series)[0] <= result.speed_rms * 1.05
+
+
+def test_logs_fitted_together_determine_what_each_leaves_to_its_prior():
+    # One flight turns on the spot (the speed channel is never driven), the other drives
+    # straight (the turn-rate channel never): each alone leaves a channel at its prior; joined,
+    # one model explains both and the limits of both channels are found. Each flight ends at
+    # rest, as a log cut by identify does (join's premise).
+    turning = synthetic(TRUE, 33.0, speed_amp=0.0, rate_amp=2.6, seed=3, stop=3.0)
+    driving = synthetic(TRUE, 33.0, speed_amp=4.5, rate_amp=0.0, seed=4, stop=3.0)
+    for part, blind in ((turning, "max_accel"), (driving, "max_yaw_accel")):
+        assert fit(part, DEFAULTS).status[blind] == PRIOR
+    both = join([turning, driving])
+    assert len(both.t) == len(turning.t) + len(driving.t) and np.all(np.diff(both.t) > 0)
+    result = fit(both, DEFAULTS)
+    assert within(result.params.max_accel, TRUE.max_accel, 0.05), result.params
+    assert within(result.params.max_yaw_accel, TRUE.max_yaw_accel, 0.05), result.params
+    for part in (turning, driving):
+        assert max(rms(result.params, part)) < 0.03      # the noise's 0.02, on each flight
 
 
 def test_parameters_the_log_does_not_excite_take_their_priors():
@@ -239,6 +259,14 @@ def test_identify_a_companion_run_log_end_to_end(vehicle_file, tmp_path):
     text = companion("identify", flown["tlog"], "--out", str(tmp_path / "again.toml"))
     assert text.returncode == 0 and "RMS         speed" in text.stdout
     assert "undetermined" in text.stdout
+    # Several logs are fitted together, and the file says which.
+    both = companion("identify", flown["tlog"], flown["csv"], "--out", str(tmp_path / "j.toml"),
+                     "--json")
+    assert both.returncode == 0, both.stderr
+    j = json.loads(both.stdout)
+    assert j["log"] == f"{flown['tlog']} + {flown['csv']}" and j["samples"] > r["samples"]
+    assert f"fitted to {flown['tlog']} + {flown['csv']}" in (tmp_path / "j.toml").read_text()
+    check_recovered(j["params"])
 
 
 def test_live_identify_stays_within_space_ends_in_hold_and_writes_the_file(vehicle_file,

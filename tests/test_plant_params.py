@@ -10,6 +10,7 @@ import struct
 import subprocess
 import sys
 
+from sitl_plant.earth import CMAC, e7
 from sitl_plant.testing import PlantProcess, Pilot
 
 PREARM = 0x10000000
@@ -87,7 +88,7 @@ def test_ekf_origin_and_prearm_come_after_the_ekf_delay():
         pilot.wait("ATTITUDE", 5.0, lambda m: m.time_boot_ms >= 2000)
         request(pilot, 49)
         origin = pilot.wait("GPS_GLOBAL_ORIGIN")
-        assert (origin.latitude, origin.longitude) == (-353632620, 1491652370)
+        assert (origin.latitude, origin.longitude) == (e7(CMAC[0]), e7(CMAC[1]))
         request(pilot, 193)
         assert pilot.wait("EKF_STATUS_REPORT").flags == 0x33F
         assert pilot.wait("SYS_STATUS").onboard_control_sensors_health & PREARM

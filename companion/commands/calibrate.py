@@ -7,10 +7,14 @@
 2. tunes gains for that vehicle and its neighbours (``companion tune --vehicle``, about a minute
    on two cores): ``DIR/gains.toml``, recorded with the vehicle file's SHA-256;
 3. refines: flies the paper's ellipse at 0.08 Hz (shrunk to ``--space``) for 30 s with those
-   gains, fits the model to that tracking log with the manoeuvre's log as the check, and keeps
-   the refit (then re-tunes) when it still predicts the manoeuvre within 0.25 m/s and 0.25 rad/s:
-   measured on ArduPilot SITL, a model fitted to tracking predicts tracking better than one
-   fitted to the manoeuvre alone (``--no-refine`` skips this step; it needs the flight logs);
+   gains, fits one model to the manoeuvre and that track together, and keeps it (then
+   re-tunes) when it explains both flights within 0.15 m/s and 0.15 rad/s and predicts the
+   track better than the manoeuvre's model did. Why: on ArduPilot SITL the manoeuvre alone
+   reads the speed loop's delay long (0.22 s against 0.15 s from tracking: its speed steps
+   start from rest) and its gains track the 0.08 Hz ellipse less well, while a model fitted to
+   tracking alone misreads what tracking does not exercise (the turn/speed coupling) and
+   mispredicts a faster track; the joint fit predicted held-out tracks at every speed as well as
+   or better than either (``--no-refine`` skips this step; it needs the flight logs);
 4. prints the ``companion run --vehicle DIR/vehicle.toml`` command that flies with them.
 """
 
@@ -57,10 +61,9 @@ def _folder(text: str) -> Path:
 
 REFINE_S = 30.0             # s of tracking flown to refine the model
 REFINE_F_R = 0.08           # Hz: the paper's ellipse at the speed that tests the inner loops
-# m/s, rad/s: the refit must still predict the manoeuvre this well (a sanity bound, not a
-# held-out criterion: a tracking fit predicting the manoeuvre, a different regime, to 0.13-0.17
-# m/s on SITL still predicts tracking better than the manoeuvre's own fit)
-CHECK_LIMIT = (0.25, 0.25)
+# m/s, rad/s: the joint fit must explain each flight this well (the held-out standard the
+# identification is held to: issue 11's 0.15 m/s and 0.15 rad/s)
+CHECK_LIMIT = (0.15, 0.15)
 
 
 def _refine_mission(space: float):
@@ -80,8 +83,10 @@ def _tune(vehicle: Path, rate: float, command: str, args, log):
 
 
 def _refine(args, vehicle: Path, report, log) -> dict:
-    """Fly the refining track with the tuned gains and refit on it (see the module docstring).
-    Returns what happened; on success ``vehicle`` holds the refit."""
+    """Fly the refining track with the tuned gains and fit one model to the manoeuvre and the
+    track together (see the module docstring). Returns what happened; on success ``vehicle``
+    holds the joint fit."""
+    from ..ident.fit import rms
     from .identify import identify_log
     from .run import fly_mission
     folder = vehicle.parent
@@ -92,17 +97,29 @@ def _refine(args, vehicle: Path, report, log) -> dict:
     result, paths = fly_mission(flown, _refine_mission(args.space))
     if result.exit_code != 0 or paths is None:
         return {"refined": False, "why": f"the tracking flight ended: {result.reason}"}
-    logs = [Path(paths.tlog)]
     refit = folder / "vehicle-refit.toml"
-    check = argparse.Namespace(check=report.log, plot=None, name=args.name, out=str(refit))
-    again = identify_log(str(logs[-1]), check, dict(report.autopilot), log,
-                         prior=report.fit.params)
-    speed, yaw = again.check_rms
-    out = {"tlog": str(logs[-1]), "check_speed_rms_m_s": speed, "check_yaw_rate_rms_rad_s": yaw,
-           "fit_speed_rms_m_s": again.fit.speed_rms, "fit_yaw_rate_rms_rad_s": again.fit.yaw_rate_rms}
-    if speed > CHECK_LIMIT[0] or yaw > CHECK_LIMIT[1]:
+    joint_args = argparse.Namespace(check=None, plot=None, name=args.name, out=str(refit))
+    joint = identify_log([report.log, paths.tlog], joint_args, dict(report.autopilot), log)
+    manoeuvre, track = joint.parts
+    on_manoeuvre = rms(joint.fit.params, manoeuvre)
+    on_track = rms(joint.fit.params, track)
+    before = rms(report.fit.params, track)       # the manoeuvre's own model on the track
+    out = {"tlog": str(paths.tlog),
+           "check_speed_rms_m_s": on_manoeuvre[0], "check_yaw_rate_rms_rad_s": on_manoeuvre[1],
+           "track_speed_rms_m_s": on_track[0], "track_yaw_rate_rms_rad_s": on_track[1],
+           "track_speed_rms_before_m_s": before[0],
+           "track_yaw_rate_rms_before_rad_s": before[1],
+           "fit_speed_rms_m_s": joint.fit.speed_rms,
+           "fit_yaw_rate_rms_rad_s": joint.fit.yaw_rate_rms}
+    why = None
+    if max(on_manoeuvre[0], on_track[0]) > CHECK_LIMIT[0] or \
+            max(on_manoeuvre[1], on_track[1]) > CHECK_LIMIT[1]:
+        why = "the joint fit does not explain both flights"
+    elif on_track[0] >= before[0]:
+        why = "the joint fit predicts the track no better than the manoeuvre's model"
+    if why is not None:
         refit.unlink()
-        return {**out, "refined": False, "why": "the refit does not predict the manoeuvre"}
+        return {**out, "refined": False, "why": why}
     refit.replace(vehicle)
     return {**out, "refined": True}
 
@@ -134,7 +151,7 @@ def run(args) -> int:
     if args.refine and args.log:
         log(f"refining: {REFINE_S:g} s of the paper's ellipse at {REFINE_F_R:g} Hz with these gains")
         refined = _refine(args, vehicle, report, log)
-        log("refined: " + ("the model fitted to the tracking flight, re-tuned" if refined["refined"]
+        log("refined: " + ("one model fitted to both flights, re-tuned" if refined["refined"]
                            else f"kept the manoeuvre's model ({refined['why']})"))
         if refined["refined"]:
             gains_path.unlink()
@@ -151,9 +168,11 @@ def run(args) -> int:
                           "gains_header": gains.header.splitlines(), "next": next_run}))
         return 0
     _print(report, False, flight)
-    print("refine      " + (f"the model refitted to {refined['tlog']} (check on the manoeuvre: "
-                             f"{refined['check_speed_rms_m_s']:.3f} m/s, "
-                             f"{refined['check_yaw_rate_rms_rad_s']:.3f} rad/s)"
+    print("refine      " + (f"one model fitted to the manoeuvre and {refined['tlog']} (on the "
+                             f"manoeuvre {refined['check_speed_rms_m_s']:.3f} m/s, "
+                             f"{refined['check_yaw_rate_rms_rad_s']:.3f} rad/s; on the track "
+                             f"{refined['track_speed_rms_m_s']:.3f} m/s against "
+                             f"{refined['track_speed_rms_before_m_s']:.3f} before)"
                              if refined["refined"] else f"not applied: {refined['why']}"))
     print(f"gains       {gains_path}")
     for line in gains.header.splitlines()[2:]:

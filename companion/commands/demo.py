@@ -143,6 +143,9 @@ def run(args) -> int:
         vehicle_gains=own_gains)
     rate = requested_rate(settings)
     argv = plant_argv(args, port, rate)
+    if mission.geodetic:
+        # The plant's EKF origin at the mission's own (a plan's home): it starts where drawn.
+        argv.append(f"--origin={mission.datum[0]:.7f},{mission.datum[1]:.7f}")
     trace = TraceSink()
     sinks = [ProgressSink(mission.duration, mission.name), trace]
 

@@ -1,14 +1,16 @@
 """``companion identify``: the vehicle model's inner loops, fitted to a flight log or to a short
 manoeuvre flown on the spot.
 
-    companion identify LOG --out vehicle.toml [--check LOG2] [--plot DIR] [--json]
+    companion identify LOG [LOG ...] --out vehicle.toml [--check LOG2] [--plot DIR] [--json]
     companion identify --connect URL --out vehicle.toml [--arm] [--space R] [--json]
 
 LOG is a .tlog (the companion's, or any with its SET_POSITION_TARGET_LOCAL_NED speed / turn-rate
 setpoints) or the companion's .csv. The fit (:mod:`companion.ident.fit`) finds, per channel, the
 delay, lag, clamp and acceleration / deceleration limits, and the skid-steer coupling, and
 reports the RMS of the model's speed and turn rate against the measured ones; ``--check LOG2``
-reports it on another log too. What the log does not determine takes its prior: the autopilot's
+reports it on another log too. Several LOGs are fitted together, as one model that must
+explain them all (a manoeuvre and a tracking flight: each determines what the other leaves
+loose; ``calibrate`` refines this way). What the log does not determine takes its prior: the autopilot's
 limit parameters when known (read live, or found in the .tlog), else stock ArduPilot values.
 
 With ``--connect`` it flies the excitation manoeuvre (:mod:`companion.ident.excite`) in GUIDED
@@ -47,8 +49,9 @@ def register(subparsers) -> None:
         "identify", help="fit the vehicle model to a flight log (or fly a manoeuvre and fit it)",
         description=__doc__.split("\n\n", 1)[1],
         epilog=EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("log_path", nargs="?", metavar="LOG",
-                   help="flight log to fit: .tlog or the companion's .csv (or use --connect)")
+    p.add_argument("log_path", nargs="*", metavar="LOG",
+                   help="flight log(s) to fit: .tlog or the companion's .csv; several are "
+                        "fitted together (or use --connect)")
     p.add_argument("--out", required=True, metavar="FILE", help="vehicle file to write (TOML)")
     p.add_argument("--check", metavar="LOG2", help="another log to report the model's RMS on")
     p.add_argument("--plot", metavar="DIR", help="draw measured against model (PNG) into DIR")
@@ -100,7 +103,7 @@ def _check_out(path: str) -> None:
 
 
 def run(args) -> int:
-    if (args.log_path is None) == (args.connect is None):
+    if (not args.log_path) == (args.connect is None):
         raise UserError("give a LOG to fit or --connect URL to fly the manoeuvre (one of them)")
     _check_out(args.out)
     if args.connect is not None:
@@ -110,19 +113,23 @@ def run(args) -> int:
     return 0
 
 
-def identify_log(path: str, args, autopilot: dict[str, float],
+def identify_log(paths: str | list[str], args, autopilot: dict[str, float],
                  log=lambda text: None, label: str | None = None, prior=None):
     """Read, fit, check, write, plot: the offline half (the live half ends here too).
-    ``label`` names the log in the file when the path is not worth keeping (``--no-log``)."""
+    Several ``paths`` are fitted together (:func:`companion.ident.fit.join`). ``label`` names
+    the log in the file when the path is not worth keeping (``--no-log``)."""
     from ..ident.data import autopilot_params, read_series
-    from ..ident.fit import fit, rms
+    from ..ident.fit import fit, join, rms
     from ..ident.priors import AUTOPILOT_PARAMS, from_autopilot
     from ..ident.record import Report, vehicle_file
     from ..sim.vehicle_file import save
 
-    series, _ = read_series(path)
+    paths = [paths] if isinstance(paths, str) else list(paths)
+    parts = [read_series(path)[0] for path in paths]
+    series = join(parts)
     check = read_series(args.check)[0] if args.check else None   # a bad one fails before the fit
-    autopilot = {**autopilot_params(path, AUTOPILOT_PARAMS), **autopilot}
+    for path in paths:              # what was read live, then the first log's, win
+        autopilot = {**autopilot_params(path, AUTOPILOT_PARAMS), **autopilot}
     priors = from_autopilot(autopilot)
     if prior is not None:       # an earlier fit of this vehicle: what this log leaves open
         from ..ident.priors import Priors
@@ -131,8 +138,8 @@ def identify_log(path: str, args, autopilot: dict[str, float],
     log(f"fitting {len(series.t)} samples ({series.duration:.1f} s)")
     t0 = time.perf_counter()
     result = fit(series, priors.params, progress=lambda what: log(f"fitting the {what}"))
-    report = Report(result, priors, series, label or str(path), time.perf_counter() - t0,
-                    out=args.out,
+    report = Report(result, priors, series, label or " + ".join(map(str, paths)),
+                    time.perf_counter() - t0, out=args.out, parts=parts,
                     autopilot=autopilot, command=_command_line())
     if check is not None:
         report.check_log, report.check_rms = str(args.check), rms(result.params, check)
@@ -150,7 +157,7 @@ def _plot(report, check, out: Path) -> list[str]:
         raise UserError(f"--plot {out}: cannot create it: {exc.strerror}") from None
     f = report.fit
     figures = [plot_fit(report.series, f.params, out / "identify_fit.png",
-                        f"{Path(report.log).name}: RMS speed {f.speed_rms:.3f} m/s, "
+                        f"{', '.join(Path(p).name for p in report.log.split(' + '))}: RMS speed {f.speed_rms:.3f} m/s, "
                         f"turn rate {f.yaw_rate_rms:.3f} rad/s")]
     if check is not None:
         figures.append(plot_fit(check, f.params, out / "identify_check.png",

@@ -18,10 +18,15 @@ mission's rate_hz > the --gains file's > 40 Hz. Limits: flags > the mission's [l
 6 rad/s.
 
 exit codes: 0 mission done, or stopped on SIGTERM / Ctrl-C / abort after stopping the rover;
-2 a user error (bad flag or file, no vehicle, no telemetry); 3 stopped by a fault (telemetry
-lost for --lost-timeout, vehicle restarted, non-finite command, mode or arming refused, pilot
-took over). The rover is stopped (zero setpoint, then HOLD) whenever the companion stops it.
+2 a user error (bad flag or file, no vehicle, no telemetry, no EKF origin for a mission placed
+by latitude / longitude, --origin far from the vehicle's, the mission's start too far); 3
+stopped by a fault (telemetry lost for --lost-timeout, vehicle restarted, non-finite command,
+mode or arming refused, pilot took over). The rover is stopped (zero setpoint, then HOLD)
+whenever the companion stops it.
 """
+
+
+DEFAULT_START_DISTANCE = 25.0   # m: --max-start-distance
 
 
 def positive(text: str) -> float:
@@ -113,8 +118,19 @@ def register(subparsers) -> None:
                    help="pymavlink connection string (default udpin:0.0.0.0:14550)")
     p.add_argument("--mission", metavar="FILE", required=True,
                    help="mission file (.toml, .plan, .waypoints)")
-    p.add_argument("--origin", metavar="LAT,LON",
-                   help="the vehicle's EKF origin, for missions placed by latitude / longitude")
+    g = p.add_argument_group(
+        "where the mission is",
+        "A mission placed by latitude / longitude (.plan, .waypoints, TOML frame\n"
+        "\"geodetic\") is placed around the vehicle's own EKF origin, read from it\n"
+        "(GPS_GLOBAL_ORIGIN / HOME_POSITION) after connecting.")
+    g.add_argument("--origin", metavar="LAT,LON",
+                   help="the EKF origin you expect: refused when more than 5 m from the "
+                        "vehicle's; used as given only if the vehicle tells none")
+    g.add_argument("--origin-timeout", type=positive, default=60.0, metavar="S",
+                   help="wall s to wait for the vehicle's EKF origin (its GPS fix; default 60)")
+    g.add_argument("--max-start-distance", type=non_negative, default=DEFAULT_START_DISTANCE,
+                   metavar="M", help="refuse a mission whose first point is more than M m from "
+                   f"the rover (default {DEFAULT_START_DISTANCE:g}; 0: no limit)")
     p.add_argument("--sysid", type=int, metavar="N",
                    help="system id of the vehicle to follow (default: the first heartbeat's)")
     p.add_argument("--arm", action="store_true",
@@ -140,7 +156,15 @@ def register(subparsers) -> None:
     o.add_argument("-q", "--quiet", action="store_true", help="no log lines on stderr")
     from .zenoh_args import add_zenoh_arguments
     add_zenoh_arguments(p)
+    allow_negative_pairs(p)
     p.set_defaults(func=run)
+
+
+def allow_negative_pairs(parser: argparse.ArgumentParser) -> None:
+    """Let ``--origin -35.36,149.16`` (southern / western) be a value, as argparse already lets
+    ``-35.36`` be: its test for a negative number knows no comma-separated list."""
+    import re
+    parser._negative_number_matcher = re.compile(r"^-\d*\.?\d+(,-?\d*\.?\d+)*$")
 
 
 def vehicle_choice(args, mission, log) -> tuple[object, object]:
@@ -184,13 +208,27 @@ def settings_from_args(args, mission, url: str, key: bytes | None = None,
                             arm=getattr(args, "arm", True),
                             telemetry_timeout=getattr(args, "telemetry_timeout", 10.0),
                             arm_timeout=getattr(args, "arm_timeout", 60.0),
-                            lost_timeout=getattr(args, "lost_timeout", 30.0)),
+                            lost_timeout=getattr(args, "lost_timeout", 30.0),
+                            max_start_distance=start_limit(args)),
         rate=args.rate, gains_file=args.gains,
         gain_flags=GainFlags(args.k_df, args.lambda_f, args.k_dc, args.lambda_c),
         max_speed=args.max_speed, max_yaw_rate=args.max_yaw_rate,
         realtime=getattr(args, "realtime", False),
         w_c=getattr(args, "w_c", None), d_cen=getattr(args, "d_cen", None),
-        vehicle_gains=vehicle[0], vehicle_limits=vehicle[1])
+        vehicle_gains=vehicle[0], vehicle_limits=vehicle[1],
+        origin=parse_origin(getattr(args, "origin", None)),
+        origin_timeout=getattr(args, "origin_timeout", 60.0))
+
+
+def start_limit(args) -> float:
+    """--max-start-distance in metres; 0 (and commands without the flag): no limit."""
+    limit = getattr(args, "max_start_distance", None)
+    return math.inf if not limit else float(limit)
+
+
+def parse_origin(text: str | None) -> tuple[float, float] | None:
+    from .mission import parse_origin as parse
+    return parse(text)
 
 
 def logger(prefix: str, quiet: bool):
@@ -240,6 +278,10 @@ def print_result(result, as_json: bool, extra: dict | None = None) -> None:
         f"HOLD {'confirmed' if d['hold_confirmed'] else 'not confirmed'}",
         f"gains       {d['gains_source']}",
     ]
+    if d.get("ekf_origin"):
+        o = d["ekf_origin"]
+        lines.append(f"origin      {o['lat']:.7f}, {o['lon']:.7f} ({o['source']}): the mission "
+                     "placed around it")
     for key in ("plot", "tlog", "csv"):
         if key in d:
             lines.append(f"{key:<11} {d[key]}")
@@ -247,8 +289,11 @@ def print_result(result, as_json: bool, extra: dict | None = None) -> None:
 
 
 def load_mission(path: str, origin_text: str | None):
+    """The mission file read and checked before connecting (a bad one fails early); one
+    placed by latitude / longitude is placed again around the vehicle's EKF origin once it is
+    known (companion.live.origin)."""
     from .. import mission as missions
-    from .mission import parse_origin, print_warnings
+    from .mission import print_warnings
     mission = missions.load(path, origin=parse_origin(origin_text))
     print_warnings(mission, "companion run")
     return mission

@@ -40,7 +40,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Callable
+from typing import Callable, Sequence
 
 import numpy as np
 
@@ -69,6 +69,7 @@ class Series:
     yaw_rate_cmd: np.ndarray       # rad/s
     speed: np.ndarray              # measured signed speed along the heading, m/s
     yaw_rate: np.ndarray           # measured turn rate, rad/s
+    starts: tuple[int, ...] = (0,)     # first sample of each log, when several are joined
 
     def __post_init__(self) -> None:
         n = len(self.t)
@@ -77,8 +78,35 @@ class Series:
             raise ValueError("a series needs >= 2 samples and arrays of one length")
 
     @property
+    def segments(self) -> list[slice]:
+        """Each joined log's samples (one slice for a single log)."""
+        ends = self.starts[1:] + (len(self.t),)
+        return [slice(a, b) for a, b in zip(self.starts, ends)]
+
+    @property
     def duration(self) -> float:
         return float(self.t[-1] - self.t[0])
+
+
+def join(parts: Sequence[Series]) -> Series:
+    """Several logs as one series: each next part starts one sample step after the previous
+    ends, so one model is fitted to all of them (a manoeuvre and a tracking flight: the regimes
+    that each determine best). Sound because every part cut by
+    :func:`companion.ident.data.series_from_flight` begins at rest before its first moving
+    setpoint and ends at rest after its stop: the model's state carries nothing across a seam."""
+    if len(parts) == 1:
+        return parts[0]
+    times, offset = [], 0.0
+    for i, part in enumerate(parts):
+        step = float(np.median(np.diff(part.t)))
+        if i > 0:
+            offset = times[-1][-1] + step - float(part.t[0])
+        times.append(part.t + offset)
+    starts = tuple(int(k) for k in np.cumsum([0] + [len(part.t) for part in parts[:-1]]))
+    return Series(np.concatenate(times),
+                  *(np.concatenate([getattr(part, name) for part in parts])
+                    for name in ("speed_cmd", "yaw_rate_cmd", "speed", "yaw_rate")),
+                  starts=starts)
 
 
 @dataclass(frozen=True)
@@ -198,7 +226,10 @@ class _Channel:
             self._omega[dt] = self._turn_rate(self.base, 1, dt)[1][:, 0]
         return self._omega[dt]
 
-    def cost(self, values: dict[str, np.ndarray], n: int, dt: float) -> np.ndarray:
+    def cost(self, values: dict[str, np.ndarray], n: int, dt: float,
+             per_log: bool = False) -> np.ndarray:
+        """RMS of each of the ``n`` parameter sets over the series: shape (n,); with
+        ``per_log``, over each joined log apart: shape (logs, n)."""
         s = self.series
         p = self.base.with_(**values)
         if self.which == 1:
@@ -209,6 +240,8 @@ class _Channel:
                                  p.max_accel, p.decel, p.turn_speed_coupling, p.max_yaw_rate)
         self.evaluations += n
         err = out - self.measured[:, None]
+        if per_log:
+            return np.array([np.sqrt(np.mean(err[k] ** 2, axis=0)) for k in s.segments])
         return np.sqrt(np.mean(err * err, axis=0))
 
 
@@ -261,27 +294,32 @@ def _search(channel: _Channel, dims: list[_Dim], u0: np.ndarray, cfg: Search,
 def _settle(channel: _Channel, dims: list[_Dim], best: dict[str, float], prior: RoverParams,
             cfg: Search) -> tuple[dict[str, float], dict[str, str]]:
     """Which parameters the log determines; the others move to their prior as far as the log
-    allows (all of the way: PRIOR; part of the way: BOUND). Returns (values, status)."""
+    allows (all of the way: PRIOR; part of the way: BOUND). Returns (values, status).
+    With several logs joined, each is held to its own RMS: a parameter one log shows is
+    determined, and a move must keep every log within ``tol`` (on the joined RMS, a log that
+    never drives the channel would dilute what another shows)."""
     names = [dim.name for dim in dims]
     by_name = {dim.name: dim for dim in dims}
 
     keys = list(best)                      # every parameter of the channel, moved or not
 
-    def costs(rows: list[dict[str, float]]) -> np.ndarray:
-        return channel.cost({k: np.array([row[k] for row in rows]) for k in keys}, len(rows),
-                            cfg.check_dt)
+    def within(rows: list[dict[str, float]]) -> np.ndarray:
+        """Per row: every log's RMS within its limit."""
+        cost = channel.cost({k: np.array([row[k] for row in rows]) for k in keys}, len(rows),
+                            cfg.check_dt, per_log=True)
+        return np.all(cost <= limit[:, None], axis=0)
 
     rows: list[dict[str, float]] = [best]
     for dim in dims:
         for stepped in dim.steps(best[dim.name]):
             rows.append({**best, dim.name: stepped})
-    cost = costs(rows)
-    limit = float(cost[0]) * (1.0 + cfg.tol) + 1e-9
-    cost = cost[1:]
+    limit = channel.cost({k: np.array([best[k]]) for k in keys}, 1, cfg.check_dt,
+                         per_log=True)[:, 0] * (1.0 + cfg.tol) + 1e-9
+    flat = within(rows)[1:]
     status = {name: FITTED for name in names}
     loose = []
     for i, dim in enumerate(dims):
-        up_flat, down_flat = cost[2 * i] <= limit, cost[2 * i + 1] <= limit
+        up_flat, down_flat = flat[2 * i], flat[2 * i + 1]
         if (up_flat and down_flat) or (dim.name in LIMITS and up_flat):
             loose.append(dim.name)
     if not loose:
@@ -296,7 +334,7 @@ def _settle(channel: _Channel, dims: list[_Dim], best: dict[str, float], prior: 
     # All of them at their priors at once; else one at a time, in field order (an accel limit
     # before its decel limit, whose prior may be "as accel").
     joint = moved(best, loose)
-    if costs([joint])[0] <= limit:
+    if within([joint])[0]:
         return joint, {**status, **{name: PRIOR for name in loose}}
     values = dict(best)
     for name in loose:
@@ -311,8 +349,7 @@ def _settle(channel: _Channel, dims: list[_Dim], best: dict[str, float], prior: 
             ladder = values[name] * (target / values[name]) ** fractions
         else:
             ladder = values[name] + (target - values[name]) * fractions
-        c = costs([{**values, name: float(v)} for v in ladder])
-        ok = np.flatnonzero(c <= limit)
+        ok = np.flatnonzero(within([{**values, name: float(v)} for v in ladder]))
         if len(ok):
             values[name] = float(ladder[ok[-1]])
             status[name] = PRIOR if ok[-1] == len(ladder) - 1 else BOUND

@@ -26,7 +26,7 @@ class Report:
     fit: Fit
     priors: Priors
     series: Series
-    log: str
+    log: str                       # the log's path; several fitted together: joined by " + "
     fit_time_s: float
     out: str = ""
     check_log: str | None = None
@@ -34,6 +34,7 @@ class Report:
     autopilot: dict[str, float] = field(default_factory=dict)
     figures: list[str] = field(default_factory=list)
     command: str = ""
+    parts: list[Series] = field(default_factory=list)    # each log's series, when several
 
 
 def file_value(params: RoverParams, name: str) -> float:

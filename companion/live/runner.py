@@ -81,6 +81,10 @@ class RunnerConfig:
     period: float | None = None       # nominal telemetry period, for missed-cycle counts
     heartbeat_lost: float = 3.0       # wall s without a vehicle heartbeat -> failsafe
     max_gap: float = 0.5              # vehicle s between tracked samples -> reset the tracker
+    # m: a mission whose reference at time 0 is further than this from the rover is refused
+    # before anything moves (inf: no limit); the first point of a far mission would otherwise
+    # be chased in a straight line, across whatever lies between
+    max_start_distance: float = math.inf
 
 
 @dataclass
@@ -94,8 +98,11 @@ class Outcome:
 class Runner:
     def __init__(self, link: Link, tracker: Any, mission: Any, config: RunnerConfig,
                  limits: Limits, sinks: Sequence[Sink] = (), control: ControlChannel | None = None,
-                 log: Callable[[str], None] = lambda text: None):
+                 log: Callable[[str], None] = lambda text: None,
+                 origin: tuple[float, float] | None = None):
         self.link, self.tracker, self.mission = link, tracker, mission
+        self.origin = origin              # the vehicle's EKF origin (lat, lon), when known
+        self._pose: tuple[float, float, float] | None = None   # the last valid sample's
         self.config, self.limits, self.log = config, limits, log
         self.sinks = list(sinks)
         self.control = control
@@ -214,6 +221,7 @@ class Runner:
             return
         self._last_sample_wall = t_read
         prev_vt, self._last_vt = self._last_vt, s.t
+        self._pose = (s.x, s.y, s.yaw)
         state = self.state
         if state is State.TRACKING:
             if self._segment_t0 is not None and s.t - prev_vt > self._max_gap:
@@ -223,6 +231,11 @@ class Runner:
             if state is State.FAILSAFE and self._heartbeat_fresh(t_read):
                 self._recover()
             elif state is State.WAITING:
+                problem = self._start_problem(self.mission, s.x, s.y, s.yaw)
+                if problem is not None:
+                    # Nothing has moved: a user's problem (exit 2), the vehicle left as it is.
+                    self._finish(problem, 2, hold=False, stop=False)
+                    return
                 self.log(f"telemetry flowing; engaging {self.track_mode}")
                 self._enter_engaging(State.WAITING)
             self.link.send_stop(s.time_boot_ms)
@@ -231,6 +244,21 @@ class Runner:
                     self._warm_t0 = s.t
                 self._engage(t_read)
         self._waited = False
+
+    def _start_problem(self, mission: Any, x: float, y: float, yaw: float) -> str | None:
+        """Why ``mission`` must not start with the rover at (x, y, yaw), or None."""
+        limit = self.config.max_start_distance
+        if not (math.isfinite(limit) and limit > 0):
+            return None
+        ref = mission.anchored(x, y, yaw).sample(0.0)
+        distance = math.hypot(ref.x - x, ref.y - y)
+        if not distance > limit:
+            return None
+        where = (f" ({mission.frame} frame: {ref.x:.1f} m north, {ref.y:.1f} m east of the "
+                 "EKF origin)" if mission.frame == "local" else "")
+        return (f"'{mission.name}' starts {distance:.1f} m from the rover{where}, more than "
+                f"--max-start-distance {limit:g} m: bring the rover nearer its first point or "
+                "raise the limit (0: no limit)")
 
     def _heartbeat_fresh(self, now: float) -> bool:
         return now - self._last_heartbeat_wall <= self.config.heartbeat_lost
@@ -555,9 +583,20 @@ class Runner:
             path = Path(text)
             local_file = (req.allow_path and "\n" not in text and path.suffix != ""
                           and path.exists())
-            new = missions.load(path) if local_file else missions.loads(text, "<load-mission>")
+            origin = self.origin
+            new = (missions.load(path, origin=origin) if local_file
+                   else missions.loads(text, "<load-mission>", origin=origin))
         except UserError as err:
             req.reply(False, str(err))
+            return
+        if new.geodetic and self.origin is None:
+            req.reply(False, f"'{new.name}' is placed by latitude / longitude and this run has "
+                             "not read the vehicle's EKF origin: start the run with a geodetic "
+                             "mission to fly one")
+            return
+        problem = self._pose and self._start_problem(new, *self._pose)
+        if problem:
+            req.reply(False, problem)
             return
         self.mission, self.trajectory = new, None
         self.mission_time, self._mission_offset, self._segment_t0 = 0.0, 0.0, None

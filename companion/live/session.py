@@ -26,6 +26,7 @@ from .events import ControlChannel, Sink
 from ..core.filter import FilterGains
 from ..core.limits import Limits
 from ..core.pzc import PZCGains
+from . import origin as origin_mod
 from .runner import Runner, RunnerConfig
 from .stats import RunResult
 
@@ -60,6 +61,8 @@ class RunSettings:
     realtime: bool = False             # --realtime: SCHED_FIFO for the loop
     vehicle_gains: Any = None          # TunedGains for --vehicle / the mission's [vehicle] file
     vehicle_limits: Limits | None = None   # that vehicle's top speed and turn rate
+    origin: tuple[float, float] | None = None   # --origin: checked against the vehicle's
+    origin_timeout: float = 60.0       # wall s to wait for the vehicle's EKF origin
 
 
 REALTIME_PRIORITY = 10   # low among real-time tasks: above every normal process, below the kernel's
@@ -197,6 +200,12 @@ def fly(s: RunSettings, sinks: Sequence[Sink] = (), control: ControlChannel | No
         for name in (TRACK_MODE[vehicle.autopilot], HOLD_MODE[vehicle.autopilot]):
             if name not in (link.master.mode_mapping() or {}):
                 raise UserError(f"the vehicle reports no {name} mode (MAV_TYPE {vehicle.mav_type})")
+        mission, origin = s.mission, None
+        if mission.geodetic:
+            # Placed by latitude / longitude: around the vehicle's own EKF origin, which its
+            # LOCAL_POSITION_NED is relative to (not the plan's home, nor a guess).
+            mission, origin = origin_mod.place(mission, link, s.origin, s.origin_timeout, log,
+                                               stop)
         accepted, notes = link.negotiate_rate(rate)
         for note in notes:
             log(note)
@@ -207,7 +216,8 @@ def fly(s: RunSettings, sinks: Sequence[Sink] = (), control: ControlChannel | No
         tracker = (PZCTracker(choice.filter, choice.pzc, limits) if make_tracker is None
                    else make_tracker(link, limits))
         config = replace(s.runner, period=1.0 / accepted if accepted else None)
-        runner = Runner(link, tracker, s.mission, config, limits, sinks, control, log)
+        runner = Runner(link, tracker, mission, config, limits, sinks, control, log,
+                        origin=origin.latlon if origin is not None else None)
         # Sinks that write files (the flight-log CSV) flush when the loop is about to sleep.
         link.on_idle.extend(idle for sink in sinks if (idle := getattr(sink, "idle", None)))
         if switch is not None:
@@ -237,6 +247,7 @@ def fly(s: RunSettings, sinks: Sequence[Sink] = (), control: ControlChannel | No
                 "max_yaw_rate": _finite_or_none(limits.max_yaw_rate)},
         failsafes=outcome.failsafes, hold_confirmed=outcome.hold_confirmed,
         mission=runner.mission.name,
-        extra={"missed_gaps": st.gaps, "backlog": st.backlog,
+        extra={**({"ekf_origin": origin.as_dict()} if origin is not None else {}),
+               "missed_gaps": st.gaps, "backlog": st.backlog,
                "sink_errors": runner.sink_errors, "signing_rejected": link.signing_rejected,
                "tracker_resets": runner.tracker_resets, "udp_recv_buffer": link.recv_buffer})

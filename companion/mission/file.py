@@ -38,8 +38,10 @@ from __future__ import annotations
 
 import math
 import tomllib
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
+from functools import partial
 from pathlib import Path
+from typing import Callable
 
 from ..sim import gains as _gains
 from ..sim import vehicle_file as _vehicle_file
@@ -84,6 +86,24 @@ class Mission:
     profile: MotionProfile | None = None   # length and peaks over the mission
     warnings: tuple[str, ...] = ()    # one line per imported item that is not followed
     vehicle_file: str | None = None   # [vehicle] file: the identified vehicle (companion identify)
+    # Placed by latitude / longitude (TOML frame "geodetic", kind "plan", .plan, .waypoints):
+    # `datum` is the (lat, lon) of the trajectory's local (0, 0), the EKF origin it was loaded
+    # for (else the plan's home or the TOML's own origin); `placer` reloads the same mission
+    # around another origin with ArduPilot's exact maths (`at_origin`).
+    geodetic: bool = False
+    datum: tuple[float, float] | None = None
+    placer: Callable[..., "Mission"] | None = field(default=None, compare=False, repr=False)
+
+    def at_origin(self, origin: tuple[float, float]) -> "Mission":
+        """The same mission placed around the EKF origin ``origin`` = (lat, lon) (a local or
+        start-frame mission is returned as it is). Files are read again: a file changed or gone
+        since is a UserError, still before anything moves."""
+        if not self.geodetic or self.placer is None:
+            return self
+        placed = self.placer(origin=origin)
+        # a duration set since loading (companion demo --duration) is kept
+        return placed if placed.duration == self.duration else replace(placed,
+                                                                         duration=self.duration)
 
     def anchored(self, x0: float, y0: float, yaw0: float) -> Trajectory:
         """The trajectory in the vehicle's local NED frame for a start pose (identity for frame
@@ -148,7 +168,8 @@ def load(path: str | Path, *, origin: tuple[float, float] | None = None,
         except (OSError, UnicodeDecodeError) as exc:
             raise UserError(f"{path}: cannot read: {exc}") from None
         return loads(text, str(path), origin=origin, base_dir=path.parent)
-    return _from_plan(path, origin=origin, speed=speed, corner_radius=None)
+    mission = _from_plan(path, origin=origin, speed=speed, corner_radius=None)
+    return replace(mission, placer=partial(load, path, speed=speed))
 
 
 def loads(text: str, source: str = "<mission>", *, origin: tuple[float, float] | None = None,
@@ -162,7 +183,10 @@ def loads(text: str, source: str = "<mission>", *, origin: tuple[float, float] |
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise UserError(f"{source}: not valid TOML: {exc}") from None
-    return _from_table(Table(data, source), Path(base_dir) if base_dir else Path("."), origin)
+    mission = _from_table(Table(data, source), Path(base_dir) if base_dir else Path("."), origin)
+    if mission.geodetic:
+        mission = replace(mission, placer=partial(loads, text, source, base_dir=base_dir))
+    return mission
 
 
 # --------------------------------------------------------------------------- TOML missions
@@ -187,10 +211,11 @@ def _from_table(top: Table, base: Path, origin: tuple[float, float] | None) -> M
     limits = _read_limits(top.table("limits"))
     vehicle, vehicle_file = _read_vehicle(top.table("vehicle"), base)
     spec = top.table("trajectory", required=True)
-    traj, warnings = _build_trajectory(spec, base, laps, origin)
+    traj, warnings, datum = _build_trajectory(spec, base, laps, origin)
     top.done()
 
     kind = spec.data["kind"]
+    geodetic = kind == "plan" or frame == "geodetic"
     if kind == "plan":
         if frame not in ("start", "local") or (top.has("frame") and frame != "local"):
             raise top.error("frame", f'a plan is placed by lat/lon: leave frame out or use '
@@ -199,6 +224,7 @@ def _from_table(top: Table, base: Path, origin: tuple[float, float] | None) -> M
     if frame == "geodetic":
         from . import geo
         shift = geo.ne_from_latlon(*geo_origin, origin) if origin is not None else (0.0, 0.0)
+        datum = origin if origin is not None else geo_origin
         frame = "local"
     else:
         shift = None
@@ -213,7 +239,8 @@ def _from_table(top: Table, base: Path, origin: tuple[float, float] | None) -> M
                    rate_hz=rate_hz, filter_gains=filter_gains, pzc_gains=pzc_gains,
                    limits=limits, vehicle=vehicle, frame=frame, source=src,
                    kind=_kind_name(traj), period=period, profile=profile,
-                   warnings=tuple(warnings), vehicle_file=vehicle_file)
+                   warnings=tuple(warnings), vehicle_file=vehicle_file,
+                   geodetic=geodetic, datum=datum)
 
 
 def _latlon(table: Table, key: str, required: bool = False) -> tuple[float, float] | None:
@@ -287,6 +314,7 @@ def _build_trajectory(spec: Table, base: Path, laps: float | None,
     kind = spec.string("kind", required=True, choices=KINDS)
     speed = {"positive": True, "maximum": MAX_SPEED}
     warnings: tuple[str, ...] = ()
+    datum = None
     try:
         if kind == "ellipse":
             traj = Ellipse(
@@ -342,11 +370,11 @@ def _build_trajectory(spec: Table, base: Path, laps: float | None,
                 imported = _from_plan(path, origin=origin, speed=plan_speed, corner_radius=radius)
             except UserError as err:   # name the mission file and key, then the plan's problem
                 raise spec.error("file", str(err)) from None
-            traj, warnings = imported.trajectory, imported.warnings
+            traj, warnings, datum = imported.trajectory, imported.warnings, imported.datum
     except paths.PathError as exc:
         raise spec.error(exc.key, str(exc)) from None
     spec.done()
-    return traj, warnings
+    return traj, warnings, datum
 
 
 def _file_key(table: Table, key: str, name: str, base: Path) -> Path:
@@ -463,4 +491,5 @@ def _from_plan(path: Path, *, origin: tuple[float, float] | None, speed: float |
                      f"m/s, relative to {where} {plan.origin[0]:.7f}, {plan.origin[1]:.7f}"),
         trajectory=traj, duration=duration, rate_hz=None, filter_gains=None, pzc_gains=None,
         limits=None, vehicle=None, frame="local", source=str(path), kind="plan",
-        period=None, profile=profile, warnings=tuple(warnings))
+        period=None, profile=profile, warnings=tuple(warnings), geodetic=True,
+        datum=plan.origin)

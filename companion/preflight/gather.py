@@ -16,6 +16,7 @@ from typing import Any
 
 from ..errors import UserError
 from ..live.link import ARDUPILOT, PX4, Link, LinkConfig, mavlink
+from ..live.origin import from_message
 from ..live.params import Param, ParamClient
 from .checks import Ekf, Limits, Observed, Streams
 
@@ -186,6 +187,7 @@ class Probe:
             ekf = Ekf(int(ekf_msg.flags), ekf_msg.vel_ratio, ekf_msg.pos_horiz_ratio,
                       ekf_msg.pos_vert_ratio, ekf_msg.mag_ratio)
         origin_msg = seen.latest.get("GPS_GLOBAL_ORIGIN")
+        origin = None if origin_msg is None else from_message(origin_msg)   # 0, 0: not set
         return Observed(
             autopilot=v.autopilot, mav_type=v.mav_type, modes=frozenset(link.mode_names()),
             armed=link.armed, mavlink_version=seen.mavlink_version or 2, signed=seen.signed,
@@ -198,8 +200,7 @@ class Probe:
                 int(sys_status.onboard_control_sensors_health)),
             prearm_texts=self.prearm_texts,
             ekf=ekf,
-            origin=None if origin_msg is None else (origin_msg.latitude * 1e-7,
-                                                     origin_msg.longitude * 1e-7),
+            origin=None if origin is None else origin.latlon,
             streams=streams, limits=limits)
 
     def set_params(self, values: dict[str, float]) -> list[dict[str, Any]]:
