@@ -23,6 +23,7 @@ COMMANDS = [
     "tune",
     "identify",
     "calibrate",
+    "preflight",
     "mission",
     "simulate",
     "monitor",

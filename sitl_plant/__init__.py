@@ -7,6 +7,7 @@ timeout, noisy / late / lossy telemetry, and real-time, accelerated or lockstep 
 
 Modules: ``modes`` (mode tables), ``setpoint`` (target decoding), ``guidance`` (the autopilot's
 inner steering), ``vehicle`` (state machine + dynamics, pure), ``streams`` (message intervals),
-``telemetry`` (noise, latency, dropout), ``clock`` (pacing, lockstep), ``link`` (pymavlink),
+``telemetry`` (noise, latency, dropout), ``params`` (the parameters it serves), ``status`` (EKF
+status, origin, pre-arm), ``clock`` (pacing, lockstep), ``link`` (pymavlink),
 ``server`` (the loop), ``cli``.
 """

@@ -68,6 +68,24 @@ def _sysid(text: str) -> int:
     return value
 
 
+def _param_override(text: str) -> tuple[str, float]:
+    from .params import parse_override
+    try:
+        return parse_override(text)
+    except ValueError as err:
+        raise argparse.ArgumentTypeError(str(err)) from None
+
+
+def _mav_type(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not an integer") from None
+    if not 0 <= value <= 255:
+        raise argparse.ArgumentTypeError(f"{text!r}: must be 0..255")
+    return value
+
+
 def _origin(text: str) -> tuple[float, float, float]:
     from companion.mission.geo import check_latlon
     try:
@@ -164,6 +182,20 @@ def build_parser() -> argparse.ArgumentParser:
     flt = p.add_argument_group("faults and security")
     flt.add_argument("--takeover-at", type=_positive, metavar="S", dest="takeover_at",
                      help="a pilot switches to HOLD at S s of vehicle time (SIGUSR1: now)")
+    flt.add_argument("--param", action="append", default=[], metavar="NAME=VALUE",
+                     type=_param_override,
+                     help="serve this parameter value (repeatable): overrides the modelled one "
+                          "or adds one (sitl_plant.params)")
+    flt.add_argument("--param-loss", type=_probability, default=0.0, metavar="P",
+                     help="each PARAM_VALUE of a PARAM_REQUEST_LIST reply lost with probability P")
+    flt.add_argument("--ekf-delay", type=_non_negative, default=0.0, metavar="S",
+                     help="no EKF origin, no position estimate and no arming for the first S s "
+                          "of vehicle time (ArduPilot SITL: about 20 s to an origin)")
+    flt.add_argument("--mav-type", type=_mav_type, metavar="N",
+                     help="the heartbeat's MAV_TYPE (default 10 rover, 11 with FRAME_CLASS 2); "
+                          "another imitates a vehicle that is not a rover")
+    flt.add_argument("--mavlink1", action="store_true",
+                     help="send MAVLink 1 frames (a port set to SERIALn_PROTOCOL 1)")
     flt.add_argument("--signing-key", metavar="FILE", dest="signing_key",
                      help="MAVLink 2 signing: 32-byte secret (raw or 64 hex digits, mode 600); "
                           "unsigned commands and setpoints are ignored")
@@ -178,8 +210,9 @@ def config_from_args(args: argparse.Namespace) -> PlantConfig:
                   "speed_turn_coupling")
                  if getattr(args, name) is not None}
     params = params.with_(**overrides)
+    # no arming before the EKF runs, as on SITL
     vehicle = VehicleConfig(params=params, autopilot=Autopilot(args.autopilot),
-                            arm_delay=args.arm_delay, start=tuple(args.start))
+                            arm_delay=max(args.arm_delay, args.ekf_delay), start=tuple(args.start))
     telemetry = TelemetryConfig(noise_pos=args.noise_pos, noise_yaw=args.noise_yaw,
                                 latency=args.latency, dropout=args.dropout,
                                 seed=args.sysid if args.seed is None else args.seed,
@@ -195,8 +228,11 @@ def config_from_args(args: argparse.Namespace) -> PlantConfig:
                        tick_aligned=(args.tick_aligned if args.tick_aligned is not None
                                      else args.preset == "ardupilot-skid"),
                        telemetry=telemetry, takeover_at=args.takeover_at, signing_key=key,
-                       origin=OriginConfig(*args.origin, delay=args.origin_delay),
-                       global_position_rate=args.global_position_rate)
+                       origin=OriginConfig(*args.origin,
+                                           delay=max(args.origin_delay, args.ekf_delay)),
+                       global_position_rate=args.global_position_rate,
+                       params=tuple(args.param), param_loss=args.param_loss,
+                       ekf_delay=args.ekf_delay, mav_type=args.mav_type, mavlink1=args.mavlink1)
 
 
 def _install_signals(server) -> tuple[socket.socket, socket.socket]:
@@ -231,7 +267,8 @@ def main(argv: list[str] | None = None) -> int:
     from .link import Link, LinkError
     from .server import PlantServer
     try:
-        link = Link(config.connect, config.sysid, config.compid, config.signing_key)
+        link = Link(config.connect, config.sysid, config.compid, config.signing_key,
+                    mavlink1=config.mavlink1)
     except LinkError as err:
         print(f"sitl-plant: error: {err}", file=sys.stderr)
         return 2

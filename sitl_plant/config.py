@@ -30,3 +30,11 @@ class PlantConfig:
     signing_key: bytes | None = None  # MAVLink 2 signing: 32-byte secret
     origin: OriginConfig = field(default_factory=OriginConfig)   # EKF origin (lat, lon, alt)
     global_position_rate: float = 0.0  # Hz of GLOBAL_POSITION_INT at boot (0: until asked)
+    # Served parameters and estimator status (sitl_plant.params / status): --param overrides,
+    # the share of a PARAM_REQUEST_LIST reply lost, the EKF's start-up time, the heartbeat's
+    # MAV_TYPE (None: from FRAME_CLASS), MAVLink 1 frames out.
+    params: tuple[tuple[str, float], ...] = ()
+    param_loss: float = 0.0
+    ekf_delay: float = 0.0
+    mav_type: int | None = None
+    mavlink1: bool = False

@@ -31,7 +31,8 @@ def _mavutil():
 
 
 class Link:
-    def __init__(self, url: str, sysid: int, compid: int, signing_key: bytes | None = None):
+    def __init__(self, url: str, sysid: int, compid: int, signing_key: bytes | None = None,
+                 mavlink1: bool = False):
         _mavutil()
         from companion.errors import UserError
         from companion.mav.connection import open_connection
@@ -52,6 +53,11 @@ class Link:
         self.bad_data = 0
         self.received = 0
         self.peer_closed = False
+        self.mav_type = MAV_TYPE_GROUND_ROVER   # the heartbeat's (the server may change it)
+        if mavlink1:
+            # A port set to MAVLink 1 (SERIALn_PROTOCOL 1): send v1 frames, still read both.
+            send = self.mav.send
+            self.mav.send = lambda msg, force_mavlink1=False: send(msg, force_mavlink1=True)
 
     @property
     def signing_rejected(self) -> int:
@@ -107,11 +113,12 @@ class Link:
     def heartbeat(self, autopilot: modes.Autopilot, base_mode: int, custom_mode: int,
                   armed: bool) -> None:
         state = MAV_STATE_ACTIVE if armed else MAV_STATE_STANDBY
-        self._send(self.mav.heartbeat_send, MAV_TYPE_GROUND_ROVER,
+        self._send(self.mav.heartbeat_send, self.mav_type,
                    modes.heartbeat_autopilot(autopilot), base_mode, custom_mode, state)
 
-    def sys_status(self, receive_errors: int, setpoints_nonfinite: int) -> None:
-        self._send(self.mav.sys_status_send, 0, 0, 0, 0, 12600, -1, -1, 0,
+    def sys_status(self, receive_errors: int, setpoints_nonfinite: int,
+                   sensors: tuple[int, int, int] = (0, 0, 0)) -> None:
+        self._send(self.mav.sys_status_send, *sensors, 0, 12600, -1, -1, 0,
                    min(receive_errors, 0xFFFF), min(setpoints_nonfinite, 0xFFFF), 0, 0, 0)
 
     def attitude(self, s: PoseSample) -> None:
@@ -141,6 +148,16 @@ class Link:
 
     def message_interval(self, msg_id: int, interval_us: int) -> None:
         self._send(self.mav.message_interval_send, msg_id, interval_us)
+
+    def param_value(self, name: str, value: float, param_type: int, count: int,
+                    index: int) -> None:
+        self._send(self.mav.param_value_send, name.encode("ascii"), value, param_type, count,
+                   index)
+
+    def ekf_status(self, r) -> None:
+        """EKF_STATUS_REPORT from a :class:`sitl_plant.status.EkfReport`."""
+        self._send(self.mav.ekf_status_report_send, r.flags, r.velocity_variance,
+                   r.pos_horiz_variance, r.pos_vert_variance, r.compass_variance, 0.0)
 
     def close(self) -> None:
         try:

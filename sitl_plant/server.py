@@ -20,7 +20,7 @@ import socket
 import time
 from typing import Any, Callable
 
-from . import streams
+from . import params, status, streams
 from .clock import LockstepGate, Pacer
 from .config import PlantConfig
 from .earth import Earth, e7
@@ -66,6 +66,21 @@ class PlantServer:
         self.takeover_requested = False   # set by SIGUSR1
         self._takeover_us = (None if config.takeover_at is None
                              else int(round(config.takeover_at * 1e6)))
+        v = self.vehicle.config
+        self.params = params.ParamTable(
+            params.defaults(v.autopilot, v.params, config.loop_rate, config.sysid,
+                            v.offboard_loss_timeout),
+            bytewise=v.autopilot.value == "px4", overrides=config.params,
+            loss=config.param_loss, seed=config.telemetry.seed)
+        self._update_mav_type()
+
+    def _update_mav_type(self) -> None:
+        self.link.mav_type = (self.config.mav_type if self.config.mav_type is not None
+                              else self.params.mav_type())
+
+    def _status_sensors(self) -> tuple[int, int, int]:
+        """SYS_STATUS's pre-arm bit: healthy once arming would be accepted."""
+        return status.sensors(self.vehicle.t >= self.vehicle.config.arm_delay)
 
     @property
     def t_us(self) -> int:
@@ -172,7 +187,8 @@ class PlantServer:
             if mid == streams.HEARTBEAT:
                 link.heartbeat(v.autopilot, v.base_mode, v.custom_mode, v.armed)
             elif mid == streams.SYS_STATUS:
-                link.sys_status(link.bad_data, v.setpoints_ignored.get("non-finite", 0))
+                link.sys_status(link.bad_data, v.setpoints_ignored.get("non-finite", 0),
+                                self._status_sensors())
             elif mid == streams.GLOBAL_POSITION_INT:
                 self._global_position()
             else:
@@ -267,6 +283,9 @@ class PlantServer:
                               msg.get_srcComponent())
                 while self._after_ack:     # a requested message follows its ACK, as in ArduPilot
                     self._after_ack.pop(0)()
+        elif kind in ("PARAM_REQUEST_LIST", "PARAM_REQUEST_READ", "PARAM_SET"):
+            if self._for_us(msg) and self.params.handle(msg, self.link.param_value):
+                self._update_mav_type()
         elif kind == "SET_MODE":
             if self._for_us(msg):
                 if msg.base_mode & FLAG_CUSTOM_MODE_ENABLED:
@@ -300,6 +319,10 @@ class PlantServer:
             return Result.ACCEPTED
         if cmd == MAV_CMD_REQUEST_MESSAGE:
             return self._send_once(p1)
+        if cmd == status.MAV_CMD_RUN_PREARM_CHECKS:
+            if not v.armed and v.t < v.config.arm_delay:
+                self.link.statustext(SEVERITY_WARNING, status.PREARM_TEXT)
+            return Result.ACCEPTED
         return Result.UNSUPPORTED
 
     def _send_once(self, msg_id: float) -> Result:
@@ -309,9 +332,13 @@ class PlantServer:
         if msg_id == streams.HEARTBEAT:
             link.heartbeat(v.autopilot, v.base_mode, v.custom_mode, v.armed)
         elif msg_id == streams.SYS_STATUS:
-            link.sys_status(link.bad_data, v.setpoints_ignored.get("non-finite", 0))
+            link.sys_status(link.bad_data, v.setpoints_ignored.get("non-finite", 0),
+                            self._status_sensors())
         elif msg_id in (streams.ATTITUDE, streams.LOCAL_POSITION_NED):
             self.telemetry.push(self.t_us, int(msg_id), self._sample())
+        elif msg_id == status.MSG_EKF_STATUS_REPORT:
+            report = status.ekf_report(v.t, max(self.config.ekf_delay, self.config.origin.delay))
+            self._after_ack.append(lambda: link.ekf_status(report))
         elif msg_id == streams.GLOBAL_POSITION_INT:
             self._global_position()
         elif msg_id in (streams.GPS_GLOBAL_ORIGIN, streams.HOME_POSITION):

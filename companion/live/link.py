@@ -242,30 +242,14 @@ class Link:
 
     def read_params(self, names: Sequence[str], timeout: float = 2.0) -> dict[str, float]:
         """The vehicle's values of the parameters ``names`` (PARAM_REQUEST_READ by name, asked
-        again each second): ``{name: value}`` for those answered within ``timeout`` seconds; a
-        parameter the firmware does not have is simply missing.
+        again each second; :class:`companion.live.params.ParamClient`): ``{name: value}`` for
+        those answered within ``timeout`` seconds; a parameter the firmware does not have is
+        simply missing.
 
         Other messages read meanwhile are dropped: only for set-up, before the control loop.
         """
-        v = self.vehicle
-        found: dict[str, float] = {}
-        deadline = time.monotonic() + timeout
-        next_ask = 0.0
-        while len(found) < len(names) and (left := deadline - time.monotonic()) > 0:
-            if time.monotonic() >= next_ask:
-                for name in names:
-                    if name not in found:
-                        self.mav.param_request_read_send(v.sysid, v.compid, name.encode(), -1)
-                next_ask = time.monotonic() + 1.0
-            msg = self.recv()
-            if msg is None:
-                self.wait(min(left, 0.05))
-            elif msg.get_type() == "PARAM_VALUE" and self.is_vehicle(msg):
-                name = msg.param_id if isinstance(msg.param_id, str) else msg.param_id.decode()
-                name = name.rstrip("\x00")
-                if name in names:
-                    found[name] = float(msg.param_value)
-        return found
+        from .params import ParamClient
+        return {name: p.value for name, p in ParamClient(self).read(names, timeout).items()}
 
     def set_message_rate(self, msg_id: int, hz: float) -> int | None:
         """MAV_CMD_SET_MESSAGE_INTERVAL: the ACK's result, or None without an answer."""
