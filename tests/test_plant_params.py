@@ -12,8 +12,10 @@ import sys
 
 from sitl_plant.earth import CMAC, e7
 from sitl_plant.testing import PlantProcess, Pilot
+from companion.sim.vehicle_file import load as load_vehicle, preset_path
 
 PREARM = 0x10000000
+PRESET = load_vehicle(preset_path("ardupilot-skid")).params   # what the plant serves
 
 
 def values(msgs) -> dict[str, object]:
@@ -29,8 +31,9 @@ def test_list_read_and_set_as_ardupilot_answers_them():
         count = next(iter(listed.values())).param_count
         assert len(listed) == count and sorted(m.param_index for m in listed.values()) == \
             list(range(count))
-        assert math.isclose(listed["ATC_STR_RAT_MAX"].param_value, 120.0, rel_tol=1e-5)  # deg/s
-        assert math.isclose(listed["ATC_ACCEL_MAX"].param_value, 1.05633, rel_tol=1e-5)
+        assert math.isclose(listed["ATC_STR_RAT_MAX"].param_value,        # deg/s
+                            math.degrees(PRESET.max_yaw_rate), rel_tol=1e-5)
+        assert math.isclose(listed["ATC_ACCEL_MAX"].param_value, PRESET.max_accel, rel_tol=1e-5)
         assert listed["SERVO1_FUNCTION"].param_value == 73 and listed["FS_ACTION"].param_value == 1
         assert listed["MY_EXTRA"].param_value == 2.5 and listed["MY_EXTRA"].param_type == 9
         assert listed["FS_GCS_ENABLE"].param_type == 2              # INT8, sent as its value

@@ -6,6 +6,7 @@ wrong (its --param / --ekf-delay / --loop-rate / --mavlink1 / --mav-type / --sig
 from __future__ import annotations
 
 import json
+import math
 import os
 import pty
 import subprocess
@@ -14,6 +15,8 @@ from pathlib import Path
 
 import pytest
 
+from companion.sim.vehicle_file import load as load_vehicle, preset_path
+
 from sitl_plant.testing import PlantProcess, Pilot, free_udp_port
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -21,6 +24,8 @@ SKID = str(ROOT / "companion" / "sim" / "vehicles" / "ardupilot_skid.toml")
 STEERING = "FRAME_CLASS, SERVOn_FUNCTION"
 STREAMS = "LOCAL_POSITION_NED, ATTITUDE rate"
 TOP_SPEED = "WP_SPEED, CRUISE_SPEED / CRUISE_THROTTLE"
+
+PRESET = load_vehicle(preset_path("ardupilot-skid")).params   # what the plant serves
 
 
 def preflight(port: int, *args: str, timeout: float = 60.0) -> subprocess.CompletedProcess:
@@ -62,7 +67,7 @@ def test_a_plant_set_up_right_passes_every_check_and_exits_0(key):
     rates = [float(w) for w in c[STREAMS]["value"].replace("(", " ").split() if w[0].isdigit()]
     assert len(rates) == 3 and all(abs(hz - 40.0) < 1.0 for hz in rates), rates  # 2 + asked
     assert c["GPS_GLOBAL_ORIGIN"]["value"].startswith("-35.36326")
-    assert c["ATC_STR_RAT_MAX"]["value"] == "120 deg/s"       # the plant's own 2.0944 rad/s
+    assert c["ATC_STR_RAT_MAX"]["value"] == f"{math.degrees(PRESET.max_yaw_rate):.6g} deg/s"
     assert c["signing"]["value"].startswith("signed")
 
     # the text form, one line per check; unsigned on a network link is a warning (exit 1)
@@ -113,7 +118,7 @@ def test_a_boat_is_a_boat_and_the_vehicle_file_is_held_against_the_limits():
         r = preflight(plant.port, "--json", "--vehicle", SKID)
     s, c = statuses(r), checks(r)
     assert s["HEARTBEAT type"] == "ok" and c["HEARTBEAT type"]["value"].startswith("boat")
-    assert s["ATC_ACCEL_MAX"] == "warn" and "1.06 m/s^2" in c["ATC_ACCEL_MAX"]["want"]
+    assert s["ATC_ACCEL_MAX"] == "warn" and f"{PRESET.max_accel:.3g} m/s^2" in c["ATC_ACCEL_MAX"]["want"]
     assert s[TOP_SPEED] == "warn"
     assert s["ATC_STR_RAT_MAX"] == "ok"
     assert s[STREAMS] == "fail" and "none" in c[STREAMS]["value"]   # every pose message lost
