@@ -174,6 +174,35 @@ def test_a_mode_switch_by_the_ground_station_ends_the_run_with_exit_3_and_no_mor
           f"heartbeat; the vehicle stayed in Hold")
 
 
+@pytest.mark.px4
+@pytest.mark.slow
+def test_identify_on_px4_flies_the_velocity_vector_manoeuvre_and_fits_the_course_loop(px4,
+                                                                                       tmp_path):
+    """``companion identify --connect`` on PX4: reads PX4's rover parameters (the priors), flies
+    the velocity-vector manoeuvre within --space, leaves PX4 in Hold, and writes a vehicle file
+    with PX4's course loop and the Ackermann turning radius (the SIH rover's wheel base 0.321 m
+    and 30 deg steering make 0.556 m)."""
+    sitl = px4()
+    out = tmp_path / "vehicle.toml"
+    with CompanionProcess(sitl, "--out", str(out), "--arm", "--space", "8", "--no-zenoh",
+                          "--json", "--log-dir", str(tmp_path / "logs"),
+                          command="identify") as comp:
+        code = comp.wait(BOOT_WALL + 200.0)
+    assert code == 0, comp.stderr
+    r = comp.result()
+    assert r["flight"]["hold_confirmed"] and r["flight"]["max_distance_m"] <= 8.0 + 1.0, r
+    assert r["autopilot_params"]["RO_YAW_P"] == 5.0
+    assert set(r["params"]) >= {"speed", "turn_rate", "course"}
+    from companion.sim.vehicle_file import load
+    v = load(out).params
+    assert v.velocity_vector and 1.0 <= v.course_gain <= 15.0
+    assert 0.556 * 0.7 <= v.min_turn_radius <= 0.556 * 1.8, v.min_turn_radius
+    assert r["rms"]["yaw_rate_rad_s"] < 0.5
+    print(f"\nPX4 identify: course gain {v.course_gain:.2f} 1/s, turning radius "
+          f"{v.min_turn_radius:.3f} m, RMS speed {r['rms']['speed_m_s']:.3f} m/s, turn rate "
+          f"{r['rms']['yaw_rate_rad_s']:.3f} rad/s; farthest {r['flight']['max_distance_m']:.1f} m")
+
+
 # --------------------------------------------------------------------------- the harness itself
 
 def test_without_px4_configured_the_tests_skip_with_the_reason(monkeypatch):
