@@ -23,7 +23,7 @@ from companion.core.signals import Estimate, Measurement, Reference
 from companion.core.trajectory import Ellipse
 from companion.errors import UserError
 from companion.ident.excite import Home, Plan, VectorExcitation
-from companion.ident.fit import FITTED, Series, fit
+from companion.ident.fit import FITTED, Series, fit, rms
 from companion.ident.priors import from_px4
 from companion.mission.feasibility import check
 from companion.sim import vehicle_file
@@ -176,12 +176,13 @@ def test_the_velocity_vector_fit_finds_the_course_gain_and_the_turning_radius():
     assert p.velocity_vector
     assert result.status["course_gain"] == FITTED
     assert result.status["min_turn_radius"] == FITTED
-    # the radius shows clearly (slow tight turns ride on it); the course gain trades against
-    # the turn-rate channel's lag and delay (a slower loop, a quicker channel: the same
-    # response), so it is only bounded, and what counts is that the model predicts the log
     assert p.min_turn_radius == pytest.approx(0.7, rel=0.15)
-    assert 2.0 <= p.course_gain <= 8.0
-    assert result.speed_rms < 0.05 and result.yaw_rate_rms < 0.06
+    assert p.course_gain == pytest.approx(4.0, rel=0.3)
+    # the turn rate as well as the true model predicts it series-parallel (the course loop
+    # closed on the heading sampled at 40 Hz, where the vehicle closes it continuously)
+    truth_rms = rms(truth, series)
+    assert result.speed_rms < 0.05
+    assert result.yaw_rate_rms <= 1.1 * truth_rms[1] + 0.01, (result.yaw_rate_rms, truth_rms)
 
 
 def test_px4_priors_from_its_parameters():

@@ -34,7 +34,8 @@ turn-rate channel gets PX4's course loop, a proportional heading controller on t
 An Ackermann rover cannot turn tighter than its steering allows: with ``min_turn_radius`` R
 (wheel base / tan(max steering angle)) the turn-rate command is also clamped to
 ``|u_omega| <= |v| / R`` (v at the step's start; a rover at rest cannot turn at all). The
-vector goes through the speed channel's delay. :meth:`RoverModel.step_vector` is that step.
+speed and the course loop's turn rate then take their channels' delays.
+:meth:`RoverModel.step_vector` is that step.
 
 Integration. Without rate limits the actuators are linear first-order systems with a
 held input, so v, omega and phi have exact closed forms over a step, and x, y are the integrals of
@@ -154,13 +155,7 @@ class RoverModel:
         self._coupled = _any_positive(params.turn_speed_coupling)
         self._turn_coupled = _any_positive(params.speed_turn_coupling)
         self._curvature = _any_positive(params.min_turn_radius)
-        if params.velocity_vector:
-            # the vector (u_x, u_y) is what is in flight: both components take the speed delay
-            self.delay = (CommandDelay(params.speed_delay, params.speed_delay, n)
-                          if _any_positive(params.speed_delay) else None)
-        else:
-            self.delay = (CommandDelay(params.speed_delay, params.yaw_delay, n)
-                          if params.has_delay else None)
+        self.delay = CommandDelay(params.speed_delay, params.yaw_delay, n) if params.has_delay else None
         self._trig_yaw = None
         self._trig_cs = None
         self._decay_h = None
@@ -219,17 +214,12 @@ class RoverModel:
 
     def step_vector(self, s: RoverState, ux: Num, uy: Num, dt: float) -> RoverState:
         """Advance ``dt`` seconds with the velocity vector u_p held (PX4's interface, see the
-        module docstring): speed |u_p|, turn rate from PX4's course loop on atan2(u_p)."""
-        if self.delay is not None:
-            ux, uy = self.delay.push(ux, uy, dt)
-        m, p = self._m, self.params
-        speed = m.hypot(ux, uy)
+        module docstring): speed |u_p|, turn rate from PX4's course loop on atan2(u_p), then
+        each through its channel's delay, as :meth:`step` (what identification fits: the
+        course loop's output on the heading of the moment, delayed)."""
+        m = self._m
         course_err = m.wrap(m.atan2(uy, ux) - s.yaw)
-        rate = p.course_gain * course_err
-        u, w = self.clamp_command(speed, rate, s.omega, s.v)
-        if self._paper:
-            return self._step_exact(s, u, w, dt)
-        return self._step_limited(s, u, w, dt)
+        return self.step(s, m.hypot(ux, uy), self.params.course_gain * course_err, dt)
 
     def step(self, s: RoverState, speed_cmd: Num, yaw_rate_cmd: Num, dt: float) -> RoverState:
         """Advance ``dt`` seconds with the commands (v_ref, omega_ref) held (after the delay)."""
