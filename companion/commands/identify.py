@@ -14,7 +14,10 @@ limit parameters when known (read live, or found in the .tlog), else stock ArduP
 With ``--connect`` it flies the excitation manoeuvre (:mod:`companion.ident.excite`) in GUIDED
 through the live loop of ``companion run`` (every failsafe, the flight logs, Zenoh, signing),
 within ``--space`` metres of where the rover starts and for at most 90 s, then fits the .tlog
-it wrote.
+it wrote. On PX4 it reads PX4's rover parameters (``RO_*``, ``RA_*``: the priors), flies a
+velocity-vector manoeuvre in OFFBOARD (speed steps on a gentle circle, course steps, slow tight
+turns; nothing on the spot: an Ackermann rover cannot) and fits, besides the two channels,
+PX4's course loop gain and the minimum turning radius (the vehicle file's ``[course]``).
 """
 
 from __future__ import annotations
