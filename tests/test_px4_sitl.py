@@ -132,7 +132,9 @@ def test_sigterm_mid_mission_stops_the_rover_in_hold_and_exits_0(px4, tmp_path):
     slow = [m for m in samples if _speed(m) < 0.2]
     assert slow, [round(_speed(m), 2) for m in samples]
     stopped_after = (slow[0].time_boot_ms - t0) / 1e3
-    assert stopped_after <= 5.0, stopped_after
+    # PX4 brakes at RO_DECEL_LIM 3 m/s^2 (about 1 s from 3 m/s) after the zero vectors and Hold;
+    # seen 3.1-3.2 s on an idle machine, 5.4 s with the whole suite and others on two cores
+    assert stopped_after <= 8.0, stopped_after
     # what the companion sent last: zero vectors (then PX4's Hold has the rover; the SIH rover
     # creeps in Hold by itself, up to about 0.5 m/s seen: PX4's, not the companion's doing)
     frames, _ = read_tlog(Path(r["tlog"]))
