@@ -18,9 +18,10 @@ demo: $(BIN)/.installed
 test: $(BIN)/.installed
 	$(BIN)/python -m pytest $(ARGS)
 
-# Only the tests against ArduPilot Rover SITL (skipped unless ARDUPILOT_SITL or ARDUPILOT_DIR is set)
+# Only the tests against ArduPilot Rover SITL and PX4 SITL (each skipped unless ARDUPILOT_SITL or
+# ARDUPILOT_DIR, PX4_SITL or PX4_DIR is set)
 sitl-test: $(BIN)/.installed
-	$(BIN)/python -m pytest -m sitl $(ARGS)
+	$(BIN)/python -m pytest -m "sitl or px4" $(ARGS)
 
 paper-table: $(BIN)/.installed
 	@$(BIN)/companion paper-table $(ARGS)

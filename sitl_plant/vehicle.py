@@ -21,7 +21,7 @@ from companion.sim.plant import RoverModel, RoverParams, RoverState
 
 from . import guidance, modes
 from .modes import Autopilot
-from .setpoint import (STOP, Pose, PositionTarget, Rejected, Setpoint, Target,
+from .setpoint import (STOP, HeadingSpeed, Pose, PositionTarget, Rejected, Setpoint, Target,
                        decode_ardupilot, decode_px4)
 
 GUIDED_TIMEOUT_TEXT = "target not received last 3secs, stopping"
@@ -149,7 +149,20 @@ class Vehicle:
             else:
                 self._offboard_loss()
         speed, rate = self.commands()
-        s = self.model.step(self.state, speed, rate, dt)
+        p = self.config.params
+        if p.velocity_vector:
+            # A vehicle file with PX4's course loop ([course]): the velocity vector goes to the
+            # model as PX4 gets it (no pivot: an Ackermann rover drives its turning circle);
+            # other targets (a stop, a position) as the vector that asks for that turn rate.
+            target = self.target
+            if self.armed and self.mode.follows_setpoints and isinstance(target, HeadingSpeed):
+                speed, heading = target.speed, target.heading
+            else:
+                heading = self.state.yaw + rate / p.course_gain
+            s = self.model.step_vector(self.state, speed * math.cos(heading),
+                                       speed * math.sin(heading), dt)
+        else:
+            s = self.model.step(self.state, speed, rate, dt)
         if not -math.pi < s.yaw <= math.pi:
             s.yaw = wrap(s.yaw)
         self.state = s

@@ -43,3 +43,13 @@ def ardupilot(tmp_path):
     from ardupilot_harness import sitl_factory
     with sitl_factory(tmp_path) as start:
         yield start
+
+
+@pytest.fixture
+def px4(tmp_path):
+    """Start PX4 SITL (SIH Ackermann rover): ``px4(params={"NAME": value})`` returns a running
+    ``px4_harness.PX4SITL``; every one is stopped after the test. Skips when neither PX4_SITL
+    nor PX4_DIR is set."""
+    from px4_harness import px4_factory
+    with px4_factory(tmp_path) as start:
+        yield start

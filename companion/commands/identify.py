@@ -16,7 +16,10 @@ limit parameters when known (read live, or found in the .tlog), else stock ArduP
 With ``--connect`` it flies the excitation manoeuvre (:mod:`companion.ident.excite`) in GUIDED
 through the live loop of ``companion run`` (every failsafe, the flight logs, Zenoh, signing),
 within ``--space`` metres of where the rover starts and for at most 90 s, then fits the .tlog
-it wrote.
+it wrote. On PX4 it reads PX4's rover parameters (``RO_*``, ``RA_*``: the priors), flies a
+velocity-vector manoeuvre in OFFBOARD (speed steps on a gentle circle, course steps, slow tight
+turns; nothing on the spot: an Ackermann rover cannot) and fits, besides the two channels,
+PX4's course loop gain and the minimum turning radius (the vehicle file's ``[course]``).
 """
 
 from __future__ import annotations
@@ -123,17 +126,23 @@ def identify_log(paths: str | list[str], args, autopilot: dict[str, float],
     the log in the file when the path is not worth keeping (``--no-log``)."""
     from ..ident.data import autopilot_params, read_series
     from ..ident.fit import fit, join, rms
-    from ..ident.priors import AUTOPILOT_PARAMS, from_autopilot
+    from ..ident.priors import AUTOPILOT_PARAMS, PX4_PARAMS, from_autopilot, from_px4
     from ..ident.record import Report, vehicle_file
     from ..sim.vehicle_file import save
 
     paths = [paths] if isinstance(paths, str) else list(paths)
     parts = [read_series(path)[0] for path in paths]
-    series = join(parts)
+    try:
+        series = join(parts)
+    except ValueError as exc:
+        raise UserError(f"LOG {' + '.join(paths)}: {exc}") from None
     check = read_series(args.check)[0] if args.check else None   # a bad one fails before the fit
     for path in paths:              # what was read live, then the first log's, win
-        autopilot = {**autopilot_params(path, AUTOPILOT_PARAMS), **autopilot}
-    priors = from_autopilot(autopilot)
+        autopilot = {**autopilot_params(path, AUTOPILOT_PARAMS + PX4_PARAMS), **autopilot}
+    if series.vector:            # PX4's velocity vectors: its rover parameters, its course loop
+        priors = from_px4({k: v for k, v in autopilot.items() if k in PX4_PARAMS})
+    else:
+        priors = from_autopilot(autopilot)
     if prior is not None:       # an earlier fit of this vehicle: what this log leaves open
         from ..ident.priors import Priors
         from dataclasses import fields
@@ -242,9 +251,9 @@ def fly_and_fit(args):
     """Fly the manoeuvre through run's live loop, then fit its log: (exit code, report or None
     when stopped before the manoeuvre ended, the flight's summary)."""
     from ..bus import open_bus, shut
-    from ..ident.excite import Excitation, Plan
-    from ..ident.priors import AUTOPILOT_PARAMS, from_autopilot
-    from ..live.link import ARDUPILOT
+    from ..ident.excite import Excitation, Plan, VectorExcitation
+    from ..ident.priors import AUTOPILOT_PARAMS, PX4_PARAMS, from_autopilot, from_px4
+    from ..live.link import ARDUPILOT, PX4
     from ..live.session import StopSwitch, fly
     from .run import install_signals, settings_from_args
     from .zenoh_args import bus_options
@@ -259,9 +268,11 @@ def fly_and_fit(args):
 
     def make_tracker(link, limits):
         """Read the autopilot's limits (the priors), size the manoeuvre, build the tracker."""
+        if link.vehicle.autopilot == PX4:
+            return px4_tracker(link, limits)
         if link.vehicle.autopilot != ARDUPILOT:
-            raise UserError(f"identify drives ArduPilot's speed / turn-rate setpoints; this "
-                            f"vehicle runs {link.vehicle.autopilot}")
+            raise UserError(f"identify drives ArduPilot's speed / turn-rate setpoints or PX4's "
+                            f"velocity vectors; this vehicle runs {link.vehicle.autopilot}")
         read.update(link.read_params(AUTOPILOT_PARAMS))
         log("autopilot parameters: " + (", ".join(f"{k} {v:g}" for k, v in sorted(read.items()))
                                         or "none answered; default priors"))
@@ -273,6 +284,20 @@ def fly_and_fit(args):
         log(f"manoeuvre within {plan.space:g} m: setpoints up to {plan.max_speed:.2f} m/s, "
             f"{plan.max_yaw_rate:.2f} rad/s")
         made.append(Excitation(plan))
+        return made[-1]
+
+    def px4_tracker(link, limits):
+        """PX4: its rover parameters (the priors, a velocity-vector model) and the velocity-
+        vector manoeuvre (no turning on the spot: an Ackermann rover cannot)."""
+        read.update(link.read_params(PX4_PARAMS))
+        log("PX4 parameters: " + (", ".join(f"{k} {v:g}" for k, v in sorted(read.items()))
+                                  or "none answered; default priors"))
+        prior = from_px4(read).params
+        plan = Plan(space=args.space, max_speed=min(limits.max_speed, prior.max_speed),
+                    max_yaw_rate=min(limits.max_yaw_rate, prior.max_yaw_rate),
+                    decel=min(prior.decel, prior.max_accel), top_speed=prior.max_speed)
+        log(f"velocity-vector manoeuvre within {plan.space:g} m: up to {plan.max_speed:.2f} m/s")
+        made.append(VectorExcitation(plan))
         return made[-1]
 
     switch = StopSwitch()

@@ -2,6 +2,9 @@
 
 ``check`` validates each file (TOML mission, QGroundControl .plan, QGC WPL 110 .waypoints) and
 prints one summary line per good file; each bad file gets one error line and the exit code is 2.
+With ``--vehicle FILE`` each reference is also checked against that vehicle
+(:mod:`companion.mission.feasibility`): one line per problem (tighter than its minimum turning
+radius, slowing faster than it can, ...) and exit 3 when any reference is out of its reach.
 ``show`` prints what a mission holds and can draw its path with time marks.
 """
 
@@ -21,6 +24,11 @@ def register(subparsers) -> None:
 
     check = sub.add_parser("check", help="validate files and print a one-line summary of each")
     check.add_argument("files", nargs="+", metavar="FILE")
+    check.add_argument("--vehicle", metavar="FILE",
+                       help="also check each reference against this vehicle file (companion "
+                            "identify / calibrate): tighter than its minimum turning radius, "
+                            "faster than it can slow down, speed up or turn, above its top "
+                            "speed; exit 3 when a reference is out of its reach")
     _common(check)
     check.set_defaults(func=run_check)
 
@@ -70,7 +78,11 @@ def run_check(args) -> int:
     from .. import mission as missions
     origin = parse_origin(args.origin)
     _check_speed(args.speed)
-    failed = 0
+    vehicle = None
+    if getattr(args, "vehicle", None):
+        from ..sim.vehicle_file import load as load_vehicle
+        vehicle = load_vehicle(args.vehicle).params
+    failed = out_of_reach = 0
     for name in args.files:
         try:
             m = missions.load(name, origin=origin, speed=args.speed)
@@ -79,8 +91,18 @@ def run_check(args) -> int:
             failed += 1
             continue
         print_warnings(m)
-        print(f"{name}: ok: {m.summary()}", flush=True)
-    return 2 if failed else 0
+        problems = []
+        if vehicle is not None:
+            from ..mission.feasibility import check
+            problems = check(m.trajectory, m.duration, vehicle)
+        if problems:
+            out_of_reach += 1
+            for p in problems:
+                print(f"{name}: out of reach for {args.vehicle}: {p.describe()}", flush=True)
+            continue
+        print(f"{name}: ok: {m.summary()}" + (f"; within {args.vehicle}'s reach"
+                                               if vehicle is not None else ""), flush=True)
+    return 2 if failed else (3 if out_of_reach else 0)
 
 
 def run_show(args) -> int:

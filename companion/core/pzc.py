@@ -80,6 +80,21 @@ identified vehicle):
   (fixed gains, 0.12 Hz ellipse: 1.88 -> 1.61 m with the yaw curve, 1.51 m with both). 0
   (default) is off.
 
+Extension for a velocity-vector autopilot on an Ackermann rover (PX4; off by default):
+
+* **progress floor** (``min_progress``, a share gamma of the reference speed): PX4 steers a rover
+  along u_p itself; a u_p that points backwards (the rover ahead of the reference, K_P p~
+  larger than p_ref') makes a rover that cannot turn on the spot drive a loop at its minimum
+  radius and come back: an orbit. With gamma > 0 the component of u_p along the reference's
+  direction t = p_ref' / |p_ref'| is kept at or above gamma |p_ref'|,
+
+      u_p += max(0, gamma |p_ref'| - u_p . t) t,
+
+  (the normal part untouched), so an ahead rover slows down and lets the reference come to it
+  instead of turning round, and the position integrators are held while the floor acts (the
+  error it leaves is not one the law should wind up on). Where the reference stands still
+  (|p_ref'| = 0) nothing changes.
+
 Re-tuned with all three (``companion tune --vehicle``), the rover above holds in the model
 0.002 / 0.045 / 1.41 m steady RMS on the 0.04 / 0.08 / 0.12 Hz ellipse (before: 0.022 / 0.125 /
 1.98; the 0.12 Hz reference peaks at 4.77 m/s against a 3.08 m/s top speed, and any path
@@ -138,11 +153,12 @@ class PZCGains:
     accel_ff_turn: Num | None = None
     brake_accel: Num = 0.0
     brake_yaw_accel: Num = 0.0
+    min_progress: Num = 0.0
 
     def __post_init__(self):
         if self.speed_law not in SPEED_LAWS:
             raise ValueError(f"speed_law must be one of {SPEED_LAWS}, not {self.speed_law!r}")
-        for name in ("accel_ff_turn", "brake_accel", "brake_yaw_accel"):
+        for name in ("accel_ff_turn", "brake_accel", "brake_yaw_accel", "min_progress"):
             value = getattr(self, name)
             if value is not None and _any_negative(value):
                 raise ValueError(f"{name} must be >= 0, not {value!r}")
@@ -220,6 +236,7 @@ class PZCLaw:
             self._split_ff and not _ops.is_plain_zero(gains.accel_ff_turn))
         self._brake = not _ops.is_plain_zero(gains.brake_accel)
         self._brake_yaw = not _ops.is_plain_zero(gains.brake_yaw_accel)
+        self._progress = not _ops.is_plain_zero(gains.min_progress)
         self.reset()
 
     def reset(self) -> None:
@@ -257,6 +274,20 @@ class PZCLaw:
                 turn = (g.accel_ff_turn - g.accel_ff) * heading_rate
                 ux = ux - turn * ref.vy
                 uy = uy + turn * ref.vx
+
+        if self._progress:
+            # Progress floor: u_p's component along the reference's direction >= gamma |p_ref'|.
+            ref_speed = m.hypot(ref.vx, ref.vy)
+            moving = ref_speed > 1e-6
+            safe = m.maximum(ref_speed, 1e-6)
+            tx, ty = ref.vx / safe, ref.vy / safe
+            lift = m.maximum(g.min_progress * ref_speed - (ux * tx + uy * ty), 0.0)
+            lifting = moving & (lift > 0) if m is not _ops.scalar else (moving and lift > 0)
+            lift = m.where(lifting, lift, 0.0)
+            ux = ux + lift * tx
+            uy = uy + lift * ty
+            int_x = m.where(lifting, self.int_x, int_x)
+            int_y = m.where(lifting, self.int_y, int_y)
 
         yaw_ref = m.atan2(uy, ux)
         eyaw = m.wrap(yaw_ref - est.yaw)

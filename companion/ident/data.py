@@ -37,13 +37,20 @@ def series_from_flight(flight) -> Series:
                         "its pose samples): identification needs what the vehicle was asked")
     speed_cmd = np.asarray(flight.speed_cmd, dtype=float)
     yaw_cmd = np.asarray(flight.yaw_rate_cmd, dtype=float)
-    if np.all(np.isnan(yaw_cmd)):
+    course = getattr(flight, "course_cmd", None)
+    vector = np.all(np.isnan(yaw_cmd))
+    if vector and course is None:
         raise UserError(f"LOG {name}: its setpoints are velocity vectors without a turn rate "
-                        "(PX4); identification needs ArduPilot's speed / turn-rate setpoints")
+                        "(PX4) and the log is not a .tlog: a PX4 vehicle is identified from "
+                        "the .tlog, where the vectors' course is")
+    if vector:
+        # PX4: speed |u_p| and the course atan2(u_p); the turn rate PX4's course loop makes of
+        # it is derived in the fit (fit.with_course_loop) on the measured heading
+        yaw_cmd = np.asarray(course, dtype=float)
     cmd_t = np.asarray(flight.cmd_t, dtype=float)
     good = np.isfinite(cmd_t) & np.isfinite(speed_cmd) & np.isfinite(yaw_cmd)
     cmd_t, speed_cmd, yaw_cmd = cmd_t[good], speed_cmd[good], yaw_cmd[good]
-    moving = np.flatnonzero((speed_cmd != 0.0) | (yaw_cmd != 0.0))
+    moving = np.flatnonzero((speed_cmd != 0.0) | ((yaw_cmd != 0.0) & (not vector)))
     if len(moving) == 0:
         raise UserError(f"LOG {name}: every setpoint in it is zero: nothing to identify")
     along = flight.speed_along if flight.speed_along is not None else flight.speed
@@ -52,6 +59,7 @@ def series_from_flight(flight) -> Series:
             & np.isfinite(along) & np.isfinite(flight.yaw_rate))
     speed = np.asarray(along, dtype=float)[keep]
     rate = np.asarray(flight.yaw_rate, dtype=float)[keep]
+    yaw = np.asarray(flight.yaw, dtype=float)[keep]
     t = t[keep]
     if len(t) < MIN_SAMPLES or t[-1] - t[0] < MIN_DURATION:
         span = float(t[-1] - t[0]) if len(t) else 0.0
@@ -62,6 +70,10 @@ def series_from_flight(flight) -> Series:
     held = k >= 0
     u = np.where(held, speed_cmd[np.maximum(k, 0)], 0.0)
     w = np.where(held, yaw_cmd[np.maximum(k, 0)], 0.0)
+    if vector:
+        # the turn-rate command is derived later; the course and the heading go along
+        return Series(t, u, np.zeros_like(u), speed, rate, course_cmd=np.where(held, w, yaw),
+                      yaw=yaw)
     return Series(t, u, w, speed, rate)
 
 

@@ -39,7 +39,7 @@ at the lowest value the log allows, a cautious model).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Callable, Sequence
 
 import numpy as np
@@ -47,7 +47,7 @@ import numpy as np
 from ..sim.plant import RoverParams
 from ..sim.response import respond
 from . import channels
-from .priors import SPEED_FIELDS, YAW_FIELDS
+from .priors import COURSE_FIELDS, SPEED_FIELDS, YAW_FIELDS
 
 FITTED, PRIOR, BOUND = "fitted", "prior", "bound"
 LIMITS = {"max_speed", "max_accel", "max_decel", "max_yaw_rate", "max_yaw_accel", "max_yaw_decel"}
@@ -70,6 +70,10 @@ class Series:
     speed: np.ndarray              # measured signed speed along the heading, m/s
     yaw_rate: np.ndarray           # measured turn rate, rad/s
     starts: tuple[int, ...] = (0,)     # first sample of each log, when several are joined
+    # PX4 (velocity vectors): the course atan2(u_p) in force and the measured heading, rad;
+    # ``yaw_rate_cmd`` is then derived (:func:`with_course_loop`)
+    course_cmd: np.ndarray | None = None
+    yaw: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         n = len(self.t)
@@ -87,6 +91,28 @@ class Series:
     def duration(self) -> float:
         return float(self.t[-1] - self.t[0])
 
+    @property
+    def vector(self) -> bool:
+        """Velocity-vector setpoints (PX4): the turn-rate command comes from the course loop."""
+        return self.course_cmd is not None
+
+
+def with_course_loop(series: Series, course_gain: float, min_turn_radius: float,
+                     max_yaw_rate: float = math.inf) -> Series:
+    """The series with the turn-rate command PX4's course loop makes of its velocity vectors
+    (:meth:`companion.sim.plant.RoverModel.step_vector`), on the *measured* heading and speed:
+    ``clip(K wrap(course - yaw), +-max_yaw_rate, +-|v| / R_min)``. The turn-rate channel is
+    then fitted as ArduPilot's (series-parallel: the loop closed on what was measured)."""
+    if not series.vector:
+        return series
+    err = np.remainder(series.course_cmd - series.yaw + math.pi, 2.0 * math.pi) - math.pi
+    cmd = np.clip(course_gain * err, -max_yaw_rate, max_yaw_rate)
+    cmd = np.where(series.speed_cmd > 0, cmd, 0.0)          # a zero vector: no course at all
+    if min_turn_radius > 0:
+        top = np.abs(series.speed) / min_turn_radius
+        cmd = np.clip(cmd, -top, top)
+    return replace(series, yaw_rate_cmd=cmd)
+
 
 def join(parts: Sequence[Series]) -> Series:
     """Several logs as one series: each next part starts one sample step after the previous
@@ -102,11 +128,16 @@ def join(parts: Sequence[Series]) -> Series:
         if i > 0:
             offset = times[-1][-1] + step - float(part.t[0])
         times.append(part.t + offset)
+    vector = {part.vector for part in parts}
+    if len(vector) > 1:
+        raise ValueError("speed / turn-rate logs (ArduPilot) and velocity-vector logs (PX4) "
+                         "cannot be fitted as one vehicle")
+    extra = ("course_cmd", "yaw") if vector == {True} else ()
     starts = tuple(int(k) for k in np.cumsum([0] + [len(part.t) for part in parts[:-1]]))
-    return Series(np.concatenate(times),
-                  *(np.concatenate([getattr(part, name) for part in parts])
-                    for name in ("speed_cmd", "yaw_rate_cmd", "speed", "yaw_rate")),
-                  starts=starts)
+    joined = {name: np.concatenate([getattr(part, name) for part in parts])
+              for name in ("t", "speed_cmd", "yaw_rate_cmd", "speed", "yaw_rate") + extra}
+    joined["t"] = np.concatenate(times)
+    return Series(**joined, starts=starts)
 
 
 @dataclass(frozen=True)
@@ -404,8 +435,14 @@ def _fit_channel(series: Series, base: RoverParams, prior: RoverParams, fields: 
     return values, status, channel.evaluations
 
 
+def _derived(params: RoverParams, series: Series) -> Series:
+    return with_course_loop(series, float(params.course_gain), float(params.min_turn_radius),
+                            float(params.max_yaw_rate))
+
+
 def rms(params: RoverParams, series: Series, dt: float = 0.01) -> tuple[float, float]:
     """(speed RMS m/s, turn-rate RMS rad/s) of the model ``params`` against a series."""
+    series = _derived(params, series)
     v, w = respond(params, series.t, series.speed_cmd, series.yaw_rate_cmd, 1, dt,
                    v0=float(series.speed[0]), omega0=float(series.yaw_rate[0]))
     return (float(np.sqrt(np.mean((v[:, 0] - series.speed) ** 2))),
@@ -415,14 +452,82 @@ def rms(params: RoverParams, series: Series, dt: float = 0.01) -> tuple[float, f
 def simulate(params: RoverParams, series: Series, dt: float = 0.01
              ) -> tuple[np.ndarray, np.ndarray]:
     """The model's speed and turn rate on the series' times (for plots)."""
+    series = _derived(params, series)
     v, w = respond(params, series.t, series.speed_cmd, series.yaw_rate_cmd, 1, dt,
                    v0=float(series.speed[0]), omega0=float(series.yaw_rate[0]))
     return v[:, 0], w[:, 0]
 
 
+# (course gain, turning radius) factors tried around the prior for a velocity-vector log
+COURSE_GAIN_STEPS = (0.35, 0.5, 0.7, 1.0, 1.4, 2.0, 2.8)
+TURN_RADIUS_STEPS = (0.5, 0.7, 0.85, 1.0, 1.2, 1.45, 1.8)
+FINE_GAIN_STEPS = (0.6, 0.7, 0.8, 0.9, 1.0, 1.12, 1.25, 1.4, 1.6)
+FINE_RADIUS_STEPS = (0.8, 0.9, 1.0, 1.1, 1.2)
+
+
+def _course_rms(series: Series, params: RoverParams, dt: float) -> float:
+    s = _derived(params, series)
+    out, _ = channels.turn_rate(s.t, s.yaw_rate_cmd, 1, dt, float(s.yaw_rate[0]),
+                                params.yaw_delay, params.yaw_bandwidth, params.max_yaw_rate,
+                                params.max_yaw_accel, params.yaw_decel)
+    return float(np.sqrt(np.mean((out[:, 0] - s.yaw_rate) ** 2)))
+
+
+def _fit_course(series: Series, params: RoverParams, prior: RoverParams, cfg: Search,
+                gain_steps=COURSE_GAIN_STEPS, radius_steps=TURN_RADIUS_STEPS,
+                ) -> tuple[dict[str, float], dict[str, str]]:
+    """PX4's course gain and the turning radius on a grid around the prior, with the turn-rate
+    channel as fitted (the grid's best; determinacy as in :func:`_settle`: a factor of 1.4 or
+    so that leaves the RMS within ``tol`` either way does not count as seen)."""
+    k0, r0 = float(prior.course_gain), float(prior.min_turn_radius)
+    radii = [r0 * f for f in radius_steps] if r0 > 0 else [0.0]
+    grid = [(k0 * a, r) for a in gain_steps for r in radii]
+    costs = [_course_rms(series, params.with_(course_gain=k, min_turn_radius=r), cfg.check_dt)
+             for k, r in grid]
+    best = int(np.argmin(costs))
+    k, r = grid[best]
+    limit = costs[best] * (1.0 + cfg.tol) + 1e-9
+    status = {}
+    for name, values in (("course_gain", {kk for kk, rr in grid if rr == r and kk != k}),
+                         ("min_turn_radius", {rr for kk, rr in grid if kk == k and rr != r})):
+        near = [costs[i] for i, (kk, rr) in enumerate(grid)
+                if (kk if name == "course_gain" else rr) in values
+                and (rr == r if name == "course_gain" else kk == k)]
+        status[name] = FITTED if near and min(near) > limit else PRIOR
+    values = {"course_gain": k if status["course_gain"] == FITTED else k0,
+              "min_turn_radius": r if status["min_turn_radius"] == FITTED else r0}
+    return values, status
+
+
 def fit(series: Series, prior: RoverParams, search: Search = Search(),
         progress: Callable[[str], None] = lambda text: None) -> Fit:
-    """Fit the turn-rate channel, then the speed channel (module docstring)."""
+    """Fit the turn-rate channel, then the speed channel (module docstring). A velocity-vector
+    series (PX4) first takes its turn-rate command from the prior's course loop; after the
+    channels, the course gain and turning radius are fitted on a grid and the turn-rate
+    channel once more with them."""
+    if series.vector:
+        first = _fit_channels(_derived(prior, series), prior, search, progress)
+        progress("course loop")
+        course, course_status = _fit_course(series, first.params, prior, search)
+        again_prior = prior.with_(**course)
+        second = _fit_channels(_derived(again_prior, series), again_prior, search, progress)
+        # once more, finer, with the channel fitted to the course loop found (the first
+        # channel fit, made with the prior's loop, may have absorbed part of its error)
+        fine, fine_status = _fit_course(series, second.params.with_(**course),
+                                        second.params.with_(**course), search,
+                                        FINE_GAIN_STEPS, FINE_RADIUS_STEPS)
+        for name in COURSE_FIELDS:
+            if course_status[name] == FITTED:
+                course[name] = fine[name]
+        params = second.params.with_(**course)
+        speed_rms, yaw_rms = rms(params, series, search.dt)
+        return Fit(params, speed_rms, yaw_rms, {**second.status, **course_status},
+                   first.evaluations + second.evaluations)
+    return _fit_channels(series, prior, search, progress)
+
+
+def _fit_channels(series: Series, prior: RoverParams, search: Search,
+                  progress: Callable[[str], None]) -> Fit:
     rng = np.random.default_rng(search.seed)
     progress("turn-rate channel")
     yaw, yaw_status, n_yaw = _fit_channel(series, prior, prior, YAW_FIELDS, 1, search, rng)

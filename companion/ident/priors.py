@@ -50,7 +50,9 @@ FILE_NAMES = {"speed_delay": "speed.delay_s", "w_c": "speed.lag_s", "max_speed":
               "max_yaw_rate": "turn_rate.max_rad_s", "max_yaw_accel": "turn_rate.accel_max_rad_s2",
               "max_yaw_decel": "turn_rate.decel_max_rad_s2",
               "turn_speed_coupling": "coupling.turn_speed",
-              "speed_turn_coupling": "coupling.speed_turn"}
+              "speed_turn_coupling": "coupling.speed_turn",
+              "course_gain": "course.gain_1_s", "min_turn_radius": "course.min_turn_radius_m"}
+COURSE_FIELDS = ("course_gain", "min_turn_radius")     # PX4's velocity-vector interface
 
 DEFAULTS = RoverParams(
     w_c=1.0 / 0.4, w_c_yaw=1.0 / 0.15,           # lags: 0.4 s speed, 0.15 s turn rate
@@ -116,3 +118,55 @@ def from_autopilot(values: dict[str, float]) -> Priors:
     elif full is not None:
         take("max_speed", full, f"CRUISE_SPEED {cruise:g} / CRUISE_THROTTLE {throttle:g} %")
     return Priors(DEFAULTS.with_(**changes), source)
+
+
+# --------------------------------------------------------------------------- PX4
+
+# PX4 rover parameters a live identification reads on a PX4 vehicle (rover_ackermann /
+# rover_differential, PX4 main 2025-2026; RO_* are shared by every rover, RA_* are Ackermann's).
+PX4_PARAMS = ("RO_SPEED_LIM", "RO_ACCEL_LIM", "RO_DECEL_LIM", "RO_YAW_P", "RO_YAW_RATE_LIM",
+              "RO_YAW_ACCEL_LIM", "RO_YAW_DECEL_LIM", "RA_WHEEL_BASE", "RA_MAX_STR_ANG")
+
+# PX4's velocity-vector interface (RoverParams.course_gain > 0) before any parameter is known:
+# a slow course loop and a wide turning circle (the cautious side), no skid-steer coupling.
+PX4_DEFAULTS = DEFAULTS.with_(course_gain=2.0, min_turn_radius=1.0, turn_speed_coupling=0.0,
+                              speed_turn_coupling=0.0, max_accel=1.0)
+
+
+def from_px4(values: dict[str, float]) -> Priors:
+    """Priors for a PX4 rover from its parameters (any subset; others default):
+
+    * ``RO_SPEED_LIM`` -> ``max_speed``; ``RO_ACCEL_LIM`` / ``RO_DECEL_LIM`` (m/s^2, 0 = none)
+      -> ``max_accel`` / ``max_decel``;
+    * ``RO_YAW_P`` (the course loop: yaw rate per rad of heading error) -> ``course_gain``;
+      ``RO_YAW_RATE_LIM``, ``RO_YAW_ACCEL_LIM``, ``RO_YAW_DECEL_LIM`` (deg/s, deg/s^2)
+      -> the turn-rate clamp and limits;
+    * ``RA_WHEEL_BASE`` / tan(``RA_MAX_STR_ANG``) (m, rad) -> ``min_turn_radius`` (Ackermann).
+    """
+    changes: dict[str, float | None] = {}
+    source: dict[str, str] = {}
+
+    def take(name: str, value: float | None, why: str) -> None:
+        changes[name] = value
+        source[name] = why
+
+    for key, name in (("RO_SPEED_LIM", "max_speed"), ("RO_ACCEL_LIM", "max_accel"),
+                      ("RO_DECEL_LIM", "max_decel")):
+        value = _positive(values, key)
+        if value is not None:
+            take(name, value if value > 0 else math.inf, f"{key} {value:g}")
+    gain = _positive(values, "RO_YAW_P")
+    if gain is not None and gain > 0:
+        take("course_gain", gain, f"RO_YAW_P {gain:g}")
+    for key, name in (("RO_YAW_RATE_LIM", "max_yaw_rate"), ("RO_YAW_ACCEL_LIM", "max_yaw_accel"),
+                      ("RO_YAW_DECEL_LIM", "max_yaw_decel")):
+        value = _positive(values, key)
+        if value is not None:
+            take(name, math.radians(value) if value > 0 else math.inf, f"{key} {value:g} deg/s")
+    base, angle = _positive(values, "RA_WHEEL_BASE"), _positive(values, "RA_MAX_STR_ANG")
+    if base and angle and base > 0 and 0 < angle < math.pi / 2:
+        take("min_turn_radius", base / math.tan(angle),
+             f"RA_WHEEL_BASE {base:g} / tan(RA_MAX_STR_ANG {angle:g})")
+    elif values and base is None:
+        take("min_turn_radius", 0.0, "no RA_WHEEL_BASE: not an Ackermann rover")
+    return Priors(PX4_DEFAULTS.with_(**changes), source)

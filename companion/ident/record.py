@@ -60,7 +60,11 @@ def parameter_table(params: RoverParams) -> dict[str, dict[str, float | None]]:
     for name in SPEED_FIELDS + YAW_FIELDS:        # the vehicle file's order: turn_speed first
         section, key = FILE_NAMES[name].split(".")
         out.setdefault(section, {})[key] = _number(file_value(params, name))
-    return {k: out[k] for k in ("speed", "turn_rate", "coupling")}
+    table = {k: out[k] for k in ("speed", "turn_rate", "coupling")}
+    if params.velocity_vector:
+        table["course"] = {"gain_1_s": float(params.course_gain),
+                           "min_turn_radius_m": float(params.min_turn_radius)}
+    return table
 
 
 def undetermined(report: Report) -> list[str]:

@@ -57,6 +57,8 @@ class Flight:
     # Signed speed along the heading, m/s (negative when reversing): what a speed setpoint asks
     # for, so what identification compares it with (``speed`` is the unsigned ground speed).
     speed_along: np.ndarray | None = None
+    # PX4's velocity-vector setpoints: the course atan2(vy, vx) each asked for (tlog only)
+    course_cmd: np.ndarray | None = None
 
     def metrics(self) -> dict[str, Any]:
         out: dict[str, Any] = {"samples": int(len(self.t)), "records": self.records,
@@ -200,9 +202,10 @@ def read_tlog(path: str | Path, mission: Any = None) -> Flight:
                               msg.vx * math.cos(yaw) + msg.vy * math.sin(yaw)))
             elif kind == "SET_POSITION_TARGET_LOCAL_NED":
                 if msg.type_mask & (1 << 11):       # yaw rate ignored: PX4's velocity vector
-                    cmds[msg.time_boot_ms] = (math.hypot(msg.vx, msg.vy), math.nan)
+                    cmds[msg.time_boot_ms] = (math.hypot(msg.vx, msg.vy), math.nan,
+                                              math.atan2(msg.vy, msg.vx))
                 else:
-                    cmds[msg.time_boot_ms] = (msg.vx, msg.yaw_rate)
+                    cmds[msg.time_boot_ms] = (msg.vx, msg.yaw_rate, math.nan)
             elif kind == "STATUSTEXT" and src == vehicle:
                 events.append((last_t if poses else None, f"vehicle: {msg.text}"))
     finally:
@@ -217,6 +220,9 @@ def read_tlog(path: str | Path, mission: Any = None) -> Flight:
         flight.cmd_t = t[answered]
         flight.speed_cmd = np.array([cmds[int(ms[k])][0] for k in answered])
         flight.yaw_rate_cmd = np.array([cmds[int(ms[k])][1] for k in answered])
+        course = np.array([cmds[int(ms[k])][2] for k in answered])
+        if np.any(np.isfinite(course)):
+            flight.course_cmd = course
     if mission is not None:
         _attach_reference(flight, mission, cmds, ms)
     return flight

@@ -3,7 +3,8 @@
 The plant (:mod:`companion.sim.plant`) is integrated with RK4 on a fine fixed step (1 ms or finer);
 the trackers run at their own rate (1 kHz down to 10 Hz or less) on the sampled pose, and their
 command is held (zero-order hold) until the next control step, as on a real autopilot link.
-The very same tracker objects run here and in the live MAVLink loop; ``n=None`` simulates one
+The very same tracker objects run here and in the live MAVLink loop (a vehicle with PX4's
+velocity-vector interface, ``RoverParams.velocity_vector``, is sent the command's u_p); ``n=None`` simulates one
 vehicle on Python floats, ``n=k`` simulates k vehicles on arrays, each tracker owning a slice.
 
 Metrics (Section 5.3), per vehicle, integrated on the plant step:
@@ -129,6 +130,9 @@ def simulate(trackers: Tracker | Sequence[tuple[Tracker, slice]], params: RoverP
     speed_cmd = yaw_rate_cmd = zero
     last_speed = last_yaw_rate = zero      # the previous step's commands (for the variation)
     step_index = 0
+    # PX4's interface: the vehicle gets the velocity vector u_p, not (speed, turn rate)
+    vector = params.velocity_vector
+    ux = uy = zero
 
     for k in range(n_control):
         t = times[k]
@@ -143,11 +147,17 @@ def simulate(trackers: Tracker | Sequence[tuple[Tracker, slice]], params: RoverP
         if len(groups) == 1 and groups[0][1] is None:
             cmd = groups[0][0].step(t, meas, ref)
             speed_cmd, yaw_rate_cmd = cmd.speed, cmd.yaw_rate
+            if vector:
+                ux, uy = cmd.ux, cmd.uy
         else:
             speed_cmd, yaw_rate_cmd = np.empty(n), np.empty(n)
+            if vector:
+                ux, uy = np.empty(n), np.empty(n)
             for tracker, sl in groups:
                 cmd = tracker.step(t, _take(meas, sl), _take(ref, sl))
                 speed_cmd[sl], yaw_rate_cmd[sl] = cmd.speed, cmd.yaw_rate
+                if vector:
+                    ux[sl], uy[sl] = cmd.ux, cmd.uy
         if k:
             tv_speed = tv_speed + abs(speed_cmd - last_speed)
             tv_yaw = tv_yaw + abs(yaw_rate_cmd - last_yaw_rate)
@@ -166,7 +176,8 @@ def simulate(trackers: Tracker | Sequence[tuple[Tracker, slice]], params: RoverP
                 steady = steady + err2
             if trace_stride is not None and step_index % trace_stride == 0:
                 _record(trace, t + j * h, state, ref, speed_cmd, yaw_rate_cmd, meas, groups, n)
-            state = model.step(state, speed_cmd, yaw_rate_cmd, h)
+            state = (model.step_vector(state, ux, uy, h) if vector
+                     else model.step(state, speed_cmd, yaw_rate_cmd, h))
             step_index += 1
         if progress is not None and (k % report_every == 0 or k == n_control - 1):
             progress((k + 1) / n_control)

@@ -23,6 +23,20 @@ axle; ``w_c`` the paper's actuator bandwidth omega_c (k_c). The commands are cla
 vehicle's top speed and turn rate and held over each step. Works on floats (one rover, e.g. the
 bundled MAVLink plant) or arrays (batch simulation).
 
+PX4's velocity-vector interface (``course_gain`` > 0). PX4 rovers take the velocity vector
+u_p (the companion's command, LOCAL_NED) and run their own loops: the speed channel gets
+``|u_p|`` (PX4's speed setpoint; the same delay, clamp, rate limits and lag as above) and the
+turn-rate channel gets PX4's course loop, a proportional heading controller on the course
+``atan2(u_y, u_x)`` (RO_YAW_P), clamped to the turn-rate limit (RO_YAW_RATE_LIM):
+
+    u_omega = clip(course_gain * wrap(atan2(u_y, u_x) - phi), +-max_yaw_rate)
+
+An Ackermann rover cannot turn tighter than its steering allows: with ``min_turn_radius`` R
+(wheel base / tan(max steering angle)) the turn-rate command is also clamped to
+``|u_omega| <= |v| / R`` (v at the step's start; a rover at rest cannot turn at all). The
+speed and the course loop's turn rate then take their channels' delays.
+:meth:`RoverModel.step_vector` is that step.
+
 Integration. Without rate limits the actuators are linear first-order systems with a
 held input, so v, omega and phi have exact closed forms over a step, and x, y are the integrals of
 known functions of time, taken with Simpson's rule: this *is* RK4 for a right-hand side that
@@ -61,6 +75,8 @@ class RoverParams:
     yaw_delay: Num = 0.0                  # s of pure delay before the turn-rate channel
     turn_speed_coupling: Num = 0.0        # c: share of top speed lost at full turn rate
     speed_turn_coupling: Num = 0.0        # c_w: share of the turn-rate clamp lost at full speed
+    course_gain: Num = 0.0                # 1/s: PX4's course loop (> 0: velocity-vector input)
+    min_turn_radius: Num = 0.0            # m: Ackermann steering, |omega| <= |v| / R (0: none)
 
     @property
     def yaw_bandwidth(self) -> Num:
@@ -82,6 +98,11 @@ class RoverParams:
             and not any(_any_positive(v) for v in (self.speed_delay, self.yaw_delay,
                                                    self.turn_speed_coupling,
                                                    self.speed_turn_coupling))
+
+    @property
+    def velocity_vector(self) -> bool:
+        """PX4's interface: the commands are u_p (:meth:`RoverModel.step_vector`)."""
+        return _any_positive(self.course_gain)
 
     @property
     def has_delay(self) -> bool:
@@ -133,6 +154,7 @@ class RoverModel:
         self._paper = params.is_paper
         self._coupled = _any_positive(params.turn_speed_coupling)
         self._turn_coupled = _any_positive(params.speed_turn_coupling)
+        self._curvature = _any_positive(params.min_turn_radius)
         self.delay = CommandDelay(params.speed_delay, params.yaw_delay, n) if params.has_delay else None
         self._trig_yaw = None
         self._trig_cs = None
@@ -181,7 +203,23 @@ class RoverModel:
         if self._turn_coupled:
             share_w = m.minimum(abs(v) / p.max_speed, 1.0)
             top_w = top_w * (1.0 - p.speed_turn_coupling * share_w)
+        if self._curvature:
+            # an Ackermann rover turns at most at |v| / R_min (R_min 0 for some: no limit)
+            r = p.min_turn_radius
+            if self.n is None:
+                top_w = min(top_w, abs(v) / r) if r > 0 else top_w
+            else:
+                top_w = np.minimum(top_w, abs(v) / np.where(np.asarray(r) > 0, r, 1e-12))
         return m.clip(speed, -top, top), m.clip(yaw_rate, -top_w, top_w)
+
+    def step_vector(self, s: RoverState, ux: Num, uy: Num, dt: float) -> RoverState:
+        """Advance ``dt`` seconds with the velocity vector u_p held (PX4's interface, see the
+        module docstring): speed |u_p|, turn rate from PX4's course loop on atan2(u_p), then
+        each through its channel's delay, as :meth:`step` (what identification fits: the
+        course loop's output on the heading of the moment, delayed)."""
+        m = self._m
+        course_err = m.wrap(m.atan2(uy, ux) - s.yaw)
+        return self.step(s, m.hypot(ux, uy), self.params.course_gain * course_err, dt)
 
     def step(self, s: RoverState, speed_cmd: Num, yaw_rate_cmd: Num, dt: float) -> RoverState:
         """Advance ``dt`` seconds with the commands (v_ref, omega_ref) held (after the delay)."""

@@ -105,6 +105,7 @@ class RobustConfig:
     chatter_weight: float = 0.05       # objective per (m/s + rad/s) per s of setpoint variation
     plant_dt: float = 0.02             # s: one exact step per ArduPilot tick (within 3 % of 1 ms)
     seed: int = 1
+    min_progress: float = 0.0          # the law's progress floor for every candidate (PX4)
 
     def reference_list(self) -> tuple[tuple[str, Trajectory], ...]:
         if self.references:
@@ -136,7 +137,11 @@ def ensemble(vehicle: RoverParams, count: int, spread: Spread, sample_period: fl
             dc = spread.coupling * rng.uniform(-1.0, 1.0)
             dcw = spread.coupling * rng_turn.uniform(-1.0, 1.0)
         delay = extra * sample_period
+        # PX4's course loop and an Ackermann rover's turning radius vary as a lag and a limit do
+        course_gain = vehicle.course_gain / lag_k
+        turn_radius = vehicle.min_turn_radius / lim_k
         out.append(vehicle.with_(
+            course_gain=course_gain, min_turn_radius=turn_radius,
             w_c=vehicle.w_c / lag_k, w_c_yaw=vehicle.yaw_bandwidth / lag_k,
             max_accel=vehicle.max_accel * lim_k, max_decel=vehicle.decel * lim_k,
             max_yaw_accel=vehicle.max_yaw_accel * lim_k, max_yaw_decel=vehicle.yaw_decel * lim_k,
@@ -152,7 +157,8 @@ def _stack_params(vehicles: Sequence[RoverParams], repeat: int, tile: int) -> Ro
     sequence ``tile`` times (vehicle order: candidate, then vehicle, then reference)."""
     values = {k: [float(getattr(v, k)) for v in vehicles] for k in
               ("d_cen", "w_c", "max_speed", "max_yaw_rate", "max_accel", "max_yaw_accel",
-               "speed_delay", "yaw_delay", "turn_speed_coupling", "speed_turn_coupling")}
+               "speed_delay", "yaw_delay", "turn_speed_coupling", "speed_turn_coupling",
+               "course_gain", "min_turn_radius")}
     values["w_c_yaw"] = [float(v.yaw_bandwidth) for v in vehicles]
     values["max_decel"] = [float(v.decel) for v in vehicles]
     values["max_yaw_decel"] = [float(v.yaw_decel) for v in vehicles]
@@ -210,7 +216,8 @@ def _extension_values(cands: Candidates, scales: tuple[float, float]) -> dict[st
 
 
 def _tracker(cands: Candidates, repeat: int, limits: Limits,
-             scales: tuple[float, float] = DEFAULT_BRAKE_SCALE) -> PZCTracker:
+             scales: tuple[float, float] = DEFAULT_BRAKE_SCALE,
+             min_progress: float = 0.0) -> PZCTracker:
     p, f = cands.params, cands.flags
     rep = lambda a: np.repeat(a, repeat)  # noqa: E731
     separate = f["separate_yaw"] > 0.5
@@ -230,7 +237,8 @@ def _tracker(cands: Candidates, repeat: int, limits: Limits,
                  else None,
                  brake_accel=rep(ext["brake_accel"]) if np.any(ext["brake_accel"] > 0) else 0.0,
                  brake_yaw_accel=(rep(ext["brake_yaw_accel"])
-                                  if np.any(ext["brake_yaw_accel"] > 0) else 0.0)),
+                                  if np.any(ext["brake_yaw_accel"] > 0) else 0.0),
+                 min_progress=min_progress),
         limits, n=len(cands) * repeat)
 
 
@@ -256,7 +264,8 @@ def evaluate(cands: Candidates, cfg: RobustConfig, vehicles: Sequence[RoverParam
                     seed=cfg.seed, yaw_rate_limit=min(cfg.limits.max_yaw_rate,
                                                       float(np.min(params.max_yaw_rate))))
     with np.errstate(all="ignore"):
-        result = simulate(_tracker(cands, n_v * n_r, cfg.limits, brake_scales(cfg.vehicle)), params,
+        result = simulate(_tracker(cands, n_v * n_r, cfg.limits, brake_scales(cfg.vehicle),
+                                   cfg.min_progress), params,
                           _reference(refs, n_c, n_v), n, sim, progress)
     shape = (n_c, n_v, n_r)
     rms = np.asarray(result.steady_rms).reshape(shape)
@@ -270,6 +279,9 @@ def evaluate(cands: Candidates, cfg: RobustConfig, vehicles: Sequence[RoverParam
                  + cfg.chatter_weight * np.where(finite, chatter, np.inf).mean(axis=(1, 2)))
     rejected = np.full(n_c, "", dtype=object)
     cycling = (at_limit > LIMIT_CYCLE_SHARE).any(axis=(1, 2))
+    if cfg.vehicle.velocity_vector:
+        # PX4 is sent u_p and ignores the yaw-rate setpoint: its limit says nothing there
+        cycling = np.zeros(n_c, dtype=bool)
     diverged = ~finite.all(axis=(1, 2))
     rejected[cycling] = "limit cycle"
     rejected[diverged] = "diverged"
@@ -384,6 +396,7 @@ def tune(cfg: RobustConfig, progress: Callable[[float], None] | None = None) -> 
     ev = evaluate(winner, cfg, vehicles,
                   None if progress is None else (lambda f: progress((cfg.rounds + f) / total)))
     fg, pg = candidate_gains(winner, 0, brake_scales(cfg.vehicle))
+    pg = replace(pg, min_progress=cfg.min_progress)
     labels = [label for label, _ in cfg.reference_list()]
     if not math.isfinite(float(ev.objective[0])):
         raise RuntimeError("no gain set held on every neighbour: widen the search "

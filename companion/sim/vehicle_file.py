@@ -25,11 +25,19 @@ A small TOML file, units in the key names, a header saying how it was made::
     turn_speed = 0.3              # share of top speed lost at full turn rate (skid-steer mixing)
     speed_turn = 0.15             # share of the turn-rate clamp lost at full speed
 
+    [course]                      # optional: PX4's velocity-vector interface (Ackermann)
+    gain_1_s = 5.0                # PX4's course loop: turn rate per rad of course error
+    min_turn_radius_m = 0.56      # wheel base / tan(max steering angle)
+
     [fit]                         # optional: how well the model reproduced the log
     speed_rms_m_s = 0.05
     yaw_rate_rms_rad_s = 0.04
 
-Every key but ``schema`` has a default (the paper's plant: no delay, 0.05 s lag, no limits), so
+``[course]`` (written only when set) makes it a PX4 vehicle: the companion's velocity vector u_p
+is the input, |u_p| through the speed channel and the course atan2(u_p) through PX4's
+proportional course loop into the turn-rate channel, which an Ackermann rover's minimum turning
+radius also clamps (:class:`companion.sim.plant.RoverParams`, ``course_gain`` and
+``min_turn_radius``). Every key but ``schema`` has a default (the paper's plant: no delay, 0.05 s lag, no limits), so
 the paper's rover is the file with nothing in it. ``[fit]`` and ``[source]`` are free-form
 records (numbers and strings) kept for people. :class:`companion.sim.plant.RoverParams` is what
 the simulation uses; :func:`to_params` / :func:`from_params` convert.
@@ -61,7 +69,10 @@ _CHANNELS: dict[str, dict[str, tuple[str, str]]] = {
                   "decel_max_rad_s2": ("max_yaw_decel", "limit")},
     "coupling": {"turn_speed": ("turn_speed_coupling", "share"),
                  "speed_turn": ("speed_turn_coupling", "share")},
+    "course": {"gain_1_s": ("course_gain", "nonneg"),
+               "min_turn_radius_m": ("min_turn_radius", "nonneg")},
 }
+_OPTIONAL = ("course",)       # written only when one of its values is set
 _RECORDS = ("fit", "source")
 
 
@@ -82,10 +93,10 @@ def _value(where: str, key: str, value: Any, kind: str) -> float:
         raise UserError(f"{where}.{key}: must be a finite number, not {value!r}")
     value = float(value)
     bad = {"lag": value < 0, "limit": value <= 0, "delay": value < 0 or value > 5.0,
-           "share": not 0.0 <= value <= 1.0, "length": False}[kind]
+           "share": not 0.0 <= value <= 1.0, "length": False, "nonneg": value < 0}[kind]
     if bad:
         want = {"lag": ">= 0", "limit": "> 0 (or \"inf\")", "delay": "between 0 and 5 s",
-                "share": "between 0 and 1", "length": ""}[kind]
+                "share": "between 0 and 1", "length": "", "nonneg": ">= 0"}[kind]
         raise UserError(f"{where}.{key}: must be {want}, not {value!r}")
     return value
 
@@ -146,8 +157,11 @@ def dumps(vehicle: VehicleFile) -> str:
               "w_c_yaw": 1.0 / p.yaw_bandwidth, "max_yaw_rate": p.max_yaw_rate,
               "max_yaw_accel": p.max_yaw_accel, "max_yaw_decel": p.yaw_decel,
               "turn_speed_coupling": p.turn_speed_coupling,
-              "speed_turn_coupling": p.speed_turn_coupling}
+              "speed_turn_coupling": p.speed_turn_coupling, "course_gain": p.course_gain,
+              "min_turn_radius": p.min_turn_radius}
     for section, keys in _CHANNELS.items():
+        if section in _OPTIONAL and not any(float(values[name]) for name, _ in keys.values()):
+            continue
         lines += ["", f"[{section}]"]
         lines += [f"{key} = {_fmt(values[name])}" for key, (name, _) in keys.items()]
     for section in _RECORDS:

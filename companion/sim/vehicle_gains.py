@@ -24,6 +24,7 @@ from .gains import TunedGains
 from .robust import RobustConfig, RobustResult, tune
 
 DEFAULT_LIMIT = 6.0     # m/s and rad/s: the companion's ceiling when the vehicle has none
+PX4_MIN_PROGRESS = 0.3  # share of the reference speed u_p keeps along it on a PX4 vehicle
 
 
 def digest(vehicle_path: str | Path) -> str:
@@ -49,6 +50,10 @@ def config_for(vehicle_path: str | Path, rate: float,
     """The robust tuner's configuration for a vehicle file at a loop rate (ArduPilot's 50 Hz
     scheduler ticks below 50 Hz), on the references given or the paper's ellipses."""
     vehicle = vehicle_file.load(vehicle_path).params
+    if vehicle.velocity_vector:
+        # PX4 (velocity vector, its own course loop): the progress floor keeps an Ackermann
+        # rover from turning round when it gets ahead (core.pzc, min_progress)
+        search.setdefault("min_progress", PX4_MIN_PROGRESS)
     return RobustConfig(vehicle=vehicle, rate_hz=rate, tick=0.02 if rate < 50 else None,
                         references=tuple(references), duration=duration,
                         limits=vehicle_limits(vehicle), **search)
