@@ -254,6 +254,7 @@ def fly_and_fit(args):
     from ..ident.excite import Excitation, Plan, VectorExcitation
     from ..ident.priors import AUTOPILOT_PARAMS, PX4_PARAMS, from_autopilot, from_px4
     from ..live.link import ARDUPILOT, PX4
+    from ..live.params import read_values
     from ..live.session import StopSwitch, fly
     from .run import install_signals, settings_from_args
     from .zenoh_args import bus_options
@@ -273,7 +274,7 @@ def fly_and_fit(args):
         if link.vehicle.autopilot != ARDUPILOT:
             raise UserError(f"identify drives ArduPilot's speed / turn-rate setpoints or PX4's "
                             f"velocity vectors; this vehicle runs {link.vehicle.autopilot}")
-        read.update(link.read_params(AUTOPILOT_PARAMS))
+        read.update(read_values(link, AUTOPILOT_PARAMS))
         log("autopilot parameters: " + (", ".join(f"{k} {v:g}" for k, v in sorted(read.items()))
                                         or "none answered; default priors"))
         prior = from_autopilot(read).params
@@ -289,7 +290,7 @@ def fly_and_fit(args):
     def px4_tracker(link, limits):
         """PX4: its rover parameters (the priors, a velocity-vector model) and the velocity-
         vector manoeuvre (no turning on the spot: an Ackermann rover cannot)."""
-        read.update(link.read_params(PX4_PARAMS))
+        read.update(read_values(link, PX4_PARAMS))
         log("PX4 parameters: " + (", ".join(f"{k} {v:g}" for k, v in sorted(read.items()))
                                   or "none answered; default priors"))
         prior = from_px4(read).params

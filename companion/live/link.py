@@ -25,7 +25,7 @@ from __future__ import annotations
 import os
 import time
 from dataclasses import dataclass
-from typing import Any, Callable, Sequence
+from typing import Any, Callable
 
 os.environ["MAVLINK20"] = "1"   # before pymavlink.mavutil is imported: MAVLink 2 frames
 # Every connection here says dialect="ardupilotmega"; without this mavutil would first load
@@ -239,17 +239,6 @@ class Link:
                     self.last_ack[command] = msg.result
                     return msg.result
         return None
-
-    def read_params(self, names: Sequence[str], timeout: float = 2.0) -> dict[str, float]:
-        """The vehicle's values of the parameters ``names`` (PARAM_REQUEST_READ by name, asked
-        again each second; :class:`companion.live.params.ParamClient`): ``{name: value}`` for
-        those answered within ``timeout`` seconds; a parameter the firmware does not have is
-        simply missing.
-
-        Other messages read meanwhile are dropped: only for set-up, before the control loop.
-        """
-        from .params import ParamClient
-        return {name: p.value for name, p in ParamClient(self).read(names, timeout).items()}
 
     def set_message_rate(self, msg_id: int, hz: float) -> int | None:
         """MAV_CMD_SET_MESSAGE_INTERVAL: the ACK's result, or None without an answer."""

@@ -174,3 +174,11 @@ class ParamClient:
                 if p is not None and p.name == name:
                     return p
         return None
+
+
+def read_values(link: Link, names: Iterable[str], timeout: float = 2.0) -> dict[str, float]:
+    """The vehicle's values of the parameters ``names`` (PARAM_REQUEST_READ by name, asked
+    again each second): ``{name: value}`` for those answered within ``timeout`` seconds; a
+    parameter the firmware does not have is simply missing. Other messages read meanwhile are
+    dropped: only for set-up, before the control loop."""
+    return {name: p.value for name, p in ParamClient(link).read(list(names), timeout).items()}
