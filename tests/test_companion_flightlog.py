@@ -95,7 +95,9 @@ def test_plot_draws_the_figures_and_agrees_with_the_live_metrics(demo_logs, tmp_
     ("missing.tlog", None, "no such file"),
     ("notes.txt", b"hello", "expected a .csv or .tlog"),
     ("other.csv", b"a,b,c\n1,2,3\n", "not a companion flight-log CSV"),
-    ("garbage.tlog", os.urandom(4000), "no pose samples"),
+    # random bytes: pymavlink reads through them (no pose samples) or trips while opening the
+    # file (about one time in eight): either way one line naming the file
+    ("garbage.tlog", os.urandom(4000), ("no pose samples", "no MAVLink log in it")),
 ])
 def test_plot_bad_logs_are_one_line_errors(tmp_path, name, content, expect):
     path = tmp_path / name
@@ -104,7 +106,8 @@ def test_plot_bad_logs_are_one_line_errors(tmp_path, name, content, expect):
     p = companion("plot", str(path), "--out", str(tmp_path / "out"))
     assert p.returncode == 2, p.stdout + p.stderr
     lines = p.stderr.strip().splitlines()
-    assert len(lines) == 1 and expect in lines[0] and str(path) in lines[0]
+    expect = (expect,) if isinstance(expect, str) else expect
+    assert len(lines) == 1 and any(e in lines[0] for e in expect) and str(path) in lines[0], lines
     assert "Traceback" not in p.stderr
 
 

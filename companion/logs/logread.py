@@ -163,7 +163,10 @@ def read_tlog(path: str | Path, mission: Any = None) -> Flight:
     try:
         conn = mavutil.mavlink_connection(str(path), dialect="ardupilotmega")
     except Exception as exc:  # noqa: BLE001 - pymavlink raises anything on a bad file
-        raise UserError(f"LOG {path}: cannot open as a tlog: {exc}") from None
+        # (random bytes can trip pymavlink while it sniffs the file: its message then says
+        # nothing to a user, e.g. "'NoneType' object has no attribute '_instance_field'")
+        raise UserError(f"LOG {path}: cannot open as a tlog: no MAVLink log in it "
+                        f"({type(exc).__name__}: {exc})") from None
     vehicle: tuple[int, int] | None = None
     att: dict[tuple[int, int], tuple[float, float]] = {}
     poses: list[tuple[float, float, float, float, float, float, float]] = []
