@@ -18,8 +18,6 @@ import csv
 import math
 import os
 import signal
-import subprocess
-import sys
 import time
 from pathlib import Path
 
@@ -29,6 +27,7 @@ import ardupilot_harness as harness
 from ardupilot_harness import (GUIDED, HOLD, MANUAL, SKIP_REASON, CompanionProcess,
                                GroundStation, circle_mission, from_vehicle, ground_speed)
 from safety_harness import read_tlog
+from sitl_common import process_gone, sent_by_companion, started_by_a_dying_process
 
 SPEEDUP = 5
 BOOT_WALL = 120.0 / SPEEDUP + 20.0      # wall s: boot to armed (~40-50 vehicle s) with margin
@@ -58,11 +57,6 @@ def _csv_rows(r: dict) -> list[dict]:
 def _events(r: dict) -> list[dict]:
     with open(r["csv"], newline="") as f:
         return [row for row in csv.DictReader(f) if row["event"]]
-
-
-def _companion_frames(frames, kinds=("SET_POSITION_TARGET_LOCAL_NED", "COMMAND_LONG")):
-    return [(i, m) for i, (_, m) in enumerate(frames)
-            if m.get_srcComponent() in COMPANION and m.get_type() in kinds]
 
 
 @pytest.mark.sitl
@@ -180,7 +174,7 @@ def test_pilot_switching_to_manual_ends_the_run_with_exit_3_and_no_more_setpoint
              if m.get_type() == "HEARTBEAT" and from_vehicle(m)]
     first_guided = next(i for i, mode in beats if mode == GUIDED)
     seen = next(i for i, mode in beats if i > first_guided and mode == MANUAL)
-    sent = _companion_frames(frames)
+    sent = sent_by_companion(frames)
     after = [m.get_type() for i, m in sent if i > seen]
     assert after == [], after                 # not one setpoint, not one mode request after it
     last_sp = [m for i, m in sent if m.get_type() == "SET_POSITION_TARGET_LOCAL_NED"][-1]
@@ -251,16 +245,7 @@ def test_a_misconfigured_sitl_fails_in_one_line(monkeypatch, tmp_path):
 
 
 def _gone(pid: int, timeout: float = 5.0) -> bool:
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        try:
-            state = open(f"/proc/{pid}/stat").read().rsplit(")", 1)[1].split()[0]
-        except FileNotFoundError:
-            return True
-        if state == "Z":        # exited, not yet reaped by its new parent
-            return True
-        time.sleep(0.05)
-    return False
+    return process_gone(pid, timeout)
 
 
 @pytest.mark.sitl
@@ -287,13 +272,8 @@ def test_instances_side_by_side_and_stopped_on_every_way_out(tmp_path):
     harness._stop_all()
     assert _gone(pid) and not c.alive() and c.lock is None
     # the test process dies without running any of that: SITL gets SIGTERM from the kernel
-    code = ("import os, sys; from pathlib import Path; sys.path.insert(0, 'tests'); "
-            "import ardupilot_harness as h; s = h.ArduPilotSITL(Path(sys.argv[1])).start(); "
-            "print(s.proc.pid, flush=True); os._exit(1)")
-    out = subprocess.run([sys.executable, "-c", code, str(tmp_path / "orphan")],
-                         capture_output=True, text=True, timeout=30, cwd=harness.ROOT,
-                         env={**os.environ})
-    orphan = int(out.stdout.split()[0])
+    orphan = started_by_a_dying_process("ardupilot_harness", "ArduPilotSITL",
+                                        tmp_path / "orphan", 30)
     try:
         assert _gone(orphan), f"ardurover {orphan} outlived the process that started it"
     finally:

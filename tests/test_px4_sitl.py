@@ -18,21 +18,20 @@ import csv
 import math
 import os
 import signal
-import subprocess
-import sys
 import time
 from pathlib import Path
 
 import pytest
 
 import px4_harness as harness
-from companion_harness import ROOT, ellipse_mission
-from px4_harness import HOLD, OFFBOARD, SKIP_REASON, CompanionProcess, GroundStation
+from companion_harness import ellipse_mission
+from px4_harness import (HOLD, OFFBOARD, SKIP_REASON, CompanionProcess, GroundStation,
+                         ground_speed)
 from safety_harness import read_tlog
+from sitl_common import process_gone, sent_by_companion, started_by_a_dying_process
 
 BOOT_WALL = 60.0                         # s: PX4 up to armed in OFFBOARD, with margin
 LOCAL_POSITION_NED = 32
-COMPANION = 191                          # MAV_COMP_ID_ONBOARD_COMPUTER: the companion's frames
 MASK_VELOCITY = 3559                     # use vx, vy only: PX4's velocity vector
 LOCAL_NED = 1
 
@@ -40,10 +39,6 @@ LOCAL_NED = 1
 def _companion(sitl, tmp_path: Path, mission: Path, *extra: str) -> CompanionProcess:
     return CompanionProcess(sitl, "--mission", str(mission), "--arm", "--no-zenoh", "--json",
                             "--log-dir", str(tmp_path / "logs"), *extra)
-
-
-def _speed(m) -> float:
-    return math.hypot(m.vx, m.vy)
 
 
 def _csv_rows(r: dict) -> list[dict]:
@@ -56,14 +51,9 @@ def _well_under_way(gs: GroundStation, seconds: float = 3.0) -> None:
     0.5 m/s, and ``seconds`` more of vehicle time."""
     gs.wait_for("HEARTBEAT", lambda m: m.custom_mode == OFFBOARD and m.base_mode & 128,
                 BOOT_WALL)
-    moving = gs.wait_for("LOCAL_POSITION_NED", lambda m: _speed(m) > 0.5, 20.0)
+    moving = gs.wait_for("LOCAL_POSITION_NED", lambda m: ground_speed(m) > 0.5, 20.0)
     gs.wait_for("LOCAL_POSITION_NED",
                 lambda m: m.time_boot_ms >= moving.time_boot_ms + 1000 * seconds, 20.0)
-
-
-def _sent_by_companion(frames, kinds=("SET_POSITION_TARGET_LOCAL_NED", "COMMAND_LONG")):
-    return [(i, m) for i, (_, m) in enumerate(frames)
-            if m.get_srcComponent() == COMPANION and m.get_type() in kinds]
 
 
 @pytest.mark.px4
@@ -97,7 +87,7 @@ def test_companion_engages_offboard_arms_tracks_the_ellipse_and_leaves_px4_in_ho
     # what PX4 was sent: velocity vectors in LOCAL_NED, finite and within the speed limit
     frames, bad = read_tlog(Path(r["tlog"]))
     assert bad <= 1
-    sps = [m for _, m in _sent_by_companion(frames, ("SET_POSITION_TARGET_LOCAL_NED",))]
+    sps = [m for _, m in sent_by_companion(frames, ("SET_POSITION_TARGET_LOCAL_NED",))]
     assert sps and all(m.coordinate_frame == LOCAL_NED and m.type_mask == MASK_VELOCITY
                        for m in sps)
     assert all(math.isfinite(m.vx) and math.isfinite(m.vy) for m in sps)
@@ -128,9 +118,9 @@ def test_sigterm_mid_mission_stops_the_rover_in_hold_and_exits_0(px4, tmp_path):
     assert code == 0, comp.stderr
     assert r["reason"] == "SIGTERM" and r["hold_confirmed"], r
     assert hold.custom_mode == HOLD and hold.base_mode & 128, "Hold, still armed"
-    assert _speed(first) > 0.3, "the rover was not moving when the companion was stopped"
-    slow = [m for m in samples if _speed(m) < 0.2]
-    assert slow, [round(_speed(m), 2) for m in samples]
+    assert ground_speed(first) > 0.3, "the rover was not moving when the companion was stopped"
+    slow = [m for m in samples if ground_speed(m) < 0.2]
+    assert slow, [round(ground_speed(m), 2) for m in samples]
     stopped_after = (slow[0].time_boot_ms - t0) / 1e3
     # PX4 brakes at RO_DECEL_LIM 3 m/s^2 (about 1 s from 3 m/s) after the zero vectors and Hold;
     # seen 3.1-3.2 s on an idle machine, 5.4 s with the whole suite and others on two cores
@@ -138,11 +128,11 @@ def test_sigterm_mid_mission_stops_the_rover_in_hold_and_exits_0(px4, tmp_path):
     # what the companion sent last: zero vectors (then PX4's Hold has the rover; the SIH rover
     # creeps in Hold by itself, up to about 0.5 m/s seen: PX4's, not the companion's doing)
     frames, _ = read_tlog(Path(r["tlog"]))
-    sps = [m for _, m in _sent_by_companion(frames, ("SET_POSITION_TARGET_LOCAL_NED",))]
+    sps = [m for _, m in sent_by_companion(frames, ("SET_POSITION_TARGET_LOCAL_NED",))]
     last_moving = max(i for i, m in enumerate(sps) if m.vx or m.vy)
     assert last_moving < len(sps) - 1 and all(m.vx == 0 and m.vy == 0
                                                for m in sps[last_moving + 1:])
-    print(f"\nSIGTERM at {_speed(first):.2f} m/s: below 0.2 m/s {stopped_after:.2f} s later, "
+    print(f"\nSIGTERM at {ground_speed(first):.2f} m/s: below 0.2 m/s {stopped_after:.2f} s later, "
           f"Hold, companion exit {code} after {r['wall_s']:.1f} s")
 
 
@@ -172,7 +162,7 @@ def test_a_mode_switch_by_the_ground_station_ends_the_run_with_exit_3_and_no_mor
              and (m.get_srcSystem(), m.get_srcComponent()) == vehicle]
     first_offboard = next(i for i, mode in beats if mode == OFFBOARD)
     seen = next(i for i, mode in beats if i > first_offboard and mode == HOLD)
-    sent = _sent_by_companion(frames)
+    sent = sent_by_companion(frames)
     after = [m.get_type() for i, m in sent if i > seen]
     assert after == [], after               # not one setpoint, not one mode request after it
     last_sp = [m for i, m in sent if m.get_type() == "SET_POSITION_TARGET_LOCAL_NED"][-1]
@@ -250,16 +240,7 @@ def test_the_startup_files_send_the_gcs_link_to_the_tests_port_not_14550(tmp_pat
 
 
 def _gone(pid: int, timeout: float = 8.0) -> bool:
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        try:
-            state = open(f"/proc/{pid}/stat").read().rsplit(")", 1)[1].split()[0]
-        except FileNotFoundError:
-            return True
-        if state == "Z":
-            return True
-        time.sleep(0.05)
-    return False
+    return process_gone(pid, timeout)
 
 
 @pytest.mark.px4
@@ -288,13 +269,7 @@ def test_instances_side_by_side_and_stopped_on_every_way_out(tmp_path):
     pid = c.proc.pid
     harness._stop_all()
     assert _gone(pid) and not c.alive() and c.lock is None
-    code = ("import os, sys; from pathlib import Path; sys.path.insert(0, 'tests'); "
-            "import px4_harness as h; s = h.PX4SITL(Path(sys.argv[1])).start(); "
-            "print(s.proc.pid, flush=True); os._exit(1)")
-    out = subprocess.run([sys.executable, "-c", code, str(tmp_path / "orphan")],
-                         capture_output=True, text=True, timeout=60, cwd=ROOT,
-                         env={**os.environ})
-    orphan = int(out.stdout.split()[0])
+    orphan = started_by_a_dying_process("px4_harness", "PX4SITL", tmp_path / "orphan", 60)
     try:
         assert _gone(orphan), f"px4 {orphan} outlived the process that started it"
     finally:
