@@ -38,11 +38,11 @@ def register(subparsers) -> None:
     p.add_argument("--out", required=True, metavar="DIR",
                    help="folder for vehicle.toml and gains.toml (created if missing)")
     t = p.add_argument_group("tuning")
-    from ..sim.robust import RobustConfig
-    t.add_argument("--population", type=int, default=RobustConfig.population, metavar="N",
-                   help=f"gain sets simulated per round (default {RobustConfig.population})")
-    t.add_argument("--rounds", type=int, default=RobustConfig.rounds, metavar="N",
-                   help=f"search rounds (default {RobustConfig.rounds})")
+    # (defaults resolved when calibrate runs: the tuner's module is not imported to build the CLI)
+    t.add_argument("--population", type=int, metavar="N",
+                   help="gain sets simulated per round (default: the robust tuner's)")
+    t.add_argument("--rounds", type=int, metavar="N",
+                   help="search rounds (default: the robust tuner's)")
     t.add_argument("--mission", metavar="FILE", default="missions/paper_ellipse_004.toml",
                    help="the mission named in the printed run command")
     t.add_argument("--no-refine", dest="refine", action="store_false",
@@ -130,6 +130,9 @@ def run(args) -> int:
     from .identify import _print, fly_and_fit
     from .run import logger
 
+    from ..sim.robust import RobustConfig
+    args.population = RobustConfig.population if args.population is None else args.population
+    args.rounds = RobustConfig.rounds if args.rounds is None else args.rounds
     if args.population < 8 or args.rounds < 1:
         raise UserError("--population must be at least 8 and --rounds at least 1")
     folder = _folder(args.out)

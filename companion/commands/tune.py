@@ -54,9 +54,10 @@ def register(subparsers) -> None:
     p.add_argument("--max-accel", type=float, default=math.inf, metavar="M_S2",
                    help="the rover's acceleration limit (default none)")
     p.add_argument("--population", type=int, metavar="N",
-                   help="gain sets simulated per round (default 128; with --vehicle 256)")
+                   help="gain sets simulated per round (default 128; with --vehicle the "
+                        "robust tuner's)")
     p.add_argument("--rounds", type=int, metavar="N",
-                   help="search rounds (default 4; with --vehicle 6)")
+                   help="search rounds (default 4; with --vehicle the robust tuner's)")
     p.add_argument("--seed", type=int, default=1, help="random seed (default 1)")
     p.add_argument("--out", metavar="FILE", help="write the gains to this TOML file")
     p.add_argument("--json", action="store_true", help="print one JSON object")
