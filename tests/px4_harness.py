@@ -44,6 +44,7 @@ import pytest
 import sitl_common  # first: it sets MAVLINK20 before pymavlink is imported
 from pymavlink import mavutil  # noqa: E402
 from companion_harness import Companion
+from sitl_plant.testing import free_udp_port
 from sitl_common import (FORBIDDEN_PORT, InstanceLock,  # noqa: F401  (the tests use them)
                          SITLProcess, claim_instance, ground_speed, port_free, started_under)
 from sitl_common import LIVE as _LIVE, stop_all as _stop_all  # noqa: F401  (the tests use them)
@@ -117,12 +118,6 @@ def _claim_instance(skip: set[int]) -> InstanceLock:
                           "ports or locks busy")
 
 
-def _free_udp_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
 def startup_files(etc: Path, dest: Path, gcs_port: int) -> Path:
     """A copy of PX4's ``etc`` whose GCS link sends to ``gcs_port`` instead of 14550."""
     shutil.copytree(etc, dest, symlinks=True)
@@ -180,7 +175,7 @@ class PX4SITL(SITLProcess):
     def _launch(self) -> None:
         shutil.rmtree(self.workdir, ignore_errors=True)      # parameters, dataman: fresh
         (self.workdir / "rootfs").mkdir(parents=True)
-        self.gcs_port = _free_udp_port()
+        self.gcs_port = free_udp_port()
         startup_files(self.etc, self.workdir / "etc-copy", self.gcs_port)
         self._spawn(self.argv(), self.workdir / "rootfs", self.env())
 
