@@ -13,7 +13,7 @@ import sys
 
 from . import __version__
 from .commands import config_file
-from .errors import UserError
+from .errors import ExitCode, UserError
 
 # Sub-command modules, in the order ``companion --help`` lists them.
 COMMANDS = [
@@ -63,9 +63,9 @@ def main(argv: list[str] | None = None) -> int:
         return err.exit_code
     except KeyboardInterrupt:
         print(f"companion {args.command}: interrupted", file=sys.stderr)
-        return 130
+        return ExitCode.INTERRUPTED
     except BrokenPipeError:
-        return 0
+        return ExitCode.OK
 
 
 if __name__ == "__main__":

@@ -13,7 +13,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from ..errors import UserError
+from ..errors import ExitCode, UserError
 
 
 def register(subparsers) -> None:
@@ -102,7 +102,8 @@ def run_check(args) -> int:
             continue
         print(f"{name}: ok: {m.summary()}" + (f"; within {args.vehicle}'s reach"
                                                if vehicle is not None else ""), flush=True)
-    return 2 if failed else (3 if out_of_reach else 0)
+    return (ExitCode.USER_ERROR if failed else
+            ExitCode.OUT_OF_REACH if out_of_reach else ExitCode.OK)
 
 
 def run_show(args) -> int:

@@ -19,7 +19,7 @@ import argparse
 import json
 from pathlib import Path
 
-from ..errors import UserError
+from ..errors import ExitCode, UserError
 from ..security.roles import ROLES
 
 
@@ -104,7 +104,7 @@ def show(spec: str, as_json: bool) -> int:
                  f"names     {', '.join(me.sans) or '-'}", f"sha256    {me.fingerprint}",
                  "status    " + ("ok" if not problems else "; ".join(problems))]
         print("\n".join(lines))
-    return 0 if not problems else 1
+    return ExitCode.OK if not problems else ExitCode.CHECK_FAILED
 
 
 def _by_ca(cert_path: Path, ca_path: Path) -> bool:

@@ -40,7 +40,7 @@ from pathlib import Path
 from typing import Any, Callable, Sequence
 
 from . import events as ev
-from ..errors import UserError
+from ..errors import ExitCode, UserError
 from .events import ControlChannel, ControlRequest, LoopRecord, Sink, StatusEvent
 from ..core.limits import Limits
 from .link import HOLD_MODE, PX4, TRACK_MODE, Link
@@ -90,7 +90,7 @@ class RunnerConfig:
 @dataclass
 class Outcome:
     reason: str
-    exit_code: int
+    exit_code: ExitCode
     hold_confirmed: bool
     failsafes: int
 
@@ -168,7 +168,7 @@ class Runner:
         except BaseException as exc:
             # A bug must not leave the rover driving on its last setpoint: stop it, then fail.
             if self.state is not State.DONE:
-                self._finish(f"internal error: {type(exc).__name__}: {exc}", 3)
+                self._finish(f"internal error: {type(exc).__name__}: {exc}", ExitCode.FAULT)
                 self._wait_for_hold()
             raise
         finally:
@@ -185,7 +185,7 @@ class Runner:
         link = self.link
         while self.state is not State.DONE:
             if self._stop_reason is not None:
-                self._finish(self._stop_reason, 0)
+                self._finish(self._stop_reason, ExitCode.OK)
                 break
             if self.control is not None:
                 for request in self.control.poll():
@@ -234,7 +234,7 @@ class Runner:
                 problem = self._start_problem(self.mission, s.x, s.y, s.yaw)
                 if problem is not None:
                     # Nothing has moved: a user's problem (exit 2), the vehicle left as it is.
-                    self._finish(problem, 2, hold=False, stop=False)
+                    self._finish(problem, ExitCode.USER_ERROR, hold=False, stop=False)
                     return
                 self.log(f"telemetry flowing; engaging {self.track_mode}")
                 self._enter_engaging(State.WAITING)
@@ -290,7 +290,7 @@ class Runner:
         if mt >= self.mission.duration - 1e-9:
             self.mission_time = mt
             self._emit(ev.MISSION_DONE, f"{self.mission.duration:g} s of mission tracked")
-            self._finish("mission_done", 0, s.time_boot_ms)
+            self._finish("mission_done", ExitCode.OK, s.time_boot_ms)
             return
         self.mission_time = mt
         ref = self.trajectory.sample(mt)
@@ -298,7 +298,7 @@ class Runner:
         problem = self._check(cmd)
         if problem is not None:
             self._emit(ev.FAILSAFE, problem)
-            self._finish(f"failsafe: {problem}", 3, s.time_boot_ms)
+            self._finish(f"failsafe: {problem}", ExitCode.FAULT, s.time_boot_ms)
             return
         self.link.send_command(cmd, s.time_boot_ms)
         latency = time.perf_counter() - t_read
@@ -380,16 +380,16 @@ class Runner:
                           f"{_nonzero(t.rejected)})" if t.received else "")
                 # Nothing moved yet: a user's problem (wrong port, sysid, stream), exit 2.
                 self._finish(f"no valid pose telemetry within {cfg.telemetry_timeout:g} s"
-                             f"{detail}", 2, hold=False)
+                             f"{detail}", ExitCode.USER_ERROR, hold=False)
         elif state is State.FAILSAFE:
             if not self._heartbeat_fresh(now) and not self._heartbeat_lost_said:
                 self._heartbeat_lost_said = True
                 self.log(f"no vehicle heartbeat for {cfg.heartbeat_lost:g} s")
             if self.telemetry.backwards_streak >= 3:
                 self._finish("failsafe: the vehicle restarted (time_boot_ms went back); "
-                             "not resuming a mission on a rebooted vehicle", 3)
+                             "not resuming a mission on a rebooted vehicle", ExitCode.FAULT)
             elif now - self._failsafe_since > cfg.lost_timeout:
-                self._finish(f"failsafe: telemetry lost for {cfg.lost_timeout:g} s", 3)
+                self._finish(f"failsafe: telemetry lost for {cfg.lost_timeout:g} s", ExitCode.FAULT)
             elif now >= self._next_try and not self._hold_confirmed:
                 self.link.send_stop()
                 self._request_mode(self.hold_mode, now)
@@ -452,14 +452,14 @@ class Runner:
         if not self._mode_seen:
             if now - self._engage_since > cfg.mode_timeout:
                 self._finish(f"failsafe: the vehicle did not enter {self.track_mode} within "
-                             f"{cfg.mode_timeout:g} s", 3)
+                             f"{cfg.mode_timeout:g} s", ExitCode.FAULT)
             elif now >= self._next_try:
                 self._request_mode(self.track_mode, now)
             return
         if not link.armed:
             if now - self._engage_since > cfg.arm_timeout:
                 self._finish(f"failsafe: the vehicle was not armed within {cfg.arm_timeout:g} s"
-                             + ("" if cfg.arm else " (use --arm to arm it from here)"), 3)
+                             + ("" if cfg.arm else " (use --arm to arm it from here)"), ExitCode.FAULT)
             elif cfg.arm and now >= self._next_arm_try:
                 link.request_arm()
                 self._next_arm_try = now + cfg.retry_interval
@@ -476,7 +476,7 @@ class Runner:
             self.log(f"{self.track_mode} and armed: ready, waiting for `start`")
 
     # --- stopping -----------------------------------------------------------------------------
-    def _finish(self, reason: str, code: int, time_boot_ms: int = 0, hold: bool = True,
+    def _finish(self, reason: str, code: ExitCode, time_boot_ms: int = 0, hold: bool = True,
                 stop: bool = True) -> None:
         """Stop the rover (zero setpoint, then HOLD) and end the loop."""
         if stop:
@@ -493,14 +493,14 @@ class Runner:
         if self.telemetry.backwards_streak:
             # Its clock went back too: not a pilot but a reboot (back in its boot mode).
             self._finish("failsafe: the vehicle restarted (time_boot_ms went back); not "
-                         "resuming a mission on a rebooted vehicle", 3)
+                         "resuming a mission on a rebooted vehicle", ExitCode.FAULT)
             return
         # The pilot has the vehicle: not one more setpoint (not even a zero one), no mode
         # request. Setpoints outside GUIDED / OFFBOARD are ignored anyway, but a companion
         # that keeps talking to a vehicle someone else drives is one bug away from fighting.
         self.log(f"pilot took over ({why}): no more setpoints")
         self._emit(ev.PILOT_OVERRIDE, why)
-        self._finish(f"pilot_override: {why}", 3, hold=False, stop=False)
+        self._finish(f"pilot_override: {why}", ExitCode.FAULT, hold=False, stop=False)
 
     def _wait_for_hold(self) -> None:
         """Until HOLD shows (ACK or heartbeat), answer telemetry with zero setpoints."""
@@ -566,7 +566,7 @@ class Runner:
             else:
                 req.reply(False, f"cannot resume while {state.value}")
         elif verb == "abort":
-            self._finish("aborted", 0)
+            self._finish("aborted", ExitCode.OK)
             req.reply(True, "stopping the rover")
         elif verb == "load-mission":
             self._load_mission(req)

@@ -531,7 +531,7 @@ def run_checks(obs: Observed) -> list[Check]:
 
 def exit_code(rows: list[Check]) -> int:
     """0 every check ok, 1 a warning or failure."""
-    return 0 if all(r.status == OK for r in rows) else 1
+    return 0 if all(r.status == OK for r in rows) else 1   # ExitCode.OK / CHECK_FAILED
 
 
 def fixes(rows: list[Check], params: Mapping[str, float]) -> dict[str, float]:
