@@ -38,6 +38,7 @@ from companion import mission as missions  # noqa: E402
 from companion.live.events import LoopRecord, StatusEvent  # noqa: E402
 from companion.live.link import LinkConfig  # noqa: E402
 from companion.live.runner import RunnerConfig  # noqa: E402
+from companion.live.policy import GainOptions  # noqa: E402
 from companion.live.session import RunSettings, fly  # noqa: E402
 
 
@@ -83,7 +84,7 @@ def run_rate(rate: float, seconds: float) -> None:
                     "f_r = 0.12\n")
         mission = missions.load(f.name)
         settings = RunSettings(link=LinkConfig(url=f"udpin:127.0.0.1:{port}"), mission=mission,
-                               runner=RunnerConfig(arm=True), rate=rate)
+                               runner=RunnerConfig(arm=True), gains=GainOptions(rate=rate))
         r = fly(settings, sinks=[ages])
     finally:
         plant.terminate()

@@ -12,8 +12,9 @@ from companion.errors import UserError
 from companion.core.filter import FilterGains
 from companion.core.limits import Limits
 from companion.core.pzc import PZCGains
-from companion.live.session import (DEFAULT_LIMITS, GainFlags, RunSettings, choose_gains,
-                               choose_limits, requested_rate)
+from companion.core.limits import DEFAULT_LIMITS
+from companion.live.policy import (GainOptions, KnownVehicle, choose_gains, choose_limits,
+                                   requested_rate)
 from companion.live.stats import LatencyHistogram, TrackingStats
 from companion.live.telemetry import TelemetryCheck
 
@@ -107,14 +108,14 @@ def test_tracking_stats_trapezoid_steady_and_missed():
     assert st.f_cost == pytest.approx(2.0)
 
 
-def _settings(mission, **kw):
-    return RunSettings(link=None, mission=mission, **kw)
+def _gains(mission, rate, **kw):
+    return choose_gains(mission, GainOptions(**kw), KnownVehicle(), rate)
 
 
 def test_gain_precedence(tmp_path):
     paper = missions.paper_ellipse()
     # nothing given: shipped tuned gains for (rate, w_c, d_cen) if any, else the paper's
-    choice = choose_gains(_settings(paper), 40.0)
+    choice = _gains(paper, 40.0)
     if choice.source == "paper":
         assert choice.filter == FilterGains() and choice.pzc == PZCGains()
     g = tmp_path / "g.toml"
@@ -125,29 +126,28 @@ def test_gain_precedence(tmp_path):
                  "[gains.filter]\nk_df = 500.0\nlambda_f = 50.0\n"
                  "[gains.pzc]\nk_dc = 6.0\nlambda_c = 3.0\n")
     mission = missions.load(m)
-    c = choose_gains(_settings(mission), 40.0)
+    c = _gains(mission, 40.0)
     assert (c.filter.k_df, c.pzc.k_dc) == (500.0, 6.0) and "mission" in c.source
-    c = choose_gains(_settings(mission, gains_file=str(g)), 40.0)
+    c = _gains(mission, 40.0, gains_file=str(g))
     assert (c.filter.k_df, c.pzc.k_dc) == (300.0, 4.0)
-    c = choose_gains(_settings(mission, gains_file=str(g),
-                               gain_flags=GainFlags(lambda_f=77.0, k_dc=9.0)), 40.0)
+    c = _gains(mission, 40.0, gains_file=str(g), lambda_f=77.0, k_dc=9.0)
     assert (c.filter.k_df, c.filter.lambda_f, c.pzc.k_dc, c.pzc.lambda_c) == (300.0, 77.0, 9.0, 2.0)
     assert c.source.startswith("flags over")
     # rate: flag > mission > gains file > 40
-    assert requested_rate(_settings(paper)) == 40.0
-    assert requested_rate(_settings(paper, gains_file=str(g))) == 25.0
-    assert requested_rate(_settings(paper, gains_file=str(g), rate=100.0)) == 100.0
+    assert requested_rate(paper, GainOptions()) == 40.0
+    assert requested_rate(paper, GainOptions(gains_file=str(g))) == 25.0
+    assert requested_rate(paper, GainOptions(gains_file=str(g), rate=100.0)) == 100.0
     with pytest.raises(UserError):
-        requested_rate(_settings(paper, rate=5000.0))
+        requested_rate(paper, GainOptions(rate=5000.0))
 
 
 def test_limit_precedence(tmp_path):
     paper = missions.paper_ellipse()
-    assert choose_limits(_settings(paper)) == DEFAULT_LIMITS
-    assert choose_limits(_settings(paper, max_speed=2.0)) == Limits(2.0, DEFAULT_LIMITS.max_yaw_rate)
+    assert choose_limits(paper, GainOptions()) == DEFAULT_LIMITS
+    assert choose_limits(paper, GainOptions(max_speed=2.0)) == Limits(2.0, DEFAULT_LIMITS.max_yaw_rate)
     m = tmp_path / "m.toml"
     m.write_text('duration = 5\n[trajectory]\nkind = "circle"\nradius = 5.0\nspeed = 1.0\n'
                  "[limits]\nmax_speed = 2.0\nmax_yaw_rate = 1.0\n")
     mission = missions.load(m)
-    assert choose_limits(_settings(mission)) == Limits(2.0, 1.0)
-    assert choose_limits(_settings(mission, max_yaw_rate=0.5)) == Limits(2.0, 0.5)
+    assert choose_limits(mission, GainOptions()) == Limits(2.0, 1.0)
+    assert choose_limits(mission, GainOptions(max_yaw_rate=0.5)) == Limits(2.0, 0.5)

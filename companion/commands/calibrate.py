@@ -24,9 +24,10 @@ import argparse
 import json
 import shlex
 import sys
+from dataclasses import replace
 from pathlib import Path
 
-from ..errors import UserError
+from ..errors import ExitCode, UserError
 from .identify import EPILOG, add_live_arguments
 
 
@@ -79,29 +80,30 @@ def _refine_mission(space: float):
 
 
 def _tune(vehicle: Path, rate: float, command: str, args, log):
-    from .run import gains_for_vehicle
+    from .flight import gains_for_vehicle
     return gains_for_vehicle(vehicle, rate, command, not args.quiet and not args.json, log,
                              population=args.population, rounds=args.rounds)
 
 
-def _refine(args, vehicle: Path, report, log) -> dict:
+def _refine(options, args, vehicle: Path, report, log) -> dict:
     """Fly the refining track with the tuned gains and fit one model to the manoeuvre and the
     track together (see the module docstring). Returns what happened; on success ``vehicle``
-    holds the joint fit."""
+    holds the joint fit. ``options``: the manoeuvre's flight options."""
     from ..ident.fit import rms
-    from .identify import identify_log
+    from ..live.policy import GainOptions
+    from .identify import FitOptions, identify_log
+    from .options import OutputOptions
     from .run import fly_mission
     folder = vehicle.parent
-    flown = argparse.Namespace(**{**vars(args), "vehicle": str(vehicle), "gains": None,
-                                  "origin": None, "json": False, "progress": False,
-                                  "realtime": False, "w_c": None, "d_cen": None,
-                                  "max_speed": None, "max_yaw_rate": None})
+    # The vehicle's own gains and limits (no manoeuvre limits), at the manoeuvre's rate.
+    flown = replace(options, vehicle_file=str(vehicle), gains=GainOptions(rate=args.rate),
+                    output=OutputOptions(quiet=options.output.quiet))
     result, paths = fly_mission(flown, _refine_mission(args.space))
-    if result.exit_code != 0 or paths is None:
+    if result.exit_code != ExitCode.OK or paths is None:
         return {"refined": False, "why": f"the tracking flight ended: {result.reason}"}
     refit = folder / "vehicle-refit.toml"
-    joint_args = argparse.Namespace(check=None, plot=None, name=args.name, out=str(refit))
-    joint = identify_log([report.log, paths.tlog], joint_args, dict(report.autopilot), log)
+    joint_fit = FitOptions(out=str(refit))
+    joint = identify_log([report.log, paths.tlog], joint_fit, dict(report.autopilot), log)
     manoeuvre, track = joint.parts
     on_manoeuvre = rms(joint.fit.params, manoeuvre)
     on_track = rms(joint.fit.params, track)
@@ -127,8 +129,9 @@ def _refine(args, vehicle: Path, report, log) -> dict:
 
 
 def run(args) -> int:
-    from .identify import _print, fly_and_fit
-    from .run import logger
+    from ..live.policy import DEFAULT_RATE
+    from .flight import logger
+    from .identify import FitOptions, _print, fly_and_fit, live_options
 
     from ..sim.robust import RobustConfig
     args.population = RobustConfig.population if args.population is None else args.population
@@ -141,21 +144,21 @@ def run(args) -> int:
     if gains_path.exists():      # an old gains file would no longer match the new vehicle
         gains_path.unlink()
     log = logger("companion calibrate", args.quiet)
-    ident_args = argparse.Namespace(**{**vars(args), "out": str(vehicle)})
-    code, report, flight = fly_and_fit(ident_args)
-    if report is None or code != 0:
+    options = live_options(args)
+    code, report, flight = fly_and_fit(options, FitOptions(out=str(vehicle)), args.space)
+    if report is None or code != ExitCode.OK:
         if report is not None:
             _print(report, args.json, flight)
         log("not tuned: the manoeuvre did not end normally")
-        return code or 3
-    rate = args.rate or 40.0
+        return code or ExitCode.FAULT
+    rate = args.rate or DEFAULT_RATE
     command = "companion " + shlex.join(sys.argv[1:]) if sys.argv[1:2] == ["calibrate"] \
         else f"companion calibrate --connect {args.connect} --out {args.out}"
     gains = _tune(vehicle, rate, command, args, log)
     refined = {"refined": False, "why": "--no-refine" if not args.refine else "--no-log"}
     if args.refine and args.log:
         log(f"refining: {REFINE_S:g} s of the paper's ellipse at {REFINE_F_R:g} Hz with these gains")
-        refined = _refine(args, vehicle, report, log)
+        refined = _refine(options, args, vehicle, report, log)
         log("refined: " + ("one model fitted to both flights, re-tuned" if refined["refined"]
                            else f"kept the manoeuvre's model ({refined['why']})"))
         if refined["refined"]:
@@ -171,7 +174,7 @@ def run(args) -> int:
                           "identify": {**as_dict(report), "flight": flight},
                           "refine": refined,
                           "gains_header": gains.header.splitlines(), "next": next_run}))
-        return 0
+        return ExitCode.OK
     _print(report, False, flight)
     print("refine      " + (f"one model fitted to the manoeuvre and {refined['tlog']} (on the "
                              f"manoeuvre {refined['check_speed_rms_m_s']:.3f} m/s, "
@@ -183,4 +186,4 @@ def run(args) -> int:
     for line in gains.header.splitlines()[2:]:
         print(f"            {line}")
     print(f"next        {next_run}")
-    return 0
+    return ExitCode.OK

@@ -148,7 +148,7 @@ def print_config(args: argparse.Namespace, sub: argparse.ArgumentParser) -> int:
     lines = [f"# {sub.prog}: effective settings (flags > config file > defaults); "
              "read back with --config"]
     for dest, action in keyed_actions(sub).items():
-        value = getattr(args, dest, None)
+        value = vars(args).get(dest)   # every action of the parser has its dest set
         if value is None:
             metavar = action.metavar if isinstance(action.metavar, str) else ""
             flag = (f"{action.option_strings[-1]} {metavar}".strip() if action.option_strings

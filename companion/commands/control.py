@@ -15,8 +15,8 @@ import sys
 from pathlib import Path
 
 from ..errors import UserError
-from .run import positive
-from .zenoh_args import add_zenoh_arguments, bus_options
+from .arguments import add_zenoh_arguments, positive
+from .options import bus_options
 
 VERBS = ("status", "start", "pause", "resume", "abort", "load-mission")
 

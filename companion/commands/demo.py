@@ -23,8 +23,8 @@ from dataclasses import replace
 from pathlib import Path
 
 from ..errors import UserError
-from .run import (add_gain_arguments, add_safety_arguments, gains_for_vehicle, install_signals,
-                  logger, non_negative, open_flight_log, positive, print_result, signing_key)
+from .arguments import (add_gain_arguments, add_safety_arguments, add_zenoh_arguments,
+                        non_negative, positive)
 
 DEFAULT_D_CEN = 0.3
 
@@ -53,7 +53,6 @@ def register(subparsers) -> None:
     p.add_argument("--no-plot", dest="plot", action="store_false", help="skip the plot")
     p.add_argument("--json", action="store_true", help="print one JSON result object")
     p.add_argument("-q", "--quiet", action="store_true", help="no log lines on stderr")
-    from .zenoh_args import add_zenoh_arguments
     add_zenoh_arguments(p)
     from .config_file import add_config_arguments
     add_config_arguments(p)
@@ -69,8 +68,9 @@ def _free_port() -> int:
 
 def _mission(args):
     from .. import mission as missions
-    from .run import load_mission
-    mission = load_mission(args.mission, None) if args.mission else missions.paper_ellipse(0.12, 60.0)
+    from .flight import load_mission
+    mission = (load_mission(args.mission, None, "companion demo") if args.mission
+               else missions.paper_ellipse(0.12, 60.0))
     if args.duration is not None:
         mission = replace(mission, duration=args.duration)
     return mission
@@ -92,7 +92,7 @@ def plant_argv(args, port: int, rate: float) -> list[str]:
         argv.append("--lockstep")
     if args.speedup is not None:
         argv += ["--speedup", repr(args.speedup)]
-    if getattr(args, "signing_key", None):
+    if args.signing_key:
         argv += ["--signing-key", args.signing_key]
     return argv
 
@@ -109,91 +109,65 @@ def _stop(proc: subprocess.Popen) -> int | None:
 
 
 def run(args) -> int:
-    from ..bus import open_bus, shut
-    from ..live.link import LinkConfig
+    from ..live.config import LinkConfig, RunnerConfig
+    from ..live.policy import KnownVehicle, requested_rate
+    from ..progress import TraceSink
     from ..sim import vehicle_file
-    from ..progress import ProgressSink, TraceSink
-    from ..live.runner import RunnerConfig
-    from ..live.session import DEFAULT_LIMITS, GainFlags, RunSettings, StopSwitch, fly, requested_rate
+    from ..sim.vehicle_gains import vehicle_limits
+    from .flight import Flight, known_vehicle, logger, refuse_user_error
+    from .options import FlightOptions, OutputOptions, bus_options, gain_options, log_options
+    from .run_result import print_result
 
     mission = _mission(args)
     params = vehicle_file.load(args.vehicle).params if args.vehicle else vehicle_file.preset(args.preset)
     log = logger("companion demo", args.quiet)
+    # The plant is the vehicle: its w_c and d_cen pick shipped gains, its limits bound the
+    # setpoints (so the anti-windup knows where it saturates).
+    gains = replace(gain_options(args, vehicle=False), w_c=float(params.w_c), d_cen=args.d_cen)
     # An identified vehicle (--vehicle, or a preset made from one) flies the gains tuned for it,
     # as `companion run --vehicle` does: shipped beside the preset, else tuned now.
     own_file = args.vehicle or vehicle_file.preset_path(args.preset)
-    own_gains = None
-    if own_file is not None and not args.gains:
-        own_gains = gains_for_vehicle(
-            own_file, args.rate or mission.rate_hz or 40.0,
-            f"companion demo --vehicle {own_file} (tuned on first use)",
-            not args.quiet and not args.json, log)
-    # The companion's limits: the flags, else the mission's, else the plant's own (so the
-    # anti-windup knows where the vehicle saturates), else the default ceiling.
-    base = mission.limits or DEFAULT_LIMITS
-    max_speed = args.max_speed or min(base.max_speed, params.max_speed)
-    max_yaw_rate = args.max_yaw_rate or min(base.max_yaw_rate, params.max_yaw_rate)
+    vehicle = (known_vehicle(str(own_file), mission, gains, "companion demo",
+                             not args.quiet and not args.json, log)
+               if own_file is not None else KnownVehicle())
+    vehicle = replace(vehicle, limits=vehicle_limits(params))
     port = _free_port()
-    key = signing_key(args)
-    paths, log_sinks = None, []
-    settings = RunSettings(
-        link=LinkConfig(url=f"udpin:127.0.0.1:{port}", heartbeat_timeout=15.0,
-                        signing_key=key),
-        mission=mission, runner=RunnerConfig(arm=True), rate=args.rate, gains_file=args.gains,
-        gain_flags=GainFlags(args.k_df, args.lambda_f, args.k_dc, args.lambda_c),
-        max_speed=max_speed, max_yaw_rate=max_yaw_rate, w_c=params.w_c, d_cen=args.d_cen,
-        vehicle_gains=own_gains)
-    rate = requested_rate(settings)
-    argv = plant_argv(args, port, rate)
+    options = FlightOptions(
+        link=LinkConfig(url=f"udpin:127.0.0.1:{port}", heartbeat_timeout=15.0),
+        runner=RunnerConfig(arm=True), gains=gains, signing_key_file=args.signing_key,
+        log=log_options(args), output=OutputOptions(json=args.json, progress=True,
+                                                    quiet=args.quiet),
+        bus=bus_options(args))
+    flight = Flight(options, "demo", log)          # a bad signing key fails here
+    argv = plant_argv(args, port, requested_rate(mission, gains))
     if mission.geodetic:
         # The plant's EKF origin at the mission's own (a plan's home): it starts where drawn.
         argv.append(f"--origin={mission.datum[0]:.7f},{mission.datum[1]:.7f}")
     trace = TraceSink()
-    sinks = [ProgressSink(mission.duration, mission.name), trace]
 
     log(f"plant: {' '.join(argv[2:])}")
     plant_log = tempfile.TemporaryFile(mode="w+")
     plant = subprocess.Popen(argv, stdout=subprocess.DEVNULL, stderr=plant_log,
                              env={**os.environ, "PYTHONUNBUFFERED": "1"})
-    switch = StopSwitch()
-    restore = install_signals(switch)
-    bus, flying = None, False
     try:
-        try:
-            from .zenoh_args import bus_options
-            bus = open_bus(bus_options(args), log)   # closed on every path out (finally)
-            # The flight log once every flag has been checked: a bad one leaves no empty log.
-            paths, log_sinks = open_flight_log(args, "demo", log)
-            if paths is not None:
-                settings = replace(settings, link=replace(settings.link, tlog=paths.tlog))
-            sinks[:0] = log_sinks
-            flying = True
-            if bus is not None:
-                sinks.append(bus)
-            result = fly(settings, sinks=sinks, log=log, switch=switch,
-                         control=bus.control if bus else None)
-        except UserError as err:
-            if not flying:
-                raise     # a bad --zenoh-* flag or file: its own message says which
-            if plant.poll() is not None:
-                plant_log.seek(0)
-                last = (plant_log.read().strip().splitlines() or ["(no output)"])[-1]
-                raise UserError(f"the plant exited ({plant.returncode}): {last}") from None
-            raise UserError(f"{err} (plant: {' '.join(argv[2:])})") from None
+        with flight:     # a bad --zenoh-* flag or file fails here: its own message says which
+            try:
+                result = flight.fly(mission, vehicle, sinks=[trace])
+            except UserError as err:
+                if plant.poll() is not None:
+                    plant_log.seek(0)
+                    last = (plant_log.read().strip().splitlines() or ["(no output)"])[-1]
+                    raise UserError(f"the plant exited ({plant.returncode}): {last}") from None
+                raise UserError(f"{err} (plant: {' '.join(argv[2:])})") from None
     finally:
-        shut(bus)
-        restore()
         plant_code = _stop(plant)
         plant_log.close()
-        for sink in log_sinks:
-            sink.close()    # idempotent: the loop closed it unless the set-up failed
 
-    if result.exit_code == 2:
-        raise UserError(result.reason)
+    refuse_user_error(result)
     extra = {"plant": " ".join(argv[2:]), "plant_exit": plant_code, "preset": args.preset,
              "d_cen": args.d_cen}
-    if paths is not None:
-        extra.update(tlog=paths.tlog, csv=paths.csv)
+    if flight.paths is not None:
+        extra.update(tlog=flight.paths.tlog, csv=flight.paths.csv)
     if args.plot and trace.log["t"]:
         from ..mission.plot import plot_run
         out = Path(args.out)

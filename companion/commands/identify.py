@@ -30,12 +30,14 @@ import shlex
 import sys
 import tempfile
 import time
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
-from ..errors import UserError
-from .run import (BAUD_HELP, add_safety_arguments, add_timeout_arguments, baud_rate, logger,
-                  open_flight_log, positive, signing_key)
+from ..errors import ExitCode, UserError
+from .arguments import (add_limit_arguments, add_link_arguments, add_output_arguments,
+                        add_safety_arguments, add_timeout_arguments, add_zenoh_arguments,
+                        positive)
 
 EPILOG = """\
 exit codes: 0 done; 2 a user error (bad flag, a log that is malformed, too short or without
@@ -43,6 +45,7 @@ setpoints, no vehicle); 3 the manoeuvre was stopped by a fault (the rover is sto
 setpoint, then HOLD; what was flown is still fitted when long enough).
 """
 
+DEFAULT_SPACE = 10.0       # m: --space
 MANOEUVRE_S = 85.0         # vehicle s of manoeuvre: the script (~75 s) and its returns, < 90 s
 HEADROOM = 1.2             # setpoints this far above the autopilot's limits, so the clamps show
 
@@ -66,33 +69,47 @@ def register(subparsers) -> None:
 def add_live_arguments(p: argparse.ArgumentParser, title: str, required: bool = False) -> None:
     """The flags of a live identification (identify --connect, calibrate): the link, the
     manoeuvre's space and limits, run's timeouts, logs, signing, output and Zenoh flags."""
-    live = p.add_argument_group(title)
-    live.add_argument("--connect", metavar="URL", required=required,
-                      help="pymavlink connection string or serial device[,baud]")
-    live.add_argument("--baud", type=baud_rate, metavar="BPS", help=BAUD_HELP)
-    live.add_argument("--sysid", type=int, metavar="N", help="system id of the vehicle")
-    live.add_argument("--arm", action="store_true",
-                      help="arm the vehicle (retrying once a second); default: wait for it")
-    live.add_argument("--space", type=positive, default=10.0, metavar="M",
-                      help="stay within M metres of the start (default 10)")
-    live.add_argument("--max-speed", type=positive, dest="max_speed", metavar="M_S",
-                      help="largest speed setpoint (default 1.2 x the autopilot's top speed)")
-    live.add_argument("--max-yaw-rate", type=positive, dest="max_yaw_rate", metavar="RAD_S",
-                      help="largest turn-rate setpoint (default 1.2 x ATC_STR_RAT_MAX)")
+    add_link_arguments(p, title, required=required)
+    live = p.add_argument_group("the manoeuvre")
+    live.add_argument("--space", type=positive, default=DEFAULT_SPACE, metavar="M",
+                      help=f"stay within M metres of the start (default {DEFAULT_SPACE:g})")
+    add_limit_arguments(live)
     live.add_argument("--rate", type=positive, metavar="HZ",
                       help="telemetry / control rate to ask for (default 40)")
     add_timeout_arguments(p)
     add_safety_arguments(p)
-    o = p.add_argument_group("output")
-    o.add_argument("--json", action="store_true", help="print one JSON object")
-    o.add_argument("-q", "--quiet", action="store_true", help="no log lines on stderr")
-    from .zenoh_args import add_zenoh_arguments
+    add_output_arguments(p, json_help="print one JSON object")
     add_zenoh_arguments(p)
     from .config_file import add_config_arguments
     add_config_arguments(p)
-    # run's settings builder reads these; identify flies no PZC gains.
-    p.set_defaults(gains=None, k_df=None, lambda_f=None, k_dc=None, lambda_c=None,
-                   log_path=None, check=None, plot=None, name=None)
+
+
+@dataclass(frozen=True)
+class FitOptions:
+    """The offline half's flags: where the vehicle file goes and what else to report."""
+
+    out: str                            # --out: the vehicle file to write
+    check: str | None = None            # --check LOG2
+    plot: str | None = None             # --plot DIR
+    name: str | None = None             # --name
+
+
+def fit_options(args: argparse.Namespace, out: str | None = None) -> FitOptions:
+    return FitOptions(out=out or args.out, check=args.check, plot=args.plot, name=args.name)
+
+
+def live_options(args: argparse.Namespace):
+    """identify --connect's (and calibrate's) flight options: no gains, the manoeuvre's
+    limits and rate."""
+    from ..live.policy import GainOptions
+    from .options import (FlightOptions, bus_options, link_config, log_options,
+                          output_options, runner_config)
+    return FlightOptions(
+        link=link_config(args), runner=runner_config(args),
+        gains=GainOptions(rate=args.rate, max_speed=args.max_speed,
+                          max_yaw_rate=args.max_yaw_rate),
+        signing_key_file=args.signing_key, log=log_options(args),
+        output=output_options(args, progress=False), bus=bus_options(args))
 
 
 def _command_line() -> str:
@@ -114,12 +131,12 @@ def run(args) -> int:
     _check_out(args.out)
     if args.connect is not None:
         return _live(args)
-    report = identify_log(args.log_path, args, {})
+    report = identify_log(args.log_path, fit_options(args), {})
     _print(report, args.json)
-    return 0
+    return ExitCode.OK
 
 
-def identify_log(paths: str | list[str], args, autopilot: dict[str, float],
+def identify_log(paths: str | list[str], fit_opts: FitOptions, autopilot: dict[str, float],
                  log=lambda text: None, label: str | None = None, prior=None):
     """Read, fit, check, write, plot: the offline half (the live half ends here too).
     Several ``paths`` are fitted together (:func:`companion.ident.fit.join`). ``label`` names
@@ -136,7 +153,7 @@ def identify_log(paths: str | list[str], args, autopilot: dict[str, float],
         series = join(parts)
     except ValueError as exc:
         raise UserError(f"LOG {' + '.join(paths)}: {exc}") from None
-    check = read_series(args.check)[0] if args.check else None   # a bad one fails before the fit
+    check = read_series(fit_opts.check)[0] if fit_opts.check else None   # a bad one fails before the fit
     for path in paths:              # what was read live, then the first log's, win
         autopilot = {**autopilot_params(path, AUTOPILOT_PARAMS + PX4_PARAMS), **autopilot}
     if series.vector:            # PX4's velocity vectors: its rover parameters, its course loop
@@ -151,13 +168,13 @@ def identify_log(paths: str | list[str], args, autopilot: dict[str, float],
     t0 = time.perf_counter()
     result = fit(series, priors.params, progress=lambda what: log(f"fitting the {what}"))
     report = Report(result, priors, series, label or " + ".join(map(str, paths)),
-                    time.perf_counter() - t0, out=args.out, parts=parts,
+                    time.perf_counter() - t0, out=fit_opts.out, parts=parts,
                     autopilot=autopilot, command=_command_line())
     if check is not None:
-        report.check_log, report.check_rms = str(args.check), rms(result.params, check)
-    save(vehicle_file(report, args.name or Path(path).stem), args.out)
-    if args.plot:
-        report.figures = _plot(report, check, Path(args.plot))
+        report.check_log, report.check_rms = str(fit_opts.check), rms(result.params, check)
+    save(vehicle_file(report, fit_opts.name or Path(path).stem), fit_opts.out)
+    if fit_opts.plot:
+        report.figures = _plot(report, check, Path(fit_opts.plot))
     return report
 
 
@@ -241,29 +258,27 @@ def _mission(space: float):
 
 
 def _live(args) -> int:
-    code, report, flight = fly_and_fit(args)
+    code, report, flight = fly_and_fit(live_options(args), fit_options(args), args.space)
     if report is not None:
         _print(report, args.json, flight)
     return code
 
 
-def fly_and_fit(args):
-    """Fly the manoeuvre through run's live loop, then fit its log: (exit code, report or None
-    when stopped before the manoeuvre ended, the flight's summary)."""
-    from ..bus import open_bus, shut
+def fly_and_fit(options, fit: FitOptions, space: float):
+    """Fly the manoeuvre (within ``space`` m) through run's live loop with ``options`` (a
+    FlightOptions), then fit its log: (exit code, report or None when stopped before the
+    manoeuvre ended, the flight's summary)."""
     from ..ident.excite import Excitation, Plan, VectorExcitation
     from ..ident.priors import AUTOPILOT_PARAMS, PX4_PARAMS, from_autopilot, from_px4
     from ..live.link import ARDUPILOT, PX4
     from ..live.params import read_values
-    from ..live.session import StopSwitch, fly
-    from .run import install_signals, settings_from_args
-    from .zenoh_args import bus_options
+    from .flight import Flight, logger, refuse_user_error
+    from .options import LogOptions
 
-    if args.check:
+    if fit.check:
         from ..ident.data import read_series
-        read_series(args.check)          # a bad check log is refused before anything flies
-    key = signing_key(args)
-    log = logger("companion identify", args.quiet)
+        read_series(fit.check)           # a bad check log is refused before anything flies
+    log = logger("companion identify", options.output.quiet)
     read: dict[str, float] = {}
     made: list[Excitation] = []
 
@@ -278,7 +293,7 @@ def fly_and_fit(args):
         log("autopilot parameters: " + (", ".join(f"{k} {v:g}" for k, v in sorted(read.items()))
                                         or "none answered; default priors"))
         prior = from_autopilot(read).params
-        plan = Plan(space=args.space,
+        plan = Plan(space=space,
                     max_speed=min(limits.max_speed, HEADROOM * prior.max_speed),
                     max_yaw_rate=min(limits.max_yaw_rate, HEADROOM * prior.max_yaw_rate),
                     decel=min(prior.decel, prior.max_accel), top_speed=prior.max_speed)
@@ -294,53 +309,39 @@ def fly_and_fit(args):
         log("PX4 parameters: " + (", ".join(f"{k} {v:g}" for k, v in sorted(read.items()))
                                   or "none answered; default priors"))
         prior = from_px4(read).params
-        plan = Plan(space=args.space, max_speed=min(limits.max_speed, prior.max_speed),
+        plan = Plan(space=space, max_speed=min(limits.max_speed, prior.max_speed),
                     max_yaw_rate=min(limits.max_yaw_rate, prior.max_yaw_rate),
                     decel=min(prior.decel, prior.max_accel), top_speed=prior.max_speed)
         log(f"velocity-vector manoeuvre within {plan.space:g} m: up to {plan.max_speed:.2f} m/s")
         made.append(VectorExcitation(plan))
         return made[-1]
 
-    switch = StopSwitch()
-    restore = install_signals(switch)
-    bus, log_sinks, scratch = None, [], None
+    scratch = None
+    if not options.log.enabled:      # --no-log: the logs go to a scratch dir, then away
+        scratch = tempfile.TemporaryDirectory(prefix="identify-")
+        options = replace(options, log=LogOptions(enabled=True, folder=scratch.name))
     try:
-        if not args.log:                 # --no-log: the logs go to a scratch dir, then away
-            scratch = tempfile.TemporaryDirectory(prefix="identify-")
-            args.log, args.log_dir = True, scratch.name
-        bus = open_bus(bus_options(args), log)
-        paths, log_sinks = open_flight_log(args, "identify", log)
-        settings = settings_from_args(args, _mission(args.space), args.connect, key, paths.tlog)
-        result = fly(settings, sinks=list(log_sinks) + ([bus] if bus else []), log=log,
-                     switch=switch, control=bus.control if bus else None,
-                     make_tracker=make_tracker)
-        if result.exit_code == 2:
-            raise UserError(result.reason)
-        tracker = made[-1] if made else None
-        flight = {"reason": result.reason, "exit_code": result.exit_code,
-                  "hold_confirmed": result.hold_confirmed, "duration_s": result.duration_s,
-                  "failsafes": result.failsafes, "space_m": args.space,
-                  "max_distance_m": tracker.max_distance if tracker else 0.0,
-                  "returns": tracker.returns if tracker else 0,
-                  "tlog": None if scratch else paths.tlog, "csv": None if scratch else paths.csv}
-        if switch.reason is not None:
-            log(f"stopped by {switch.reason} before the manoeuvre ended: not fitted"
-                + ("" if scratch else f" (the log is {paths.tlog})"))
-            return result.exit_code, None, flight
-        for sink in log_sinks:
-            sink.close()                 # the CSV complete before anything reads the logs
-        report = identify_log(paths.tlog, _offline_args(args), read, log,
-                              "the manoeuvre flown (--no-log: log not kept)" if scratch else None)
+        with Flight(options, "identify", log) as flight:
+            result = flight.fly(_mission(space), make_tracker=make_tracker)
+            refuse_user_error(result)
+            paths = flight.paths
+            tracker = made[-1] if made else None
+            flight_summary = {
+                "reason": result.reason, "exit_code": result.exit_code,
+                "hold_confirmed": result.hold_confirmed, "duration_s": result.duration_s,
+                "failsafes": result.failsafes, "space_m": space,
+                "max_distance_m": tracker.max_distance if tracker else 0.0,
+                "returns": tracker.returns if tracker else 0,
+                "tlog": None if scratch else paths.tlog, "csv": None if scratch else paths.csv}
+            if flight.interrupted is not None:
+                log(f"stopped by {flight.interrupted} before the manoeuvre ended: not fitted"
+                    + ("" if scratch else f" (the log is {paths.tlog})"))
+                return result.exit_code, None, flight_summary
+            flight.close_logs()          # the CSV complete before anything reads the logs
+            report = identify_log(paths.tlog, fit, read, log,
+                                  "the manoeuvre flown (--no-log: log not kept)" if scratch
+                                  else None)
     finally:
-        shut(bus)
-        restore()
-        for sink in log_sinks:
-            sink.close()
         if scratch is not None:
             scratch.cleanup()
-    return result.exit_code, report, flight
-
-
-def _offline_args(args):
-    """The live command's flags as the offline half reads them."""
-    return argparse.Namespace(check=args.check, plot=args.plot, name=args.name, out=args.out)
+    return result.exit_code, report, flight_summary

@@ -79,7 +79,7 @@ def run_check(args) -> int:
     origin = parse_origin(args.origin)
     _check_speed(args.speed)
     vehicle = None
-    if getattr(args, "vehicle", None):
+    if args.vehicle:
         from ..sim.vehicle_file import load as load_vehicle
         vehicle = load_vehicle(args.vehicle).params
     failed = out_of_reach = 0

@@ -21,8 +21,8 @@ from dataclasses import asdict, dataclass
 from typing import Any, TextIO
 
 from ..errors import UserError
-from .run import positive
-from .zenoh_args import add_zenoh_arguments, bus_options
+from .arguments import add_zenoh_arguments, positive
+from .options import bus_options
 
 SNAPSHOT_SCHEMA = "pzc-rover/monitor/1"
 

@@ -16,7 +16,9 @@ import json
 import sys
 
 from ..errors import UserError
-from .run import BAUD_HELP, baud_rate, logger, positive, signing_key
+from .arguments import BAUD_HELP, baud_rate, positive
+from .flight import logger, signing_key
+from ..live.config import DEFAULT_RATE, LINK
 
 EPILOG = """\
 exit codes: 0 every check ok; 1 a warning or a failure; 2 could not check (no vehicle, no
@@ -33,15 +35,16 @@ def register(subparsers) -> None:
                    help="pymavlink connection string (the companion's link to the autopilot)")
     p.add_argument("--baud", type=baud_rate, metavar="BPS", help=BAUD_HELP)
     p.add_argument("--sysid", type=int, metavar="N", help="system id of the vehicle")
-    p.add_argument("--rate", type=positive, default=40.0, metavar="HZ",
-                   help="pose telemetry rate the control loop will ask for (default 40)")
+    p.add_argument("--rate", type=positive, default=DEFAULT_RATE, metavar="HZ",
+                   help=f"pose telemetry rate the control loop will ask for (default {DEFAULT_RATE:g})")
     p.add_argument("--vehicle", metavar="FILE",
                    help="the rover's vehicle file: hold its limits against the autopilot's")
     p.add_argument("--signing-key", metavar="FILE",
                    help="MAVLink 2 signing key the companion uses (checks the vehicle's "
                         "signature)")
-    p.add_argument("--heartbeat-timeout", type=positive, default=10.0, metavar="S",
-                   help="wait this long for the vehicle's heartbeat (default 10)")
+    p.add_argument("--heartbeat-timeout", type=positive, default=LINK.heartbeat_timeout,
+                   metavar="S", help="wait this long for the vehicle's heartbeat "
+                                     f"(default {LINK.heartbeat_timeout:g})")
     p.add_argument("--fix", action="store_true",
                    help="set the recommended values (PARAM_SET, read back); asks first")
     p.add_argument("--yes", action="store_true", help="with --fix: do not ask")
@@ -72,7 +75,7 @@ def run(args) -> int:
     if args.yes and not args.fix:
         raise UserError("--yes confirms --fix; give both")
     limits = _limits(args.vehicle)          # a bad file fails before connecting
-    key = signing_key(args)
+    key = signing_key(args.signing_key)
     from ..live.link import LinkConfig
     from ..preflight.checks import exit_code, fixes, run_checks
     from ..preflight.gather import GatherConfig, connect

@@ -3,10 +3,12 @@
 Runs :func:`companion.sim.batch.simulate` with the mission's reference anchored at a rover at rest at
 the origin facing north, and prints the paper's metrics f_cost and steady_rms (Section 5.3).
 
-Gains, first found wins: ``--gains FILE``; the mission's own gains; the shipped tuned gains for
-this rate, w_c and d_cen (:func:`companion.sim.gains.find_tuned`); else :data:`FALLBACK`.
-The plant is the mission's [vehicle] (default the paper's, w_c 20 rad/s), with --w-c / --d-cen
-overriding it; the mission's [limits] clamp the commands.
+Rate, gains and limits are resolved by the one policy ``companion run`` uses
+(:mod:`companion.live.policy`), so a simulation flies what a run would: ``--gains FILE``; the
+mission's gains; the vehicle file's tuned gains (``--vehicle``, else the mission's [vehicle]
+file); the shipped tuned gains for this rate, w_c and d_cen; the paper's. The plant is the
+vehicle file's model, else the mission's [vehicle] (default the paper's, w_c 20 rad/s), with
+--w-c / --d-cen overriding it.
 """
 
 from __future__ import annotations
@@ -15,9 +17,8 @@ import json
 import math
 import sys
 
-from ..errors import UserError, require_positive
-
-DEFAULT_RATE = 40.0
+from ..errors import ExitCode, UserError, require_positive
+from ..live.config import DEFAULT_RATE
 
 
 def register(subparsers) -> None:
@@ -34,31 +35,18 @@ def register(subparsers) -> None:
     p.add_argument("--d-cen", type=float, dest="d_cen", metavar="M",
                    help="distance from the tracked point to the wheel axle")
     p.add_argument("--gains", metavar="FILE", help="tuned-gains TOML file")
+    p.add_argument("--vehicle", metavar="FILE",
+                   help="the rover's vehicle file: the plant simulated, its tuned gains "
+                        "(found beside it, else tuned now) and its limits, as run flies them")
+    p.add_argument("--max-speed", type=float, dest="max_speed", metavar="M_S",
+                   help="speed limit of every command (m/s)")
+    p.add_argument("--max-yaw-rate", type=float, dest="max_yaw_rate", metavar="RAD_S",
+                   help="turn-rate limit of every command (rad/s)")
     p.add_argument("--controller", choices=("pzc", "pid", "kanayama"), default="pzc")
     p.add_argument("--origin", metavar="LAT,LON", help="EKF origin for geodetic missions")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.add_argument("--plot", metavar="OUT.png", help="draw the run (path and error)")
     p.set_defaults(func=run)
-
-
-def choose_gains(mission, rate: float, w_c: float, d_cen: float, gains_file: str | None):
-    """(FilterGains, PZCGains, where they came from)."""
-    from ..sim import gains as gains_mod
-    from ..core.filter import FilterGains
-    from ..core.pzc import PZCGains
-    if gains_file is not None:
-        tuned = gains_mod.load(gains_file)
-        return tuned.filter, tuned.pzc, gains_file
-    tuned = gains_mod.find_tuned(rate, w_c, d_cen) or gains_mod.find_tuned(rate, w_c)
-    # Stand-in until tuned gains are shipped for this rate: feed-forward on, a filter slow
-    # enough for a 40 Hz stream.
-    base_filter = tuned.filter if tuned else FilterGains(k_df=200.0, lambda_f=40.0)
-    base_pzc = tuned.pzc if tuned else PZCGains(velocity_ff=True, heading_rate_ff=True)
-    where = tuned.source if tuned else "built-in stand-in (no tuned gains for this rate)"
-    if mission.filter_gains is not None or mission.pzc_gains is not None:
-        where = f"mission {mission.source}" + ("" if (mission.filter_gains and mission.pzc_gains)
-                                               else f" + {where}")
-    return (mission.filter_gains or base_filter, mission.pzc_gains or base_pzc, where)
 
 
 class _Recorder:
@@ -82,13 +70,17 @@ class _Recorder:
 
 def run(args) -> int:
     from .. import mission as missions
+    from ..live import policy
+    from ..sim import vehicle_file
     from ..sim.batch import SimConfig, simulate
-    from ..core.limits import Limits
     from ..sim.plant import RoverParams
+    from .flight import known_vehicle, logger
     from .mission import parse_origin, print_warnings
 
     require_positive("--rate", args.rate)
     require_positive("--w-c", args.w_c)
+    require_positive("--max-speed", args.max_speed)
+    require_positive("--max-yaw-rate", args.max_yaw_rate)
     if args.d_cen is not None and not (math.isfinite(args.d_cen) and args.d_cen >= 0):
         raise UserError(f"--d-cen must be a distance >= 0, not {args.d_cen!r}")
     if args.rate is not None and args.rate > 1000:
@@ -98,19 +90,25 @@ def run(args) -> int:
                else missions.paper_ellipse())
     print_warnings(mission, "companion simulate")
 
-    rate = args.rate or mission.rate_hz or DEFAULT_RATE
-    params = mission.vehicle or RoverParams.paper()
+    options = sim_gain_options(args)
+    vehicle_path = args.vehicle or mission.vehicle_file
+    vehicle = known_vehicle(vehicle_path, mission, options, "companion simulate",
+                            not args.json, logger("companion simulate", args.json))
+    resolved = policy.resolve(mission, options, vehicle)
+    rate, limits = resolved.rate, resolved.limits
+    params = (vehicle_file.load(vehicle_path).params if vehicle_path
+              else mission.vehicle or RoverParams.paper())
     if args.w_c is not None:
         params = params.with_(w_c=args.w_c)
     if args.d_cen is not None:
         params = params.with_(d_cen=args.d_cen)
-    limits = mission.limits or Limits()
 
     gains_note = ""
     if args.controller == "pzc":
         from ..core.pzc import PZCTracker
-        fg, pg, gains_note = choose_gains(mission, rate, params.w_c, params.d_cen, args.gains)
-        tracker = PZCTracker(fg, pg, limits)
+        choice = resolved.gains
+        gains_note = choice.source
+        tracker = PZCTracker(choice.filter, choice.pzc, limits)
     elif args.controller == "pid":
         from ..core.baselines import PIDGains, PIDTracker
         tracker, gains_note = PIDTracker(PIDGains(), limits), "paper's PID (k_P 3.5, k_I 0.5, k_D 0.5)"
@@ -142,4 +140,11 @@ def run(args) -> int:
         if args.plot:
             print(f"plot        {args.plot}")
     sys.stdout.flush()
-    return 0
+    return ExitCode.OK
+
+
+def sim_gain_options(args):
+    """simulate's flags as the policy reads them (the same as run's for the same values)."""
+    from ..live.policy import GainOptions
+    return GainOptions(rate=args.rate, gains_file=args.gains, max_speed=args.max_speed,
+                       max_yaw_rate=args.max_yaw_rate, w_c=args.w_c, d_cen=args.d_cen)

@@ -47,10 +47,10 @@ def register(subparsers) -> None:
                    help="reference frequencies of the paper's ellipse to tune over together")
     p.add_argument("--duration", type=float, default=60.0, metavar="S",
                    help="simulated seconds per run (default 60)")
-    p.add_argument("--max-speed", type=float, default=6.0, metavar="M_S",
-                   help="command speed limit (default 6, the companion's default)")
-    p.add_argument("--max-yaw-rate", type=float, default=6.0, metavar="RAD_S",
-                   help="command yaw-rate limit (default 6, the companion's default)")
+    p.add_argument("--max-speed", type=float, metavar="M_S",
+                   help="command speed limit (default: the companion's, as run resolves it)")
+    p.add_argument("--max-yaw-rate", type=float, metavar="RAD_S",
+                   help="command yaw-rate limit (default: the companion's, as run resolves it)")
     p.add_argument("--max-accel", type=float, default=math.inf, metavar="M_S2",
                    help="the rover's acceleration limit (default none)")
     p.add_argument("--population", type=int, metavar="N",
@@ -145,12 +145,14 @@ def run(args) -> int:
     args.population = 128 if args.population is None else args.population
     args.rounds = 4 if args.rounds is None else args.rounds
     f_r = check(args)
-    from ..core.limits import Limits
+    from ..live import policy
     from ..sim.tuning import TuneConfig, tune
 
+    # The limits a run without a mission's or vehicle's would fly (the one policy).
+    limits = policy.choose_limits(None, policy.GainOptions(max_speed=args.max_speed,
+                                                          max_yaw_rate=args.max_yaw_rate))
     cfg = TuneConfig(rate_hz=args.rate, w_c=args.w_c, d_cen=args.d_cen, f_r=f_r,
-                     duration=args.duration,
-                     limits=Limits(max_speed=args.max_speed, max_yaw_rate=args.max_yaw_rate),
+                     duration=args.duration, limits=limits,
                      max_accel=args.max_accel, population=args.population, rounds=args.rounds,
                      seed=args.seed)
     with progress_bar(f"tune {args.rate:g} Hz", not args.no_progress) as progress:
@@ -159,7 +161,7 @@ def run(args) -> int:
     if _save(result.gains, d, args):
         return 0
     print(f"tuned for {args.rate:g} Hz, w_c {args.w_c:g} rad/s, d_cen {args.d_cen:g} m, "
-          f"limits {args.max_speed:g} m/s, {args.max_yaw_rate:g} rad/s "
+          f"limits {cfg.limits.max_speed:g} m/s, {cfg.limits.max_yaw_rate:g} rad/s "
           f"({result.evaluated} gain sets simulated)")
     _print_gains(d)
     for fr, cost, rms in zip(d["f_r"], d["f_cost"], d["steady_rms"]):

@@ -28,6 +28,11 @@ class Limits:
                 raise ValueError(f"{name} must be > 0, not {value!r}")
 
 
+# The companion's ceiling for a vehicle whose limits nobody gave: above what the paper's ellipse
+# needs at 0.12 Hz (peak 4.8 m/s), and a turn rate a 40 Hz yaw loop can use without chattering.
+DEFAULT_LIMITS = Limits(max_speed=6.0, max_yaw_rate=6.0)
+
+
 def speed_from_up(m, speed_law: str, norm_up: Num, heading_error: Num) -> Num:
     """v_ref from u_p: the paper's |u_p| (eq. 20) or its projection on the heading (default).
 

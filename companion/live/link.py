@@ -38,6 +38,7 @@ from ..mav.connection import open_connection  # noqa: E402
 from ..mav.sockets import size_receive_buffer  # noqa: E402
 from ..errors import UserError  # noqa: E402
 from ..core.signals import Command  # noqa: E402
+from .config import LinkConfig  # noqa: E402,F401  (its home; imported from here too)
 
 mavlink = mavutil.mavlink
 
@@ -54,19 +55,6 @@ ACCEPTED = mavlink.MAV_RESULT_ACCEPTED
 # Rates to fall back to, fastest first, when the vehicle refuses the one asked for.
 FALLBACK_RATES = (1000.0, 800.0, 500.0, 400.0, 250.0, 200.0, 100.0, 50.0, 40.0, 25.0, 20.0,
                   10.0, 5.0, 2.0, 1.0)
-
-
-@dataclass(frozen=True)
-class LinkConfig:
-    url: str
-    sysid: int | None = None          # vehicle to follow; None: the first vehicle heartbeat's
-    source_system: int = 255
-    source_component: int = mavlink.MAV_COMP_ID_ONBOARD_COMPUTER
-    heartbeat_timeout: float = 10.0   # s to wait for the vehicle's first heartbeat
-    ack_timeout: float = 1.0          # s to wait for one COMMAND_ACK
-    signing_key: bytes | None = None  # 32 bytes: sign outgoing, refuse unsigned
-    tlog: str | None = None           # path of a .tlog to record (pymavlink's format)
-    baud: int | None = None           # serial devices only; None: DEVICE,BAUD's or 115200
 
 
 @dataclass(frozen=True)

@@ -45,6 +45,7 @@ from .events import ControlChannel, ControlRequest, LoopRecord, Sink, StatusEven
 from ..core.limits import Limits
 from .link import HOLD_MODE, PX4, TRACK_MODE, Link
 from ..core.signals import Command, Measurement
+from .config import RunnerConfig
 from .stats import TrackingStats
 from .telemetry import TelemetryCheck
 
@@ -64,27 +65,6 @@ class State(str, Enum):
 
 
 ACTIVE = (State.ENGAGING, State.READY, State.TRACKING, State.PAUSED)
-
-
-@dataclass(frozen=True)
-class RunnerConfig:
-    stale_timeout: float = 0.5        # wall s without a valid sample -> failsafe
-    arm: bool = False                 # arm the vehicle ourselves (else wait for it)
-    autostart: bool = True            # track as soon as engaged (else wait for `start`)
-    telemetry_timeout: float = 10.0   # wall s for the first valid sample
-    mode_timeout: float = 10.0        # wall s to get into GUIDED / OFFBOARD
-    arm_timeout: float = 60.0         # wall s to see the vehicle armed
-    lost_timeout: float = 30.0        # wall s in failsafe before giving up
-    retry_interval: float = 1.0       # wall s between mode / arm / HOLD requests
-    offboard_warmup: float = 1.2      # vehicle s of setpoints before asking PX4 for OFFBOARD
-    hold_timeout: float = 2.0         # wall s to see HOLD confirmed when stopping
-    period: float | None = None       # nominal telemetry period, for missed-cycle counts
-    heartbeat_lost: float = 3.0       # wall s without a vehicle heartbeat -> failsafe
-    max_gap: float = 0.5              # vehicle s between tracked samples -> reset the tracker
-    # m: a mission whose reference at time 0 is further than this from the rover is refused
-    # before anything moves (inf: no limit); the first point of a far mission would otherwise
-    # be chased in a straight line, across whatever lies between
-    max_start_distance: float = math.inf
 
 
 @dataclass

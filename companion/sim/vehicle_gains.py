@@ -15,7 +15,7 @@ from dataclasses import replace
 from pathlib import Path
 from typing import Callable, Sequence
 
-from ..core.limits import Limits
+from ..core.limits import DEFAULT_LIMITS, Limits
 from ..core.trajectory import Trajectory
 from ..errors import UserError
 from . import gains as gains_mod
@@ -23,7 +23,6 @@ from . import vehicle_file
 from .gains import TunedGains
 from .robust import RobustConfig, RobustResult, tune
 
-DEFAULT_LIMIT = 6.0     # m/s and rad/s: the companion's ceiling when the vehicle has none
 PX4_MIN_PROGRESS = 0.3  # share of the reference speed u_p keeps along it on a PX4 vehicle
 
 
@@ -37,11 +36,12 @@ def digest(vehicle_path: str | Path) -> str:
 def vehicle_limits(vehicle, max_speed: float | None = None,
                    max_yaw_rate: float | None = None) -> Limits:
     """The companion's setpoint limits for a vehicle: what it can do (or the flags, if lower)."""
-    def pick(flag: float | None, own: float) -> float:
-        own = own if math.isfinite(own) else DEFAULT_LIMIT
+    def pick(flag: float | None, own: float, ceiling: float) -> float:
+        own = own if math.isfinite(own) else ceiling    # none known: the companion's ceiling
         return min(flag, own) if flag is not None else own
-    return Limits(max_speed=pick(max_speed, float(vehicle.max_speed)),
-                  max_yaw_rate=pick(max_yaw_rate, float(vehicle.max_yaw_rate)))
+    return Limits(max_speed=pick(max_speed, float(vehicle.max_speed), DEFAULT_LIMITS.max_speed),
+                  max_yaw_rate=pick(max_yaw_rate, float(vehicle.max_yaw_rate),
+                                    DEFAULT_LIMITS.max_yaw_rate))
 
 
 def config_for(vehicle_path: str | Path, rate: float,

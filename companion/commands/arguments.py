@@ -1,0 +1,216 @@
+"""The flags several commands share, one function per group, and the value types they parse.
+
+Each group's defaults are the live loop's own (:mod:`companion.live.config`), read when the
+parser is built, so a default is stated once; :mod:`companion.commands.options` reads a group's
+values back into the typed options of a flight. Only light modules are imported here: building
+the parser (``companion --help``) must stay instant.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import re
+
+from ..live.config import LINK, ORIGIN, RUNNER
+
+CONNECT_HELP = ("pymavlink connection string or serial device, e.g. /dev/ttyAMA0 or "
+                "/dev/ttyACM0,921600")
+BAUD_HELP = ("serial devices only: bits per second (default: DEVICE,BAUD's, else 115200 as "
+             "pymavlink; ArduPilot companion ports usually 921600)")
+DEFAULT_START_DISTANCE = 25.0   # m: --max-start-distance
+
+
+# --- value types ------------------------------------------------------------------------------
+
+def positive(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
+    if not (math.isfinite(value) and value > 0):
+        raise argparse.ArgumentTypeError(f"must be a finite number > 0, not {text}")
+    return value
+
+
+def non_negative(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
+    if not (math.isfinite(value) and value >= 0):
+        raise argparse.ArgumentTypeError(f"must be a finite number >= 0, not {text}")
+    return value
+
+
+def at_least_one(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not an integer: {text!r}") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"must be >= 1, not {value}")
+    return value
+
+
+def baud_rate(text: str) -> int:
+    from ..mav.connection import parse_baud
+    try:
+        return parse_baud(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
+def allow_negative_pairs(parser: argparse.ArgumentParser) -> None:
+    """Let ``--origin -35.36,149.16`` (southern / western) be a value, as argparse already lets
+    ``-35.36`` be: its test for a negative number knows no comma-separated list."""
+    parser._negative_number_matcher = re.compile(r"^-\d*\.?\d+(,-?\d*\.?\d+)*$")
+
+
+# --- groups -----------------------------------------------------------------------------------
+
+def add_link_arguments(p: argparse.ArgumentParser, title: str | None = None, *,
+                       default_connect: bool = False, required: bool = False) -> None:
+    """--connect, --baud, --sysid, --arm: the vehicle and how to reach it."""
+    g = p.add_argument_group(title) if title else p
+    g.add_argument("--connect", metavar="URL", required=required,
+                   default=LINK.url if default_connect else None,
+                   help=CONNECT_HELP + (f" (default {LINK.url})" if default_connect else ""))
+    g.add_argument("--baud", type=baud_rate, metavar="BPS", help=BAUD_HELP)
+    g.add_argument("--sysid", type=int, metavar="N",
+                   help="system id of the vehicle to follow (default: the first heartbeat's)")
+    g.add_argument("--arm", action="store_true",
+                   help="arm the vehicle (retrying once a second); default: wait for it")
+
+
+def add_origin_arguments(p: argparse.ArgumentParser) -> None:
+    """Where a mission placed by latitude / longitude goes, and how far its start may be."""
+    g = p.add_argument_group(
+        "where the mission is",
+        "A mission placed by latitude / longitude (.plan, .waypoints, TOML frame\n"
+        "\"geodetic\") is placed around the vehicle's own EKF origin, read from it\n"
+        "(GPS_GLOBAL_ORIGIN / HOME_POSITION) after connecting.")
+    g.add_argument("--origin", metavar="LAT,LON",
+                   help="the EKF origin you expect: refused when more than 5 m from the "
+                        "vehicle's; used as given only if the vehicle tells none")
+    g.add_argument("--origin-timeout", type=positive, default=ORIGIN.timeout, metavar="S",
+                   help="wall s to wait for the vehicle's EKF origin (its GPS fix; default "
+                        f"{ORIGIN.timeout:g})")
+    g.add_argument("--max-start-distance", type=non_negative, default=DEFAULT_START_DISTANCE,
+                   metavar="M", help="refuse a mission whose first point is more than M m from "
+                   f"the rover (default {DEFAULT_START_DISTANCE:g}; 0: no limit)")
+    allow_negative_pairs(p)
+
+
+def add_gain_arguments(p: argparse.ArgumentParser) -> None:
+    g = p.add_argument_group("gains and limits")
+    g.add_argument("--rate", type=positive, metavar="HZ",
+                   help="telemetry / control rate to ask for (default: the mission's, else 40)")
+    g.add_argument("--gains", metavar="FILE", help="tuned-gains TOML file (companion tune)")
+    g.add_argument("--k-df", type=positive, dest="k_df", metavar="K", help="filter k_{d,f}")
+    g.add_argument("--lambda-f", type=positive, dest="lambda_f", metavar="L", help="filter lambda_f")
+    g.add_argument("--k-dc", type=positive, dest="k_dc", metavar="K", help="PZC k_{d,c}")
+    g.add_argument("--lambda-c", type=positive, dest="lambda_c", metavar="L", help="PZC lambda_c")
+    add_limit_arguments(g)
+
+
+def add_limit_arguments(g) -> None:
+    g.add_argument("--max-speed", type=positive, dest="max_speed", metavar="M_S",
+                   help="speed limit of every setpoint (m/s)")
+    g.add_argument("--max-yaw-rate", type=positive, dest="max_yaw_rate", metavar="RAD_S",
+                   help="turn-rate limit of every setpoint (rad/s)")
+
+
+def add_vehicle_arguments(p: argparse.ArgumentParser) -> None:
+    v = p.add_argument_group("vehicle (to pick tuned gains)")
+    v.add_argument("--vehicle", metavar="FILE",
+                   help="the rover's vehicle file (companion identify / calibrate): its gains "
+                        "(found beside it, else tuned now and stored there) and its limits; "
+                        "default: the mission's [vehicle] file")
+    v.add_argument("--w-c", type=positive, dest="w_c", metavar="RAD_S",
+                   help="speed-loop bandwidth (default: the mission's [vehicle], else 20)")
+    v.add_argument("--d-cen", type=non_negative, dest="d_cen", metavar="M",
+                   help="axle to tracked point (default: the mission's [vehicle], else 0)")
+
+
+def add_timeout_arguments(p: argparse.ArgumentParser) -> None:
+    """The live loop's failsafe timeouts (companion run, identify, calibrate)."""
+    t = p.add_argument_group("timeouts (wall seconds)")
+    t.add_argument("--stale-timeout", type=positive, default=RUNNER.stale_timeout, metavar="S",
+                   help=f"stop the rover when no valid sample arrives for S (default {RUNNER.stale_timeout:g})")
+    t.add_argument("--heartbeat-timeout", type=positive, default=LINK.heartbeat_timeout,
+                   metavar="S", help="wait this long for the vehicle's heartbeat "
+                                     f"(default {LINK.heartbeat_timeout:g})")
+    t.add_argument("--telemetry-timeout", type=positive, default=RUNNER.telemetry_timeout,
+                   metavar="S", help="wait this long for the first valid sample "
+                                     f"(default {RUNNER.telemetry_timeout:g})")
+    t.add_argument("--arm-timeout", type=positive, default=RUNNER.arm_timeout, metavar="S",
+                   help=f"wait this long to see the vehicle armed (default {RUNNER.arm_timeout:g})")
+    t.add_argument("--lost-timeout", type=positive, default=RUNNER.lost_timeout, metavar="S",
+                   help=f"give up when telemetry stays lost for S (default {RUNNER.lost_timeout:g})")
+
+
+def add_safety_arguments(p: argparse.ArgumentParser) -> None:
+    """Flight logs and MAVLink signing (companion run, demo, identify, calibrate)."""
+    g = p.add_argument_group("flight log and signing")
+    g.add_argument("--log-dir", metavar="DIR",
+                   help="where the .tlog (all MAVLink traffic) and .csv (control loop) go "
+                        "(default ./logs); written as they go, a crash loses at most 100 ms")
+    g.add_argument("--no-log", dest="log", action="store_false", help="write no flight log")
+    add_signing_argument(g)
+
+
+def add_signing_argument(g, help: str | None = None) -> None:
+    g.add_argument("--signing-key", metavar="FILE",
+                   help=help or "MAVLink 2 signing: 32-byte secret (raw or 64 hex digits, mode "
+                                "600); sign what is sent, refuse unsigned or wrongly signed input")
+
+
+def add_output_arguments(p: argparse.ArgumentParser, progress: bool = False,
+                         json_help: str = "print one JSON result object at the end") -> None:
+    o = p.add_argument_group("output")
+    o.add_argument("--json", action="store_true", help=json_help)
+    if progress:
+        o.add_argument("--progress", action="store_true", help="progress bar on stderr")
+    o.add_argument("-q", "--quiet", action="store_true", help="no log lines on stderr")
+
+
+def add_zenoh_arguments(p: argparse.ArgumentParser, vehicle: bool = True,
+                        modes: tuple[str, ...] = ("peer", "client"),
+                        roles: tuple[str, ...] | None = None) -> None:
+    """The ``--zenoh-*`` flags (run, demo, identify, calibrate, monitor, control, router).
+    ``vehicle``: the command is a rover's (it publishes: --no-zenoh, --vehicle-id, ...);
+    ``roles``: the certificate roles it accepts with --zenoh-tls (a vehicle's command: rover)."""
+    p.set_defaults(zenoh_roles=roles if roles is not None else (("rover",) if vehicle else ()),
+                   zenoh_vehicle=vehicle)
+    g = p.add_argument_group(
+        "zenoh (live telemetry and remote control)",
+        "By default an embedded Zenoh peer (no router needed) with Zenoh's default discovery. "
+        "Flags override --zenoh-config FILE (else $ZENOH_CONFIG).")
+    if vehicle:
+        g.add_argument("--no-zenoh", dest="zenoh", action="store_false",
+                       help="publish nothing and open no Zenoh session")
+    g.add_argument("--zenoh-connect", action="append", default=[], metavar="ENDPOINT",
+                   help="connect to this Zenoh endpoint, e.g. tcp/10.0.0.2:7447 (repeatable)")
+    g.add_argument("--zenoh-listen", action="append", default=[], metavar="ENDPOINT",
+                   help="listen on this Zenoh endpoint, e.g. tcp/0.0.0.0:7448 (repeatable)")
+    g.add_argument("--zenoh-config", metavar="FILE", help="a Zenoh JSON5 config file")
+    p.set_defaults(zenoh_mode=None)
+    if len(modes) > 1:
+        g.add_argument("--zenoh-mode", choices=modes, default=None,
+                       help="peer (default) or client (all traffic through the router "
+                            "given with --zenoh-connect)")
+    g.add_argument("--zenoh-scouting", action=argparse.BooleanOptionalAction, default=None,
+                   help="multicast scouting (finding peers on the LAN); default: Zenoh's (on)")
+    g.add_argument("--zenoh-tls", metavar="DIR/NAME",
+                   help="mutual TLS with DIR/NAME.pem and DIR/NAME.key, issued by the CA "
+                        "DIR/ca.pem (companion pki); every endpoint must then be "
+                        "tls/HOST:PORT, and access control enforces the certificate's role")
+    if vehicle:
+        g.add_argument("--vehicle-id", metavar="ID",
+                       help="the <vehicle_id> in rover/<vehicle_id>/... (default rover<sysid>)")
+        g.add_argument("--state-every", type=at_least_one, default=1, metavar="N",
+                       help="publish state every N-th control cycle (default 1: every cycle)")
+        g.add_argument("--control-secret", metavar="FILE",
+                       help="enable the rover/<vehicle_id>/control queryable; requests must "
+                            "carry this file's secret (the file must be chmod 600)")

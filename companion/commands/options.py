@@ -1,0 +1,127 @@
+"""A flight's options, typed, read once from the parsed flags (and the ``--config`` file, which
+fills the same flags: :mod:`companion.commands.config_file`).
+
+One reader per argument group of :mod:`companion.commands.arguments`; a command calls the
+readers of the groups it registered, and :meth:`FlightOptions.from_args` reads them all for
+``companion run``. What the loop itself needs are the live layer's dataclasses
+(:mod:`companion.live.config`, :class:`companion.live.policy.GainOptions`); the rest (flight
+logs, output, Zenoh) are the edges' own. Nothing downstream reads ``args``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+from ..live.config import LinkConfig, OriginConfig, RunnerConfig
+from ..live.policy import GainOptions
+
+
+@dataclass(frozen=True)
+class LogOptions:
+    """--log-dir / --no-log."""
+
+    enabled: bool = True
+    folder: str | None = None          # None: ./logs
+
+
+@dataclass(frozen=True)
+class OutputOptions:
+    """--json, --progress, -q."""
+
+    json: bool = False
+    progress: bool = False
+    quiet: bool = False
+
+
+def _no_bus() -> Any:
+    from ..bus import BusOptions
+    return BusOptions(enabled=False)
+
+
+@dataclass(frozen=True)
+class FlightOptions:
+    """Everything a flying command was asked, built once."""
+
+    link: LinkConfig                   # signing_key and tlog are filled when the flight opens
+    runner: RunnerConfig = RunnerConfig()
+    gains: GainOptions = GainOptions()
+    vehicle_file: str | None = None    # --vehicle (else the mission's [vehicle] file)
+    origin: OriginConfig = OriginConfig()
+    realtime: bool = False
+    signing_key_file: str | None = None
+    log: LogOptions = LogOptions()
+    output: OutputOptions = OutputOptions()
+    bus: Any = field(default_factory=_no_bus)   # companion.bus.BusOptions
+
+    @classmethod
+    def from_args(cls, args: argparse.Namespace) -> "FlightOptions":
+        """``companion run``'s flags: every group."""
+        return cls(link=link_config(args),
+                   runner=runner_config(args, max_start_distance=start_limit(
+                       args.max_start_distance)),
+                   gains=gain_options(args), vehicle_file=args.vehicle,
+                   origin=origin_config(args), realtime=args.realtime,
+                   signing_key_file=args.signing_key, log=log_options(args),
+                   output=output_options(args), bus=bus_options(args))
+
+
+# --- one reader per group of companion.commands.arguments ------------------------------------
+
+def link_config(args: argparse.Namespace) -> LinkConfig:
+    """add_link_arguments + add_timeout_arguments' --heartbeat-timeout."""
+    return LinkConfig(url=args.connect, sysid=args.sysid, baud=args.baud,
+                      heartbeat_timeout=args.heartbeat_timeout)
+
+
+def runner_config(args: argparse.Namespace, **more: Any) -> RunnerConfig:
+    """add_timeout_arguments + --arm (+ add_origin_arguments' --max-start-distance, if given)."""
+    return RunnerConfig(arm=args.arm, stale_timeout=args.stale_timeout,
+                        telemetry_timeout=args.telemetry_timeout, arm_timeout=args.arm_timeout,
+                        lost_timeout=args.lost_timeout, **more)
+
+
+def start_limit(metres: float) -> float:
+    """--max-start-distance in metres; 0: no limit."""
+    return math.inf if not metres else float(metres)
+
+
+def origin_config(args: argparse.Namespace) -> OriginConfig:
+    """add_origin_arguments (its --max-start-distance goes to the runner)."""
+    from .mission import parse_origin
+    return OriginConfig(expected=parse_origin(args.origin), timeout=args.origin_timeout)
+
+
+def gain_options(args: argparse.Namespace, vehicle: bool = True) -> GainOptions:
+    """add_gain_arguments (+ add_vehicle_arguments' --w-c and --d-cen when ``vehicle``)."""
+    return GainOptions(rate=args.rate, gains_file=args.gains, k_df=args.k_df,
+                       lambda_f=args.lambda_f, k_dc=args.k_dc, lambda_c=args.lambda_c,
+                       max_speed=args.max_speed, max_yaw_rate=args.max_yaw_rate,
+                       w_c=args.w_c if vehicle else None, d_cen=args.d_cen if vehicle else None)
+
+
+def log_options(args: argparse.Namespace) -> LogOptions:
+    """add_safety_arguments' --log-dir / --no-log."""
+    return LogOptions(enabled=args.log, folder=args.log_dir)
+
+
+def output_options(args: argparse.Namespace, progress: bool = True) -> OutputOptions:
+    """add_output_arguments (``progress``: the command has --progress)."""
+    return OutputOptions(json=args.json, progress=args.progress if progress else False,
+                         quiet=args.quiet)
+
+
+def bus_options(args: argparse.Namespace, mode: str | None = None) -> Any:
+    """add_zenoh_arguments: a companion.bus.BusOptions."""
+    from ..bus import BusOptions
+    common = dict(mode=mode or args.zenoh_mode, connect=tuple(args.zenoh_connect),
+                  listen=tuple(args.zenoh_listen), config_file=args.zenoh_config,
+                  scouting=args.zenoh_scouting, tls=args.zenoh_tls,
+                  roles=tuple(args.zenoh_roles))
+    if not args.zenoh_vehicle:
+        return BusOptions(**common)
+    return BusOptions(enabled=args.zenoh, vehicle_id=args.vehicle_id,
+                      state_every=args.state_every, control_secret=args.control_secret,
+                      **common)

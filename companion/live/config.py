@@ -1,0 +1,63 @@
+"""The live loop's settings, as plain dataclasses: the one place their defaults are stated.
+
+Light on purpose (no pymavlink, nothing of the loop): the command line reads its flags' defaults
+from here when it builds its parsers, so ``companion --help`` stays instant and a default is
+written once. :mod:`companion.live.link` and :mod:`companion.live.runner` use them.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+MAV_COMP_ID_ONBOARD_COMPUTER = 191    # pymavlink's mavlink.MAV_COMP_ID_ONBOARD_COMPUTER
+DEFAULT_RATE = 40.0    # Hz: the telemetry / control rate asked for when nobody says (a stock
+                       # ArduPilot's); the policy (companion.live.policy) decides the rest
+MAX_RATE = 1000.0      # Hz
+
+
+@dataclass(frozen=True)
+class LinkConfig:
+    url: str
+    sysid: int | None = None          # vehicle to follow; None: the first vehicle heartbeat's
+    source_system: int = 255
+    source_component: int = MAV_COMP_ID_ONBOARD_COMPUTER
+    heartbeat_timeout: float = 10.0   # s to wait for the vehicle's first heartbeat
+    ack_timeout: float = 1.0          # s to wait for one COMMAND_ACK
+    signing_key: bytes | None = None  # 32 bytes: sign outgoing, refuse unsigned
+    tlog: str | None = None           # path of a .tlog to record (pymavlink's format)
+    baud: int | None = None           # serial devices only; None: DEVICE,BAUD's or 115200
+
+
+@dataclass(frozen=True)
+class RunnerConfig:
+    stale_timeout: float = 0.5        # wall s without a valid sample -> failsafe
+    arm: bool = False                 # arm the vehicle ourselves (else wait for it)
+    autostart: bool = True            # track as soon as engaged (else wait for `start`)
+    telemetry_timeout: float = 10.0   # wall s for the first valid sample
+    mode_timeout: float = 10.0        # wall s to get into GUIDED / OFFBOARD
+    arm_timeout: float = 60.0         # wall s to see the vehicle armed
+    lost_timeout: float = 30.0        # wall s in failsafe before giving up
+    retry_interval: float = 1.0       # wall s between mode / arm / HOLD requests
+    offboard_warmup: float = 1.2      # vehicle s of setpoints before asking PX4 for OFFBOARD
+    hold_timeout: float = 2.0         # wall s to see HOLD confirmed when stopping
+    period: float | None = None       # nominal telemetry period, for missed-cycle counts
+    heartbeat_lost: float = 3.0       # wall s without a vehicle heartbeat -> failsafe
+    max_gap: float = 0.5              # vehicle s between tracked samples -> reset the tracker
+    # m: a mission whose reference at time 0 is further than this from the rover is refused
+    # before anything moves (inf: no limit); the first point of a far mission would otherwise
+    # be chased in a straight line, across whatever lies between
+    max_start_distance: float = math.inf
+
+
+@dataclass(frozen=True)
+class OriginConfig:
+    """Where a mission placed by latitude / longitude goes (:mod:`companion.live.origin`)."""
+
+    expected: tuple[float, float] | None = None   # --origin: checked against the vehicle's
+    timeout: float = 60.0             # wall s to wait for the vehicle's EKF origin
+
+
+LINK = LinkConfig(url="udpin:0.0.0.0:14550")    # the defaults, for the command line to show
+RUNNER = RunnerConfig()
+ORIGIN = OriginConfig()
