@@ -29,6 +29,7 @@ import pytest
 
 from companion import cli
 from companion.commands import run as run_command
+from companion.errors import ExitCode
 
 ROOT = Path(__file__).resolve().parents[1]
 UNIT = ROOT / "deploy" / "pzc-rover.service"
@@ -103,6 +104,21 @@ def test_documented_exit_codes_end_the_service_and_crashes_restart_it():
     assert int(unit["Unit"]["StartLimitBurst"]) >= 1
     assert float(unit["Unit"]["StartLimitIntervalSec"]) > (
         int(unit["Unit"]["StartLimitBurst"]) * float(service["RestartSec"]))
+
+
+def test_restart_policy_is_the_exit_code_enum():
+    """The unit never restarts a run that ended on a user's mistake or a fault (restarting
+    would repeat it, or drive a rover that a fault or a pilot stopped), and nothing else
+    ``run`` means to return is in the list: the enum is the one statement of what they mean."""
+    service = unit_service()
+    prevent = {int(code) for code in service["RestartPreventExitStatus"].split()}
+    assert prevent == {ExitCode.USER_ERROR, ExitCode.FAULT}
+    assert ExitCode.OK not in prevent and not restarts(service, exit_code=ExitCode.OK)
+    # what run --help documents is what the enum says, code for code
+    documented = documented_exit_codes()
+    assert set(documented) == {ExitCode.OK, ExitCode.USER_ERROR, ExitCode.FAULT}
+    # A crash is a Python traceback's exit 1 (run never returns CHECK_FAILED): restarted.
+    assert restarts(service, exit_code=1)
 
 
 def test_unit_runs_as_its_own_user_with_only_the_capability_realtime_needs():

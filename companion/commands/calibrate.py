@@ -93,7 +93,7 @@ def _refine(options, args, vehicle: Path, report, log) -> dict:
     from ..live.policy import GainOptions
     from .identify import FitOptions, identify_log
     from .options import OutputOptions
-    from .run import fly_mission
+    from .flight import fly_mission
     folder = vehicle.parent
     # The vehicle's own gains and limits (no manoeuvre limits), at the manoeuvre's rate.
     flown = replace(options, vehicle_file=str(vehicle), gains=GainOptions(rate=args.rate),

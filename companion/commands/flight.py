@@ -181,3 +181,16 @@ def refuse_user_error(result) -> None:
     from ..errors import ExitCode
     if result.exit_code == ExitCode.USER_ERROR:
         raise UserError(result.reason)
+
+
+def fly_mission(options, mission, label: str = "run", command: str = "companion run"):
+    """Fly ``mission`` with ``options`` (a FlightOptions): (the result, the flight log's paths
+    or None). Also ``calibrate``'s refining flight. A user's problem raises UserError."""
+    log = logger(f"companion {label}", options.output.quiet)
+    flight = Flight(options, label, log)          # a bad signing key fails here
+    vehicle = known_vehicle(options.vehicle_file, mission, options.gains, command,
+                            not options.output.quiet, log)   # may tune for a minute
+    with flight:
+        result = flight.fly(mission, vehicle)
+    refuse_user_error(result)
+    return result, flight.paths

@@ -50,7 +50,7 @@ def register(subparsers) -> None:
 
 
 def run(args) -> int:
-    from .flight import load_mission
+    from .flight import fly_mission, load_mission
     from .options import FlightOptions
     from .run_result import print_result
     mission = load_mission(args.mission, args.origin)
@@ -59,17 +59,3 @@ def run(args) -> int:
     print_result(result, options.output.json,
                  {"tlog": paths.tlog, "csv": paths.csv} if paths else None)
     return result.exit_code
-
-
-def fly_mission(options, mission, label: str = "run", command: str = "companion run"):
-    """Fly ``mission`` with ``options`` (a FlightOptions): (the result, the flight log's paths
-    or None). Also ``calibrate``'s refining flight. A user's problem raises UserError."""
-    from .flight import Flight, known_vehicle, logger, refuse_user_error
-    log = logger(f"companion {label}", options.output.quiet)
-    flight = Flight(options, label, log)          # a bad signing key fails here
-    vehicle = known_vehicle(options.vehicle_file, mission, options.gains, command,
-                            not options.output.quiet, log)   # may tune for a minute
-    with flight:
-        result = flight.fly(mission, vehicle)
-    refuse_user_error(result)
-    return result, flight.paths

@@ -129,7 +129,11 @@ def run(args) -> int:
     if args.json:
         print(json.dumps({"mission": mission.source, "rate_hz": rate, "f_cost": f_cost,
                           "steady_rms": steady, "duration_s": mission.duration,
-                          "controller": args.controller, "gains": gains_note}))
+                          "controller": args.controller, "gains": gains_note,
+                          "gains_values": (policy.gains_dict(choice.filter, choice.pzc)
+                                           if args.controller == "pzc" else None),
+                          "limits": {"max_speed": _finite_or_none(limits.max_speed),
+                                     "max_yaw_rate": _finite_or_none(limits.max_yaw_rate)}}))
     else:
         print(f"mission     {mission.name} ({mission.source})")
         print(f"controller  {args.controller} at {rate:g} Hz; gains: {gains_note}")
@@ -141,6 +145,10 @@ def run(args) -> int:
             print(f"plot        {args.plot}")
     sys.stdout.flush()
     return ExitCode.OK
+
+
+def _finite_or_none(x: float) -> float | None:
+    return x if math.isfinite(x) else None
 
 
 def sim_gain_options(args):
