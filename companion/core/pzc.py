@@ -11,110 +11,35 @@ characteristic polynomial factors as (s + k_dc)(s + lambda_c): the error obeys t
 system p~' = -lambda_c p~ + q driven by an excitation q' = -k_dc q + ... (Lemmas 5 and 7,
 eqs. (43), (52)). With k_dc large, q dies fast and p~ decays at lambda_c, the objective (4).
 
-Speed law. Eq. (20) sets v_ref = |u_p| (``speed_law="paper"``). That law never slows down for
-a heading error: with d_cen = 0 a rover pointing away from u_p drives at full speed the wrong
-way while it turns, and on a moving reference it settles into orbits around it. The default,
-``speed_law="projected"``, commands the component of u_p along the current heading,
+Speed law. ``speed_law="paper"``: eq. (20), v_ref = |u_p|. ``speed_law="projected"`` (the
+default): the component of u_p along the heading, which keeps the limit property (21),
 
-    v_ref = u_x cos(phi_hat) + u_y sin(phi_hat) = |u_p| cos(phi_ref - phi_hat),
+    v_ref = u_x cos(phi_hat) + u_y sin(phi_hat) = |u_p| cos(phi_ref - phi_hat).
 
-which keeps the limit property (21): as phi -> phi_ref, v_ref -> |u_p| and Delta f -> 0. The
-rover then never moves against u_p (its velocity along u_p is |u_p| cos^2 >= 0) and backs up
-while it turns round instead of circling.
+Extensions beyond the paper, each off by default (the paper's law exactly) and chosen by a tuner
+(``companion tune``; the robust tuner :mod:`companion.sim.robust` for an identified vehicle):
 
-Extensions beyond the paper (all off by default, each measured by ``companion paper-table`` and
-chosen by ``companion tune``):
-
-* separate gain pairs for the yaw loop (``k_dc_yaw``, ``lambda_c_yaw``); the paper uses one pair;
-* reference-velocity feed-forward ``u_p += p_ref'`` (``velocity_ff``), which makes the error
-  dynamics p~' = -(K_P p~ + K_I int p~) exact for a moving reference;
-* heading-rate feed-forward ``omega_ref += d/dt heading(p_ref')`` (``heading_rate_ff``);
-* reference-acceleration feed-forward ``u_p += tau p_ref''`` (``accel_ff = tau`` seconds), which
-  compensates a slow actuator: a first-order lag w_c/(s + w_c) driven by v_ref + p_ref''/w_c
-  delivers p_ref' exactly, so tau = 1/w_c is the ideal value for a linear actuator. Because
-  p_ref'' has a centripetal part, it also turns phi_ref = atan2(u_p) ahead of the path, leading
-  the (equally slow) yaw actuator;
-* actuator lead (``lead_tau`` = the actuator's time constant 1/w_c in seconds, ``lead_max_gain``):
-  cancels a slow actuator's pole, see :mod:`companion.core.lead`.
-
-Extensions for a real autopilot's inner loops (pure delay, lag, acceleration limits, a top speed;
-also off by default, chosen by the robust tuner :mod:`companion.sim.robust`, which knows the
-identified vehicle):
-
-* **split acceleration feed-forward** (``accel_ff_turn``, seconds): ``accel_ff`` previews the
-  whole of p_ref'' by one time tau, u_p += tau p_ref''. Its two parts do different jobs.
-  The part along p_ref' is a speed preview: a speed channel with delay d and lag l driven by
-  |p_ref'| + tau d|p_ref'|/dt delivers |p_ref'| on a ramp when tau = d + l, whatever the
-  yaw loop does. The part normal to p_ref' (the centripetal v^2/R) instead turns phi_ref =
-  atan2(u_p) ahead of the path by about tau * heading rate: right for a yaw loop as slow as
-  the speed loop, too early where the yaw channel is much faster (ArduPilot Rover: speed
-  0.14 s delay + 0.08 s lag, turn rate 0.045 + 0.017 s), where it cuts every turn. One tau
-  must compromise (the robust tuner picked 0.06 s on such a rover: half the speed lag
-  uncompensated). With ``accel_ff_turn`` set, the normal part uses its own time:
-
-      u_p += accel_ff p_ref'' + (accel_ff_turn - accel_ff) a_n,
-      a_n  = (d/dt heading(p_ref')) J p_ref'     (J: rotation by +90 deg)
-
-  so ``accel_ff`` can be the speed channel's d + l and ``accel_ff_turn`` the turn channel's
-  (on the rover above: 0.22 s and ~0; 0.08 Hz ellipse 0.125 -> 0.054 m steady RMS in the
-  model). ``None`` (default) is the single-tau form above.
-* **braking-curve proportional terms with integrator hold** (``brake_accel`` m/s^2,
-  ``brake_yaw_accel`` rad/s^2): a rate-limited inner loop (ArduPilot's ATC_ACCEL_MAX,
-  ATC_STR_ACC_MAX) turns a linear P demand K_P e, for a large e, into a ramp much slower than
-  the loop was designed for; the demand overshoots what can be stopped in time, and the PI's
-  integrator winds up on an error the vehicle cannot follow, which then pays it back as
-  overshoot: a limit cycle at the rate limit (seen on a 15 % slower neighbour of the identified
-  rover as soon as the yaw gains exceed ~1). With ``brake_yaw_accel = alpha`` the yaw P term is
-  ArduPilot's own square-root controller (AC_AttitudeControl ``sqrt_controller``):
-
-      P(e) = K_P e                                    for |e| <= alpha / K_P^2
-           = sign(e) sqrt(2 alpha (|e| - alpha / (2 K_P^2)))   beyond,
-
-  continuous with a continuous slope, the rate from which a vehicle decelerating at alpha stops
-  exactly at e = 0, and beyond the linear zone the yaw integrator is held: it integrates only
-  errors the vehicle can follow at its rate limit (an anti-windup against the rate limit, as
-  conditional integration is against the clamp). ``brake_accel`` does the same for the position
-  loop on |p~| (the vector's direction is kept). Inside the linear zone both are eq. (22)/(25)
-  exactly, so the PZC factorisation (Lemmas 5, 7) holds for small errors; the braking curve only
-  reshapes large transients, which lets the tuner raise the yaw gains without limit cycles
-  (fixed gains, 0.12 Hz ellipse: 1.88 -> 1.61 m with the yaw curve, 1.51 m with both). 0
-  (default) is off.
-
-Extension for a velocity-vector autopilot on an Ackermann rover (PX4; off by default):
-
-* **progress floor** (``min_progress``, a share gamma of the reference speed): PX4 steers a rover
-  along u_p itself; a u_p that points backwards (the rover ahead of the reference, K_P p~
-  larger than p_ref') makes a rover that cannot turn on the spot drive a loop at its minimum
-  radius and come back: an orbit. With gamma > 0 the component of u_p along the reference's
-  direction t = p_ref' / |p_ref'| is kept at or above gamma |p_ref'|,
-
-      u_p += max(0, gamma |p_ref'| - u_p . t) t,
-
-  (the normal part untouched), so an ahead rover slows down and lets the reference come to it
-  instead of turning round, and the position integrators are held while the floor acts (the
-  error it leaves is not one the law should wind up on). Where the reference stands still
-  (|p_ref'| = 0) nothing changes.
-
-Re-tuned with all three (``companion tune --vehicle``), the rover above holds in the model
-0.002 / 0.045 / 1.41 m steady RMS on the 0.04 / 0.08 / 0.12 Hz ellipse (before: 0.022 / 0.125 /
-1.98; the 0.12 Hz reference peaks at 4.77 m/s against a 3.08 m/s top speed, and any path
-within the top speed stays >= ~1.1 m away), and on ArduPilot SITL 0.014 / 0.063 / 1.43 m
-(before: 0.022 / 0.137 / 2.01), the turn-rate setpoint never at its limit.
+* ``k_dc_yaw``, ``lambda_c_yaw``: the yaw loop's own PZC pair in eq. (23);
+* ``velocity_ff``:     u_p += p_ref'
+* ``heading_rate_ff``: omega_ref += d/dt heading(p_ref')
+* ``accel_ff`` = tau (s): u_p += tau p_ref''; with ``accel_ff_turn`` = tau_n (s) the part normal
+  to p_ref' takes its own time:
+      u_p += tau p_ref'' + (tau_n - tau) a_n,   a_n = (d/dt heading(p_ref')) J p_ref'
+  (J: rotation by +90 deg);
+* ``brake_accel`` (m/s^2, position loop on |p~|), ``brake_yaw_accel`` = alpha (rad/s^2, yaw loop):
+  the P term becomes ArduPilot's square-root controller, and the integrator is held beyond its
+  linear zone:
+      P(e) = K_P e                                            for |e| <= alpha / K_P^2
+           = sign(e) sqrt(2 alpha (|e| - alpha / (2 K_P^2)))  beyond;
+* ``min_progress`` = gamma: with t = p_ref' / |p_ref'|, u_p += max(0, gamma |p_ref'| - u_p . t) t,
+  the position integrators held while it acts (nothing changes where |p_ref'| = 0);
+* ``lead_tau``, ``lead_max_gain``: the actuator lead of :mod:`companion.core.lead`.
 
 Limits: speed and yaw rate are clamped; while either output is clamped its integrator is held
 (conditional integration), so nothing winds up in saturation.
 
-Tried and not kept (measured on the identified ArduPilot rover's model, robust ensemble):
-previewing the pose by the delay with the filter's rate estimates (a Smith-like predictor; at
-40 Hz the rate estimates carry the position noise x 40/s, which costs more at 0.02-0.04 Hz
-than the preview gains at 0.08 Hz); extrapolating the heading-rate feed-forward to t + preview
-(worse at 0.12 Hz); slew-limiting the speed / yaw-rate setpoints to the accel limits (no gain for
-speed; for yaw it adds lag and limit-cycles); scaling the velocity feed-forward down or up while
-the reference outruns the top speed, or adding the centripetal preview only then ("cutting
-inside": no better than the braking curve alone); slowing the reference's clock while it is out
-of reach and catching up after (steady RMS is against the real-time reference, and at 0.12 Hz
-the reference is out of reach for most of each lap, so the clock never catches up: 1.5 -> 5 m,
-and 0.043 -> 0.11 m at 0.08 Hz).
+Why each extension exists, what it measured and what was tried and not kept: the design note
+docs/design/pzc-extensions.md.
 """
 
 from __future__ import annotations

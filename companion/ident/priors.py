@@ -17,10 +17,10 @@ How ArduPilot Rover's parameters map onto :class:`companion.sim.plant.RoverParam
 * ``ATC_STR_ACC_MAX`` (deg/s^2, 0 = no limit) -> ``max_yaw_accel``; ``ATC_STR_DEC_MAX`` where
   the firmware has it (0 = as accel) -> ``max_yaw_decel``;
 * ``ATC_STR_RAT_MAX`` (deg/s, 0 = no limit) -> ``max_yaw_rate``;
-* ``WP_SPEED`` (m/s) -> ``max_speed``: GUIDED holds a faster speed setpoint to it (seen on
-  SITL rover-skid: a 4.8 m/s setpoint settles at exactly WP_SPEED 3.0 m/s, on a 15 m straight);
-  no faster than full throttle, CRUISE_SPEED * 100 / CRUISE_THROTTLE (ArduPilot's throttle
-  feed-forward assumes speed proportional to throttle), which is the prior without WP_SPEED.
+* ``WP_SPEED`` (m/s) -> ``max_speed``: GUIDED holds a faster speed setpoint to it (as seen on
+  SITL: docs/design/vehicle-model.md); no faster than full throttle,
+  CRUISE_SPEED * 100 / CRUISE_THROTTLE (ArduPilot's throttle feed-forward assumes speed
+  proportional to throttle), which is the prior without WP_SPEED.
 
 ``MOT_STR_THR_MIX`` is read and recorded but sets nothing: how steering and throttle share the
 motors is not the model's coupling share, which only a turn at speed shows.

@@ -6,7 +6,7 @@ plan's home when no origin is given (simulation). The path starts at home, where
 when it starts a mission, and visits every ``MAV_CMD_NAV_WAYPOINT`` (16) in order;
 :mod:`companion.mission` rounds its corners and drives it at the cruise speed.
 
-Items policy (documented in the README): an item the tracker cannot follow is *reported*, one
+Items policy (documented in docs/missions.md): an item the tracker cannot follow is *reported*, one
 warning line per item (``ImportedPlan.warnings``), and left out of the path: takeoff, land,
 loiter, return-to-launch, jumps, camera and other DO commands, a waypoint's hold time, a waypoint
 at the same place as the previous point. The first ``DO_CHANGE_SPEED`` before any waypoint sets

@@ -10,9 +10,8 @@ Each channel's input is the command after a pure delay, clamped to the vehicle's
 turn rate, and skid-steer mixing takes from both: the speed clamp shrinks while the rover turns
 (``turn_speed_coupling`` c), ``|u_v| <= max_speed (1 - c min(1, |omega| / max_yaw_rate))``, and
 the turn-rate clamp while it drives (``speed_turn_coupling`` c_w),
-``|u_omega| <= max_yaw_rate (1 - c_w min(1, |v| / max_speed))`` (ArduPilot Rover SITL rover-skid
-turns at 2.1 rad/s in place but only about 1.8 rad/s at full throttle: when the motors saturate
-the mixer gives up turn rate as well as speed). Both clamps use the state at the step's start.
+``|u_omega| <= max_yaw_rate (1 - c_w min(1, |v| / max_speed))`` (when the motors saturate the
+mixer gives up turn rate as well as speed). Both clamps use the state at the step's start.
 Without delays, rate limits
 or coupling this is the paper's plant (first-order actuators at ``w_c``); with them it is what a
 setpoint meets inside ArduPilot Rover (a rate-limited target, a lag, a delay, shared motor range;
@@ -45,6 +44,9 @@ sine and cosine at two points per step (mid and end; the start is the previous e
 four. With rate limits each channel is still exact over a step (a ramp at the limit until the
 error is small enough, then the exponential; its integral gives the heading), and x, y again
 use Simpson's rule. Delays need a fixed step (the commands in flight sit in a ring buffer).
+
+What each piece was built from (the autopilots' measured behaviour): the design note
+docs/design/vehicle-model.md.
 """
 
 from __future__ import annotations
