@@ -103,7 +103,11 @@ def add_origin_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def add_gain_arguments(p: argparse.ArgumentParser) -> None:
+    from ..core.controllers import DEFAULT, NAMES      # names only: no numpy to build the CLI
     g = p.add_argument_group("gains and limits")
+    g.add_argument("--controller", choices=NAMES, default=DEFAULT,
+                   help=f"the tracker to fly (default {DEFAULT}); pid and kanayama fly their "
+                        "own default gains within the same limits")
     g.add_argument("--rate", type=positive, metavar="HZ",
                    help="telemetry / control rate to ask for (default: the mission's, else 40)")
     g.add_argument("--gains", metavar="FILE", help="tuned-gains TOML file (companion tune)")

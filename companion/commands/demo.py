@@ -128,13 +128,14 @@ def run(args) -> int:
     # as `companion run --vehicle` does: shipped beside the preset, else tuned now.
     own_file = args.vehicle or vehicle_file.preset_path(args.preset)
     vehicle = (known_vehicle(str(own_file), mission, gains, "companion demo",
-                             not args.quiet and not args.json, log)
+                             not args.quiet and not args.json, log, args.controller)
                if own_file is not None else KnownVehicle())
     vehicle = replace(vehicle, limits=vehicle_limits(params))
     port = _free_port()
     options = FlightOptions(
         link=LinkConfig(url=f"udpin:127.0.0.1:{port}", heartbeat_timeout=15.0),
-        runner=RunnerConfig(arm=True), gains=gains, signing_key_file=args.signing_key,
+        runner=RunnerConfig(arm=True), gains=gains, controller=args.controller,
+        signing_key_file=args.signing_key,
         log=log_options(args), output=OutputOptions(json=args.json, progress=True,
                                                     quiet=args.quiet),
         bus=bus_options(args))

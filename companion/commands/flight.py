@@ -19,6 +19,7 @@ from dataclasses import replace
 from pathlib import Path
 from typing import Any, Callable, Sequence
 
+from ..core import controllers
 from ..errors import UserError
 from .options import FlightOptions, LogOptions
 
@@ -62,9 +63,10 @@ def gains_for_vehicle(path, rate: float, command: str, show_bar: bool, log: Log,
 
 
 def known_vehicle(path: str | None, mission: Any, gains: Any, command: str, show_bar: bool,
-                  log: Log):
+                  log: Log, controller: str = controllers.DEFAULT):
     """What the policy knows of the vehicle file ``path`` (None: the mission's [vehicle] file):
-    its limits, and its gains for the rate asked, unless a --gains file overrides them."""
+    its limits, and its gains for the rate asked, unless a --gains file overrides them or the
+    ``controller`` flies gains of its own (then nothing is tuned)."""
     from ..live.policy import KnownVehicle, requested_rate
     path = path or mission.vehicle_file
     if path is None:
@@ -73,7 +75,7 @@ def known_vehicle(path: str | None, mission: Any, gains: Any, command: str, show
     from ..sim.vehicle_gains import vehicle_limits
     params = vehicle_file.load(path).params
     limits = vehicle_limits(params)
-    if gains.gains_file:
+    if gains.gains_file or not controllers.get(controller).uses_pzc_gains:
         return KnownVehicle(limits=limits, w_c=float(params.w_c), d_cen=float(params.d_cen))
     tuned = gains_for_vehicle(path, requested_rate(mission, gains),
                               f"{command} --vehicle {path} (tuned on first use)", show_bar, log)
@@ -159,7 +161,7 @@ class Flight:
                        tlog=self.paths.tlog if self.paths is not None else None)
         return RunSettings(link=link, mission=mission, runner=o.runner, gains=o.gains,
                            vehicle=vehicle if vehicle is not None else KnownVehicle(),
-                           origin=o.origin, realtime=o.realtime)
+                           origin=o.origin, realtime=o.realtime, controller=o.controller)
 
     def fly(self, mission: Any, vehicle: Any = None, sinks: Sequence[Any] = (),
             make_tracker: Callable[[Any, Any], Any] | None = None):
@@ -189,7 +191,8 @@ def fly_mission(options, mission, label: str = "run", command: str = "companion 
     log = logger(f"companion {label}", options.output.quiet)
     flight = Flight(options, label, log)          # a bad signing key fails here
     vehicle = known_vehicle(options.vehicle_file, mission, options.gains, command,
-                            not options.output.quiet, log)   # may tune for a minute
+                            not options.output.quiet, log,
+                            options.controller)   # may tune for a minute
     with flight:
         result = flight.fly(mission, vehicle)
     refuse_user_error(result)

@@ -15,6 +15,7 @@ import math
 from dataclasses import dataclass, field
 from typing import Any
 
+from ..core.controllers import DEFAULT as DEFAULT_CONTROLLER
 from ..live.config import LinkConfig, OriginConfig, RunnerConfig
 from ..live.policy import GainOptions
 
@@ -49,6 +50,7 @@ class FlightOptions:
     runner: RunnerConfig = RunnerConfig()
     gains: GainOptions = GainOptions()
     vehicle_file: str | None = None    # --vehicle (else the mission's [vehicle] file)
+    controller: str = DEFAULT_CONTROLLER   # --controller (companion.core.controllers)
     origin: OriginConfig = OriginConfig()
     realtime: bool = False
     signing_key_file: str | None = None
@@ -63,6 +65,7 @@ class FlightOptions:
                    runner=runner_config(args, max_start_distance=start_limit(
                        args.max_start_distance)),
                    gains=gain_options(args), vehicle_file=args.vehicle,
+                   controller=args.controller,
                    origin=origin_config(args), realtime=args.realtime,
                    signing_key_file=args.signing_key, log=log_options(args),
                    output=output_options(args), bus=bus_options(args))

@@ -30,6 +30,7 @@ def print_result(result, as_json: bool, extra: dict | None = None) -> None:
         f"{sum(rejected.values())} refused {rejected or ''}; {d['missed_cycles']} missed cycles",
         f"setpoints   {d['setpoints_sent']} sent; failsafes {d['failsafes']}; "
         f"HOLD {'confirmed' if d['hold_confirmed'] else 'not confirmed'}",
+        f"controller  {d['controller']}",
         f"gains       {d['gains_source']}",
     ]
     if d.get("ekf_origin"):

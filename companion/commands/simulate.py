@@ -42,11 +42,31 @@ def register(subparsers) -> None:
                    help="speed limit of every command (m/s)")
     p.add_argument("--max-yaw-rate", type=float, dest="max_yaw_rate", metavar="RAD_S",
                    help="turn-rate limit of every command (rad/s)")
-    p.add_argument("--controller", choices=("pzc", "pid", "kanayama"), default="pzc")
+    from ..core.controllers import DEFAULT, NAMES      # names only: no numpy to build the CLI
+    p.add_argument("--controller", choices=NAMES, default=DEFAULT,
+                   help=f"the tracker to fly (default {DEFAULT}); pid and kanayama fly their "
+                        "own default gains within the same limits")
     p.add_argument("--origin", metavar="LAT,LON", help="EKF origin for geodetic missions")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.add_argument("--plot", metavar="OUT.png", help="draw the run (path and error)")
     p.set_defaults(func=run)
+
+
+def build_tracker(controller: str, resolved) -> tuple[object, dict, str]:
+    """(the tracker ``controller`` names, its gains, where they came from) for the policy's
+    ``resolved`` rate, gains and limits: the policy's gains for a controller that flies the
+    filter + PZC gains, the controller's own defaults otherwise (as ``companion run`` builds
+    it: :func:`companion.live.session.build_tracker`)."""
+    from ..core import controllers
+    from ..live import policy
+    entry = controllers.get(controller)
+    if not entry.uses_pzc_gains:
+        return (controllers.build(controller, resolved.limits), entry.gains_dict(),
+                entry.defaults_source())
+    choice = resolved.gains
+    return (controllers.build(controller, resolved.limits, filter_gains=choice.filter,
+                              pzc_gains=choice.pzc),
+            policy.gains_dict(choice.filter, choice.pzc), choice.source)
 
 
 class _Recorder:
@@ -54,7 +74,12 @@ class _Recorder:
 
     def __init__(self, tracker):
         self.tracker = tracker
+        self.name = tracker.name
         self.log: dict[str, list[float]] = {k: [] for k in ("t", "x", "y", "x_ref", "y_ref")}
+
+    @property
+    def estimate(self):
+        return self.tracker.estimate
 
     def reset(self) -> None:
         self.tracker.reset()
@@ -71,6 +96,7 @@ class _Recorder:
 def run(args) -> int:
     from .. import mission as missions
     from ..live import policy
+    from ..live.session import check_controller
     from ..sim import vehicle_file
     from ..sim.batch import SimConfig, simulate
     from ..sim.plant import RoverParams
@@ -91,9 +117,11 @@ def run(args) -> int:
     print_warnings(mission, "companion simulate")
 
     options = sim_gain_options(args)
+    check_controller(args.controller, options)
     vehicle_path = args.vehicle or mission.vehicle_file
     vehicle = known_vehicle(vehicle_path, mission, options, "companion simulate",
-                            not args.json, logger("companion simulate", args.json))
+                            not args.json, logger("companion simulate", args.json),
+                            args.controller)
     resolved = policy.resolve(mission, options, vehicle)
     rate, limits = resolved.rate, resolved.limits
     params = (vehicle_file.load(vehicle_path).params if vehicle_path
@@ -103,18 +131,7 @@ def run(args) -> int:
     if args.d_cen is not None:
         params = params.with_(d_cen=args.d_cen)
 
-    gains_note = ""
-    if args.controller == "pzc":
-        from ..core.pzc import PZCTracker
-        choice = resolved.gains
-        gains_note = choice.source
-        tracker = PZCTracker(choice.filter, choice.pzc, limits)
-    elif args.controller == "pid":
-        from ..core.baselines import PIDGains, PIDTracker
-        tracker, gains_note = PIDTracker(PIDGains(), limits), "paper's PID (k_P 3.5, k_I 0.5, k_D 0.5)"
-    else:
-        from ..core.baselines import KanayamaGains, KanayamaTracker
-        tracker, gains_note = KanayamaTracker(KanayamaGains(), limits), "Kanayama defaults"
+    tracker, gains_values, gains_note = build_tracker(args.controller, resolved)
     if args.plot:
         tracker = _Recorder(tracker)
 
@@ -130,8 +147,7 @@ def run(args) -> int:
         print(json.dumps({"mission": mission.source, "rate_hz": rate, "f_cost": f_cost,
                           "steady_rms": steady, "duration_s": mission.duration,
                           "controller": args.controller, "gains": gains_note,
-                          "gains_values": (policy.gains_dict(choice.filter, choice.pzc)
-                                           if args.controller == "pzc" else None),
+                          "gains_values": gains_values,
                           "limits": {"max_speed": _finite_or_none(limits.max_speed),
                                      "max_yaw_rate": _finite_or_none(limits.max_yaw_rate)}}))
     else:

@@ -266,3 +266,14 @@ class PZCTracker:
 def with_paper_speed_law(gains: PZCGains) -> PZCGains:
     """The same gains with the paper's literal v_ref = |u_p| (eq. 20)."""
     return replace(gains, speed_law="paper")
+
+
+DEFAULT_GAINS = None   # for the registry: pzc flies the filter + PZC gains it is given
+
+
+def build(limits: Limits, n: int | None = None, filter_gains: FilterGains | None = None,
+          pzc_gains: PZCGains | None = None) -> PZCTracker:
+    """The registry's builder (:mod:`companion.core.controllers`); ``None`` gains are the
+    paper's (Section 5)."""
+    return PZCTracker(FilterGains() if filter_gains is None else filter_gains,
+                      PZCGains() if pzc_gains is None else pzc_gains, limits, n)

@@ -2,7 +2,9 @@
 
 Connect, wait for the vehicle, negotiate the telemetry rate, resolve gains and limits for the
 rate the vehicle actually accepted (:mod:`companion.live.policy`, the one policy), build the
-tracker, run the loop (:mod:`companion.live.runner`).
+tracker ``--controller`` names (:mod:`companion.core.controllers`: pzc flies the policy's gains,
+pid and kanayama their own defaults, all within the policy's limits), run the loop
+(:mod:`companion.live.runner`).
 """
 
 from __future__ import annotations
@@ -13,6 +15,7 @@ import time
 from dataclasses import dataclass, replace
 from typing import Any, Callable, Sequence
 
+from ..core import controllers
 from ..core.limits import Limits
 from ..errors import UserError
 from . import origin as origin_mod
@@ -35,6 +38,7 @@ class RunSettings:
     vehicle: KnownVehicle = KnownVehicle()  # its vehicle file's gains and limits, if any
     origin: OriginConfig = OriginConfig()
     realtime: bool = False             # --realtime: SCHED_FIFO for the loop
+    controller: str = controllers.DEFAULT   # --controller: a name in companion.core.controllers
 
 
 REALTIME_PRIORITY = 10   # low among real-time tasks: above every normal process, below the kernel's
@@ -67,6 +71,33 @@ class StopSwitch:
         self.runner.request_stop(reason)
 
 
+def build_tracker(s: RunSettings, mission: Any, rate: float,
+                  limits: Limits) -> tuple[Any, dict[str, Any], str]:
+    """(the tracker ``s.controller`` names, its gains for the result, where they came from):
+    the policy's gains (:func:`companion.live.policy.choose_gains`) for a controller that flies
+    the filter + PZC gains, the controller's own defaults otherwise."""
+    entry = controllers.get(s.controller)
+    if not entry.uses_pzc_gains:
+        return controllers.build(s.controller, limits), entry.gains_dict(), entry.defaults_source()
+    choice = policy.choose_gains(mission, s.gains, s.vehicle, rate)
+    return (controllers.build(s.controller, limits, filter_gains=choice.filter,
+                              pzc_gains=choice.pzc),
+            policy.gains_dict(choice.filter, choice.pzc), choice.source)
+
+
+def check_controller(controller: str, gains: GainOptions) -> None:
+    """A known controller, and no PZC gains asked of one that flies its own (a user error)."""
+    try:
+        entry = controllers.get(controller)
+    except ValueError as exc:
+        raise UserError(str(exc)) from None
+    g = gains
+    if not entry.uses_pzc_gains and (g.gains_file is not None or any(
+            v is not None for v in (g.k_df, g.lambda_f, g.k_dc, g.lambda_c))):
+        raise UserError(f"--gains and --k-df/--lambda-f/--k-dc/--lambda-c set the filter + PZC "
+                        f"gains; --controller {controller} flies its own defaults")
+
+
 def _finite_or_none(x: float) -> float | None:
     return x if math.isfinite(x) else None
 
@@ -82,9 +113,9 @@ def fly(s: RunSettings, sinks: Sequence[Sink] = (), control: ControlChannel | No
     known and its telemetry rate agreed, and may read from the link (parameters) meanwhile.
     """
     from .link import HOLD_MODE, TRACK_MODE, Link
-    from ..core.pzc import PZCTracker
 
     wall0 = time.perf_counter()
+    check_controller(s.controller, s.gains)
     # Before anything connects: a bad --gains file or limit is a user error.
     asked = policy.resolve(s.mission, s.gains, s.vehicle)
     rate, limits = asked.rate, asked.limits
@@ -107,11 +138,16 @@ def fly(s: RunSettings, sinks: Sequence[Sink] = (), control: ControlChannel | No
         for note in notes:
             log(note)
         log(f"telemetry at {accepted:g} Hz" if accepted else "telemetry rate not confirmed")
-        choice = policy.choose_gains(mission, s.gains, s.vehicle, accepted or rate)
-        log(f"gains: {choice.source}; limits: speed {limits.max_speed:g} m/s, "
-            f"yaw rate {limits.max_yaw_rate:g} rad/s")
-        tracker = (PZCTracker(choice.filter, choice.pzc, limits) if make_tracker is None
-                   else make_tracker(link, limits))
+        limits_text = (f"limits: speed {limits.max_speed:g} m/s, "
+                       f"yaw rate {limits.max_yaw_rate:g} rad/s")
+        if make_tracker is None:
+            tracker, gains, gains_source = build_tracker(s, mission, accepted or rate, limits)
+            log(f"controller {tracker.name}; gains: {gains_source}; {limits_text}")
+        else:
+            choice = policy.choose_gains(mission, s.gains, s.vehicle, accepted or rate)
+            gains, gains_source = policy.gains_dict(choice.filter, choice.pzc), choice.source
+            log(f"gains: {gains_source}; {limits_text}")
+            tracker = make_tracker(link, limits)
         config = replace(s.runner, period=1.0 / accepted if accepted else None)
         runner = Runner(link, tracker, mission, config, limits, sinks, control, log,
                         origin=origin.latlon if origin is not None else None)
@@ -139,12 +175,13 @@ def fly(s: RunSettings, sinks: Sequence[Sink] = (), control: ControlChannel | No
         duration_s=runner.mission_time, wall_s=time.perf_counter() - wall0,
         rate_requested_hz=rate, rate_accepted_hz=accepted,
         autopilot=vehicle.autopilot, sysid=vehicle.sysid,
-        gains=policy.gains_dict(choice.filter, choice.pzc), gains_source=choice.source,
+        gains=gains, gains_source=gains_source,
         limits={"max_speed": _finite_or_none(limits.max_speed),
                 "max_yaw_rate": _finite_or_none(limits.max_yaw_rate)},
         failsafes=outcome.failsafes, hold_confirmed=outcome.hold_confirmed,
         mission=runner.mission.name,
-        extra={**({"ekf_origin": origin.as_dict()} if origin is not None else {}),
+        extra={"controller": tracker.name,
+               **({"ekf_origin": origin.as_dict()} if origin is not None else {}),
                "missed_gaps": st.gaps, "backlog": st.backlog,
                "sink_errors": runner.sink_errors, "signing_rejected": link.signing_rejected,
                "tracker_resets": runner.tracker_resets, "udp_recv_buffer": link.recv_buffer})

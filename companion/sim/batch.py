@@ -23,18 +23,14 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Callable, Protocol, Sequence
+from typing import Callable, Sequence
 
 import numpy as np
 
 from .plant import RoverModel, RoverParams, RoverState
-from ..core.signals import Command, Measurement, Num, Reference
+from ..core.signals import Num
+from ..core.tracker import Tracker
 from ..core.trajectory import Trajectory
-
-
-class Tracker(Protocol):
-    def reset(self) -> None: ...
-    def step(self, t: float, meas: Measurement, ref: Reference) -> Command: ...
 
 
 @dataclass(frozen=True)
@@ -213,10 +209,11 @@ def _record(trace, t, state, ref, speed_cmd, yaw_rate_cmd, meas, groups, n):
     put("y_ref", ref.y)
     put("v_cmd", speed_cmd)
     put("omega_cmd", yaw_rate_cmd)
-    # Filtering errors e_f = measurement - estimate (Figure 9), NaN for trackers without a filter.
+    # Filtering errors e_f = measurement - estimate (Figure 9): 0 for a tracker that flies the
+    # raw measurement, NaN before a tracker's first step.
     ef = {k: np.full(n if n is not None else (), np.nan) for k in ("ex", "ey", "eyaw")}
     for tracker, sl in groups:
-        est = getattr(tracker, "estimate", None)
+        est = tracker.estimate
         if est is None:
             continue
         m = meas if sl is None else _take(meas, sl)

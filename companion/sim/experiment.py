@@ -18,7 +18,8 @@ Controllers, all on the same plant and the same speed law (:mod:`companion.core.
     pzc_literal  (optional) the paper's gains with the literal speed law v_ref = |u_p| of eq. (20)
 
 All 6 x 4 runs go through one vectorised :func:`companion.sim.batch.simulate` call: each controller
-owns a slice of 6 vehicles. Pure computation: no I/O, no clock.
+owns a slice of 6 vehicles, its tracker built by :func:`companion.core.controllers.build` (as
+``simulate``, ``run`` and ``demo`` build theirs). Pure computation: no I/O, no clock.
 """
 
 from __future__ import annotations
@@ -28,12 +29,13 @@ from typing import Callable
 
 import numpy as np
 
-from ..core.baselines import KanayamaGains, KanayamaTracker, PIDGains, PIDTracker
+from ..core import controllers
 from .batch import SimConfig, simulate
 from ..core.filter import FilterGains
 from ..core.limits import Limits
 from .plant import RoverParams
-from ..core.pzc import PZCGains, PZCTracker
+from ..core.pzc import PZCGains
+from ..core.tracker import Tracker
 from ..core.trajectory import Ellipse
 
 SCENARIOS: tuple[tuple[float, float], ...] = (
@@ -132,13 +134,14 @@ def run_table(config: TableConfig, tuned: tuple[FilterGains, PZCGains], tuned_so
         blocks.append((tuple(pzc_names),
                        stacked_pzc([sets[k] for k in pzc_names], n_s, lim)))
     else:
-        blocks += [((k,), PZCTracker(*sets[k], lim, n=n_s)) for k in pzc_names]
-    if "pid" in names:
-        blocks.append((("pid",), PIDTracker(PIDGains(), lim, n=n_s)))
-    if "kanayama" in names:
-        blocks.append((("kanayama",), KanayamaTracker(KanayamaGains(), lim, n=n_s)))
+        blocks += [((k,), controllers.build("pzc", lim, filter_gains=sets[k][0],
+                                            pzc_gains=sets[k][1], n=n_s)) for k in pzc_names]
+    for name in ("pid", "kanayama"):       # the baselines fly their own default gains
+        if name in names:
+            blocks.append(((name,), controllers.build(name, lim, n=n_s)))
     if LITERAL in names:
-        blocks.append(((LITERAL,), PZCTracker(FilterGains(), PZCGains(speed_law="paper"), lim, n=n_s)))
+        blocks.append(((LITERAL,), controllers.build(
+            "pzc", lim, filter_gains=FilterGains(), pzc_gains=PZCGains(speed_law="paper"), n=n_s)))
 
     groups, slices, start = [], {}, 0
     for block_names, tracker in blocks:
@@ -174,8 +177,8 @@ def merge(parts: list[TableResult]) -> TableResult:
 
 
 def stacked_pzc(gain_sets: list[tuple[FilterGains, PZCGains]], n_each: int,
-                limits: Limits) -> PZCTracker:
-    """One PZCTracker for ``len(gain_sets) * n_each`` vehicles, gain set i on the i-th block.
+                limits: Limits) -> Tracker:
+    """One PZC tracker for ``len(gain_sets) * n_each`` vehicles, gain set i on the i-th block.
 
     The gain sets must share a speed law (it is a branch, not a number).
     """
@@ -185,14 +188,16 @@ def stacked_pzc(gain_sets: list[tuple[FilterGains, PZCGains]], n_each: int,
     fgs = [fg for fg, _ in gain_sets]
     pgs = [pg for _, pg in gain_sets]
     yaw = [pg._yaw_pair() for pg in pgs]
-    return PZCTracker(
-        FilterGains(col([f.k_df for f in fgs]), col([f.lambda_f for f in fgs])),
-        PZCGains(col([p.k_dc for p in pgs]), col([p.lambda_c for p in pgs]),
-                 k_dc_yaw=col([k for k, _ in yaw]), lambda_c_yaw=col([lam for _, lam in yaw]),
-                 velocity_ff=col([float(p.velocity_ff) for p in pgs]),
-                 heading_rate_ff=col([float(p.heading_rate_ff) for p in pgs]),
-                 accel_ff=col([float(p.accel_ff) for p in pgs]),
-                 lead_tau=col([float(p.lead_tau) for p in pgs]),
-                 lead_max_gain=col([float(p.lead_max_gain) for p in pgs]),
-                 speed_law=pgs[0].speed_law),
-        limits, n=len(gain_sets) * n_each)
+    return controllers.build(
+        "pzc", limits,
+        filter_gains=FilterGains(col([f.k_df for f in fgs]), col([f.lambda_f for f in fgs])),
+        pzc_gains=PZCGains(col([p.k_dc for p in pgs]), col([p.lambda_c for p in pgs]),
+                           k_dc_yaw=col([k for k, _ in yaw]),
+                           lambda_c_yaw=col([lam for _, lam in yaw]),
+                           velocity_ff=col([float(p.velocity_ff) for p in pgs]),
+                           heading_rate_ff=col([float(p.heading_rate_ff) for p in pgs]),
+                           accel_ff=col([float(p.accel_ff) for p in pgs]),
+                           lead_tau=col([float(p.lead_tau) for p in pgs]),
+                           lead_max_gain=col([float(p.lead_max_gain) for p in pgs]),
+                           speed_law=pgs[0].speed_law),
+        n=len(gain_sets) * n_each)
