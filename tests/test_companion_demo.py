@@ -3,10 +3,13 @@
 from __future__ import annotations
 
 import json
+import math
 import subprocess
 import sys
 import time
 from pathlib import Path
+
+import pytest
 
 from companion_harness import ROOT
 
@@ -56,3 +59,37 @@ def test_demo_paced_at_a_speedup(tmp_path):
     assert r["duration_s"] >= 16.0 - 1e-6 and "plot" not in r
     assert r["steady_rms"] <= 0.3
     assert _plant_gone(r)
+
+
+@pytest.mark.parametrize("controller", ["pid", "kanayama"])
+def test_demo_flies_a_baseline_controller_as_simulate_predicts(tmp_path, controller):
+    """``--controller`` reaches the live loop: the bundled plant (lockstep) tracks the paper's
+    ellipse with the baseline, the result names it and its own default gains, and the steady
+    error is the one ``companion simulate`` predicts for the same rover and reference."""
+    p, _ = demo("--controller", controller, "--duration", "20", "--no-plot",
+                "--log-dir", str(tmp_path / "logs"))
+    assert p.returncode == 0, p.stderr
+    r = json.loads(p.stdout)
+    assert r["reason"] == "mission_done" and r["duration_s"] >= 20.0 - 1e-6
+    assert r["controller"] == controller
+    assert r["gains_source"].startswith(f"{controller} defaults (")
+    assert math.isfinite(r["f_cost"]) and 0.0 < r["steady_rms"] < 2.0
+    # the same reference, rover (the paper's, d_cen 0.3 as the demo's plant) and rate, simulated
+    mission = tmp_path / "ellipse.toml"
+    mission.write_text('name = "e"\nframe = "start"\nduration = 20.0\nrate_hz = 40.0\n'
+                       '[trajectory]\nkind = "ellipse"\nf_r = 0.12\nax = 6.0\nbx = -1.0\n'
+                       'ay = 2.0\nby = 3.0\n[vehicle]\nd_cen = 0.3\nw_c = 20.0\n')
+    s = subprocess.run([sys.executable, "-m", "companion", "simulate", "--mission", str(mission),
+                        "--controller", controller, "--json"],
+                       capture_output=True, text=True, timeout=60, cwd=ROOT)
+    predicted = json.loads(s.stdout)
+    assert predicted["controller"] == controller and predicted["gains"] == r["gains_source"]
+    assert r["steady_rms"] == pytest.approx(predicted["steady_rms"], rel=0.1)
+
+
+def test_demo_text_output_names_the_controller(tmp_path):
+    p = subprocess.run([sys.executable, "-m", "companion", "demo", "--controller", "kanayama",
+                        "--duration", "5", "--no-plot", "--no-log", "-q"],
+                       capture_output=True, text=True, timeout=120, cwd=ROOT)
+    assert p.returncode == 0, p.stderr
+    assert "controller  kanayama\n" in p.stdout

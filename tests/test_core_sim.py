@@ -255,10 +255,12 @@ def test_paper_table_cells_equal_single_vehicle_runs():
             # math.atan2 and numpy.arctan2 to 1e-4. Everything else agrees to rounding.
             rel = 1e-3 if name == "pid" else 1e-9
             assert table.f_cost[name][i] == pytest.approx(one.f_cost, rel=rel), name
-    # traces: one column per scenario, filter errors only where there is a filter
+    # traces: one column per scenario; filter errors e_f = measurement - estimate, 0 where
+    # the tracker flies the raw measurement (no filter), NaN only before the first step
     assert table.traces["pzc"]["x"].shape[1] == 2
-    assert np.all(np.isnan(table.traces["pid"]["ex"]))
-    assert np.all(np.isfinite(table.traces["pzc"]["ex"]))
+    assert np.all(table.traces["pid"]["ex"][1:] == 0.0)
+    assert np.all(np.isfinite(table.traces["pzc"]["ex"][1:]))
+    assert np.any(table.traces["pzc"]["ex"][1:] != 0.0)
 
 
 def test_single_vehicle_trace_records():

@@ -1,0 +1,162 @@
+"""The tracker protocol and the controller registry: every registered controller keeps the
+contract of :mod:`companion.core.tracker` on one vehicle and on many, Kanayama's law has its
+feed-forward, and ``simulate`` and the live loop build the same tracker for the same name."""
+
+from __future__ import annotations
+
+import math
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from companion.core import controllers
+from companion.core.filter import FilterGains
+from companion.core.limits import Limits
+from companion.core.signals import Command, Estimate, Measurement, Reference
+from companion.core.tracker import Tracker
+from companion.core.trajectory import Ellipse
+from companion_harness import ROOT
+
+LIMITS = Limits(max_speed=4.0, max_yaw_rate=3.0)
+
+
+def _inputs(k: int, n: int | None = None):
+    """The k-th control step at 40 Hz: a rover on a circle of radius 2, the paper's ellipse
+    as the reference (arrays of n slightly different vehicles when n is given)."""
+    t = k / 40.0
+    shift = 0.0 if n is None else np.linspace(0.0, 0.3, n)
+    meas = Measurement(2.0 * math.cos(0.3 * t) + shift, 2.0 * math.sin(0.3 * t) - shift,
+                       0.3 * t + math.pi / 2 + shift, -0.6 * math.sin(0.3 * t) + 0 * shift,
+                       0.6 * math.cos(0.3 * t) + 0 * shift, 0.3 + 0 * shift)
+    f_r = 0.04 if n is None else np.full(n, 0.04)
+    return t, meas, Ellipse.paper(f_r).sample(t)
+
+
+def _fly(tracker, steps: int, n: int | None = None) -> list[Command]:
+    return [tracker.step(*_inputs(k, n)) for k in range(steps)]
+
+
+def test_the_registry_names_the_three_controllers_pzc_first():
+    assert controllers.NAMES == ("pzc", "pid", "kanayama")
+    assert controllers.DEFAULT == "pzc"
+    assert controllers.get("pzc").uses_pzc_gains
+    assert not controllers.get("pid").uses_pzc_gains
+    with pytest.raises(ValueError, match="unknown controller 'lqr'; choose one of pzc, pid"):
+        controllers.get("lqr")
+    # a baseline given PZC gains would silently fly its own: refused
+    with pytest.raises(ValueError, match="flies its own gains"):
+        controllers.build("pid", LIMITS, filter_gains=FilterGains())
+
+
+@pytest.mark.parametrize("name", controllers.NAMES)
+def test_every_controller_keeps_the_tracker_contract_on_one_vehicle(name):
+    tracker = controllers.build(name, LIMITS)
+    assert isinstance(tracker, Tracker) and tracker.name == name
+    assert tracker.estimate is None                       # before the first step
+    first = _fly(tracker, 80)
+    est = tracker.estimate
+    assert isinstance(est, Estimate) and all(isinstance(getattr(est, f), float)
+                                             for f in ("x", "y", "yaw"))
+    for cmd in first:
+        assert isinstance(cmd.speed, float) and isinstance(cmd.yaw_rate, float)
+        assert abs(cmd.speed) <= LIMITS.max_speed and abs(cmd.yaw_rate) <= LIMITS.max_yaw_rate
+        assert math.hypot(cmd.ux, cmd.uy) <= LIMITS.max_speed + 1e-12
+    # reset forgets everything: the same inputs give the same commands as from new
+    tracker.reset()
+    assert tracker.estimate is None
+    again = _fly(tracker, 80)
+    assert [(c.speed, c.yaw_rate, c.ux, c.uy) for c in again] == \
+        [(c.speed, c.yaw_rate, c.ux, c.uy) for c in first]
+
+
+@pytest.mark.parametrize("name", controllers.NAMES)
+def test_every_controller_runs_vectorised_and_agrees_with_one_vehicle(name):
+    n = 3
+    many = controllers.build(name, LIMITS, n=n)
+    assert isinstance(many, Tracker) and many.estimate is None
+    cmds = _fly(many, 60, n)
+    assert many.estimate.x.shape == (n,) and cmds[-1].speed.shape == (n,)
+    for i in range(n):
+        one = controllers.build(name, LIMITS)
+        for k, cmd in enumerate(cmds):
+            t, meas, ref = _inputs(k, n)
+            pick = lambda s: type(s)(*[float(getattr(s, f)[i]) for f in s.__slots__])  # noqa: E731
+            c1 = one.step(t, pick(meas), pick(ref))
+            assert c1.speed == pytest.approx(float(cmd.speed[i]), rel=1e-9, abs=1e-12)
+            assert c1.yaw_rate == pytest.approx(float(cmd.yaw_rate[i]), rel=1e-9, abs=1e-12)
+
+
+@pytest.mark.parametrize("name", ["pid", "kanayama"])
+def test_a_baseline_flies_the_raw_measurement_as_its_estimate(name):
+    tracker = controllers.build(name, LIMITS)
+    t, meas, ref = _inputs(5)
+    tracker.step(t, meas, ref)
+    est = tracker.estimate
+    assert (est.x, est.y, est.yaw, est.vx, est.vy, est.yaw_rate) == \
+        (meas.x, meas.y, meas.yaw, meas.vx, meas.vy, meas.yaw_rate)
+
+
+def test_kanayama_feeds_the_reference_speed_and_turn_rate_forward():
+    """On the reference exactly (x_e = y_e = theta_e = 0) Kanayama's law is pure feed-forward:
+    v = v_r, omega = omega_r; a lateral error y_e turns it by v_r K_y y_e."""
+    tracker = controllers.build("kanayama")
+    ref = Ellipse.paper(0.08).sample(3.0)
+    v_r = math.hypot(ref.vx, ref.vy)
+    theta_r = math.atan2(ref.vy, ref.vx)
+    omega_r = (ref.vx * ref.ay - ref.vy * ref.ax) / v_r ** 2
+    on = tracker.step(3.0, Measurement(ref.x, ref.y, theta_r), ref)
+    assert on.speed == pytest.approx(v_r, rel=1e-12)
+    assert on.yaw_rate == pytest.approx(omega_r, rel=1e-12)
+    assert abs(omega_r) > 0.05 and v_r > 1.0             # both terms really are there
+    # 0.1 m to the reference's right (the reference lies to the vehicle's left: y_e = +0.1)
+    off = tracker.step(3.025, Measurement(ref.x + 0.1 * math.sin(theta_r),
+                                          ref.y - 0.1 * math.cos(theta_r), theta_r), ref)
+    gains = controllers.get("kanayama").default_gains
+    assert off.yaw_rate - omega_r == pytest.approx(v_r * gains.ky * 0.1, rel=1e-9)
+
+
+@pytest.mark.parametrize("name", controllers.NAMES)
+def test_simulate_and_the_live_loop_build_the_same_tracker(name):
+    """``companion simulate`` and ``companion run`` / ``demo`` (live.session) build their
+    trackers through the registry: the same name, mission and rate give the same tracker,
+    which answers the same inputs with the same commands."""
+    from companion.commands.simulate import build_tracker as simulate_tracker
+    from companion.live.session import RunSettings, build_tracker as live_tracker
+    from companion.mission import paper_ellipse
+    from companion.sim.plant import RoverParams
+
+    mission = paper_ellipse()
+    sim, sim_source = simulate_tracker(name, mission, 40.0, RoverParams.paper(), LIMITS, None)
+    live, _, live_source = live_tracker(RunSettings(link=None, mission=mission, controller=name),
+                                        40.0, LIMITS)
+    assert type(sim) is type(live) and sim.name == live.name == name
+    if name == "pzc":      # simulate names the file, run says "shipped FILE"
+        assert live_source == f"shipped {sim_source}"
+    else:
+        assert sim_source == live_source == controllers.get(name).defaults_source()
+    a, b = _fly(sim, 120), _fly(live, 120)
+    assert [(c.speed, c.yaw_rate) for c in a] == [(c.speed, c.yaw_rate) for c in b]
+
+
+@pytest.mark.parametrize("command", ["run", "demo", "simulate"])
+def test_controller_flag_offers_the_registry_and_refuses_others(command):
+    help_text = subprocess.run([sys.executable, "-m", "companion", command, "--help"],
+                               capture_output=True, text=True, cwd=ROOT, timeout=60).stdout
+    assert "--controller {pzc,pid,kanayama}" in help_text
+    extra = ["--mission", "missions/paper_ellipse_004.toml"] if command == "run" else []
+    p = subprocess.run([sys.executable, "-m", "companion", command, *extra, "--controller",
+                        "lqr"], capture_output=True, text=True, cwd=ROOT, timeout=60)
+    assert p.returncode == 2 and "invalid choice: 'lqr'" in p.stderr
+    assert "Traceback" not in p.stderr
+
+
+def test_pzc_gains_for_a_baseline_are_one_clear_line():
+    p = subprocess.run([sys.executable, "-m", "companion", "simulate", "--controller", "pid",
+                        "--gains", "companion/sim/tuned/rate40_wc20.toml"],
+                       capture_output=True, text=True, cwd=ROOT, timeout=60)
+    assert p.returncode == 2 and "Traceback" not in p.stderr
+    assert p.stderr.strip().splitlines() == [
+        "companion simulate: error: --gains sets the filter + PZC gains; --controller pid "
+        "flies its own defaults"]
