@@ -123,19 +123,23 @@ def test_simulate_and_the_live_loop_build_the_same_tracker(name):
     trackers through the registry: the same name, mission and rate give the same tracker,
     which answers the same inputs with the same commands."""
     from companion.commands.simulate import build_tracker as simulate_tracker
+    from companion.live import policy
+    from companion.live.config import LinkConfig
     from companion.live.session import RunSettings, build_tracker as live_tracker
     from companion.mission import paper_ellipse
-    from companion.sim.plant import RoverParams
 
     mission = paper_ellipse()
-    sim, sim_source = simulate_tracker(name, mission, 40.0, RoverParams.paper(), LIMITS, None)
-    live, _, live_source = live_tracker(RunSettings(link=None, mission=mission, controller=name),
-                                        40.0, LIMITS)
+    options = policy.GainOptions(max_speed=LIMITS.max_speed, max_yaw_rate=LIMITS.max_yaw_rate)
+    resolved = policy.resolve(mission, options)
+    sim, sim_gains, sim_source = simulate_tracker(name, resolved)
+    settings = RunSettings(link=LinkConfig(url="udpin:127.0.0.1:0"), mission=mission,
+                           gains=options, controller=name)
+    live, live_gains, live_source = live_tracker(settings, mission, resolved.rate,
+                                                 resolved.limits)
     assert type(sim) is type(live) and sim.name == live.name == name
-    if name == "pzc":      # simulate names the file, run says "shipped FILE"
-        assert live_source == f"shipped {sim_source}"
-    else:
-        assert sim_source == live_source == controllers.get(name).defaults_source()
+    assert sim_gains == live_gains and sim_source == live_source
+    if name != "pzc":
+        assert sim_source == controllers.get(name).defaults_source()
     a, b = _fly(sim, 120), _fly(live, 120)
     assert [(c.speed, c.yaw_rate) for c in a] == [(c.speed, c.yaw_rate) for c in b]
 
@@ -160,3 +164,15 @@ def test_pzc_gains_for_a_baseline_are_one_clear_line():
     assert p.stderr.strip().splitlines() == [
         "companion simulate: error: --gains sets the filter + PZC gains; --controller pid "
         "flies its own defaults"]
+
+
+def test_pzc_gain_flags_for_a_baseline_on_run_are_refused_before_connecting():
+    # nobody listens on the port: the refusal must come before any wait for a vehicle
+    p = subprocess.run([sys.executable, "-m", "companion", "run", "--connect",
+                        "udpin:127.0.0.1:9", "--mission", "missions/paper_ellipse_004.toml",
+                        "--controller", "kanayama", "--k-dc", "2", "--lambda-c", "3",
+                        "--no-log"], capture_output=True, text=True, cwd=ROOT, timeout=60)
+    assert p.returncode == 2 and "Traceback" not in p.stderr
+    assert p.stderr.strip().splitlines()[-1].endswith(
+        "--k-dc and --lambda-c set the filter + PZC gains; --controller kanayama flies its own "
+        "defaults")

@@ -92,10 +92,12 @@ def check_controller(controller: str, gains: GainOptions) -> None:
     except ValueError as exc:
         raise UserError(str(exc)) from None
     g = gains
-    if not entry.uses_pzc_gains and (g.gains_file is not None or any(
-            v is not None for v in (g.k_df, g.lambda_f, g.k_dc, g.lambda_c))):
-        raise UserError(f"--gains and --k-df/--lambda-f/--k-dc/--lambda-c set the filter + PZC "
-                        f"gains; --controller {controller} flies its own defaults")
+    given = [flag for flag, value in (("--gains", g.gains_file), ("--k-df", g.k_df),
+                                      ("--lambda-f", g.lambda_f), ("--k-dc", g.k_dc),
+                                      ("--lambda-c", g.lambda_c)) if value is not None]
+    if given and not entry.uses_pzc_gains:
+        raise UserError(f"{' and '.join(given)} set{'s' if len(given) == 1 else ''} the filter "
+                        f"+ PZC gains; --controller {controller} flies its own defaults")
 
 
 def _finite_or_none(x: float) -> float | None:
