@@ -5,7 +5,8 @@ this package adds what a companion computer sees of a real vehicle: heartbeat an
 message-rate requests with ArduPilot's cap, SET_POSITION_TARGET_LOCAL_NED handling with the guided
 timeout, noisy / late / lossy telemetry, and real-time, accelerated or lockstep clocks.
 
-Modules: ``modes`` (mode tables), ``setpoint`` (target decoding), ``guidance`` (the autopilot's
+Which autopilot it imitates is a profile of :mod:`companion.profiles` (ids, modes, setpoint
+reading, parameters, texts). Modules: ``modes`` (the profile's modes the plant has), ``setpoint`` (target decoding), ``guidance`` (the autopilot's
 inner steering), ``vehicle`` (state machine + dynamics, pure), ``streams`` (message intervals),
 ``telemetry`` (noise, latency, dropout), ``params`` (the parameters it serves), ``status`` (EKF
 status, origin, pre-arm), ``clock`` (pacing, lockstep), ``link`` (pymavlink),

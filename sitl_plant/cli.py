@@ -14,12 +14,12 @@ import signal
 import socket
 import sys
 
+import companion.profiles as profiles
 from companion.sim.vehicle_file import PRESETS, preset
 from companion.sim.vehicle_file import load as load_vehicle
 
 from .config import DEFAULT_URL, PlantConfig
 from .earth import CMAC, OriginConfig
-from .modes import Autopilot
 from .telemetry import TelemetryConfig
 from .vehicle import VehicleConfig
 
@@ -110,8 +110,9 @@ def build_parser() -> argparse.ArgumentParser:
     link.add_argument("--connect", metavar="URL", default=DEFAULT_URL,
                       help=f"any pymavlink connection string (default {DEFAULT_URL})")
     link.add_argument("--sysid", type=_sysid, default=1, help="MAVLink system id (default 1)")
-    link.add_argument("--autopilot", choices=[a.value for a in Autopilot], default="ardupilot",
-                      help="personality (default ardupilot)")
+    link.add_argument("--autopilot", choices=list(profiles.AUTOPILOTS),
+                      default=profiles.DEFAULT_AUTOPILOT,
+                      help=f"personality (default {profiles.DEFAULT_AUTOPILOT})")
     link.add_argument("--loop-rate", type=_positive, default=50.0, metavar="HZ",
                       help="scheduler rate; message rates above 0.8x are refused (default 50)")
     link.add_argument("--tick-aligned", action=argparse.BooleanOptionalAction, default=None,
@@ -211,7 +212,7 @@ def config_from_args(args: argparse.Namespace) -> PlantConfig:
                  if getattr(args, name) is not None}
     params = params.with_(**overrides)
     # no arming before the EKF runs, as on SITL
-    vehicle = VehicleConfig(params=params, autopilot=Autopilot(args.autopilot),
+    vehicle = VehicleConfig(params=params, autopilot=profiles.autopilot(args.autopilot),
                             arm_delay=max(args.arm_delay, args.ekf_delay), start=tuple(args.start))
     telemetry = TelemetryConfig(noise_pos=args.noise_pos, noise_yaw=args.noise_yaw,
                                 latency=args.latency, dropout=args.dropout,
@@ -276,7 +277,7 @@ def main(argv: list[str] | None = None) -> int:
     wake = _install_signals(server)
     clock = "lockstep" if config.lockstep else "paced"
     print(f"sitl-plant: sysid {config.sysid} on {config.connect}, preset {config.preset}, "
-          f"{config.vehicle.autopilot.value}, {clock} x{config.speedup:g}",
+          f"{config.vehicle.autopilot.name}, {clock} x{config.speedup:g}",
           file=sys.stderr, flush=True)
     try:
         server.run()

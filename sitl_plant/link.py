@@ -12,7 +12,8 @@ import socket
 import struct
 from typing import Any
 
-from . import modes
+from companion.profiles.autopilot import AutopilotProfile
+
 from .telemetry import PoseSample
 
 MAV_TYPE_GROUND_ROVER = 10
@@ -110,11 +111,11 @@ class Link:
         except (OSError, struct.error):
             pass  # like a radio link: the next message may get through
 
-    def heartbeat(self, autopilot: modes.Autopilot, base_mode: int, custom_mode: int,
+    def heartbeat(self, autopilot: AutopilotProfile, base_mode: int, custom_mode: int,
                   armed: bool) -> None:
         state = MAV_STATE_ACTIVE if armed else MAV_STATE_STANDBY
-        self._send(self.mav.heartbeat_send, self.mav_type,
-                   modes.heartbeat_autopilot(autopilot), base_mode, custom_mode, state)
+        self._send(self.mav.heartbeat_send, self.mav_type, autopilot.mav_autopilot[0], base_mode,
+                   custom_mode, state)
 
     def sys_status(self, receive_errors: int, setpoints_nonfinite: int,
                    sensors: tuple[int, int, int] = (0, 0, 0)) -> None:

@@ -1,6 +1,7 @@
 """The parameters the plant serves (PARAM_REQUEST_LIST / PARAM_REQUEST_READ / PARAM_SET).
 
-ArduPilot Rover's names (or PX4's) for what the plant models, so ``companion preflight`` and
+The autopilot profile's list (``PlantFacts.params``, :mod:`companion.profiles`): ArduPilot
+Rover's names (or PX4's) for what the plant models, so ``companion preflight`` and
 ``companion identify`` read a plant as they read a vehicle:
 
 * the inner-loop limits from the plant's own :class:`~companion.sim.plant.RoverParams`
@@ -15,8 +16,8 @@ ArduPilot Rover's names (or PX4's) for what the plant models, so ``companion pre
 The plant only stores what is set: the failsafes, the frame and the limits are not acted on
 (the limits were read when the plant started), except FRAME_CLASS 2, which makes the heartbeat
 a boat's as ArduPilot's does. ``--param NAME=VALUE`` overrides any of them at start (or adds
-one, served as a float). Values travel as ArduPilot sends them (integers as their value) or, for
-PX4, bytewise (an INT32's bytes in the float).
+one, served as a float). Values travel as ArduPilot sends them (integers as their value) or, where
+the profile says so (PX4), bytewise (an INT32's bytes in the float).
 """
 
 from __future__ import annotations
@@ -27,47 +28,10 @@ import struct
 from dataclasses import dataclass
 from typing import Any, Callable
 
-from companion.sim.plant import RoverParams
-
-from .modes import Autopilot
-
 UINT8, INT8, UINT16, INT16, UINT32, INT32, REAL32 = 1, 2, 3, 4, 5, 6, 9
 _INT_FORMATS = {UINT8: "<B", INT8: "<b", UINT16: "<H", INT16: "<h", UINT32: "<I", INT32: "<i"}
-CRUISE_THROTTLE = 50.0   # %: the plant's top speed is reached at full throttle, twice this
 FRAME_CLASS_BOAT = 2
 MAV_TYPE_GROUND_ROVER, MAV_TYPE_SURFACE_BOAT = 10, 11
-
-
-def _limit(value: float, scale: float = 1.0) -> float:
-    """ArduPilot's convention: 0 is 'no limit'."""
-    return 0.0 if value is None or not math.isfinite(value) else float(value) * scale
-
-
-def defaults(autopilot: Autopilot, vehicle: RoverParams, loop_rate: float, sysid: int,
-             offboard_loss_timeout: float) -> list[tuple[str, float, int]]:
-    """(name, value, MAV_PARAM_TYPE) for every parameter the plant serves, in index order."""
-    if autopilot is Autopilot.PX4:
-        return [("CA_AIRFRAME", 6, INT32), ("COM_OBL_RC_ACT", 5, INT32),
-                ("COM_OF_LOSS_T", offboard_loss_timeout, REAL32), ("MAV_SYS_ID", sysid, INT32)]
-    deg = 180.0 / math.pi
-    top = _limit(vehicle.max_speed)
-    return [
-        ("ATC_ACCEL_MAX", _limit(vehicle.max_accel), REAL32),
-        ("ATC_DECEL_MAX", _limit(vehicle.max_decel), REAL32),
-        ("ATC_STR_ACC_MAX", _limit(vehicle.max_yaw_accel, deg), REAL32),
-        ("ATC_STR_DEC_MAX", _limit(vehicle.max_yaw_decel, deg), REAL32),
-        ("ATC_STR_RAT_MAX", _limit(vehicle.max_yaw_rate, deg), REAL32),
-        ("CRUISE_SPEED", top * CRUISE_THROTTLE / 100.0, REAL32),
-        ("CRUISE_THROTTLE", CRUISE_THROTTLE, INT8),
-        ("FRAME_CLASS", 1, INT8), ("FRAME_TYPE", 0, INT8),
-        ("FS_ACTION", 2, INT8), ("FS_GCS_ENABLE", 0, INT8), ("FS_GCS_TIMEOUT", 5.0, REAL32),
-        ("MAV_GCS_SYSID", 255, INT16), ("MAV_OPTIONS", 0, INT16), ("MAV_SYSID", sysid, INT16),
-        ("MOT_STR_THR_MIX", 0.5, REAL32),
-        ("SCHED_LOOP_RATE", round(loop_rate), INT16),
-        ("SERVO1_FUNCTION", 73, INT16), ("SERVO2_FUNCTION", 0, INT16),
-        ("SERVO3_FUNCTION", 74, INT16), ("SERVO4_FUNCTION", 0, INT16),
-        ("WP_SPEED", top, REAL32),
-    ]
 
 
 @dataclass

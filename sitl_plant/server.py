@@ -25,7 +25,7 @@ from .clock import LockstepGate, Pacer
 from .config import PlantConfig
 from .earth import Earth, e7
 from .link import Link
-from .modes import hold_mode, requested_custom_mode
+from .modes import hold_mode
 from .setpoint import Setpoint
 from .telemetry import TelemetryPipe
 from .vehicle import Result, Vehicle
@@ -68,9 +68,9 @@ class PlantServer:
                              else int(round(config.takeover_at * 1e6)))
         v = self.vehicle.config
         self.params = params.ParamTable(
-            params.defaults(v.autopilot, v.params, config.loop_rate, config.sysid,
-                            v.offboard_loss_timeout),
-            bytewise=v.autopilot.value == "px4", overrides=config.params,
+            v.autopilot.plant.params(v.params, config.loop_rate, config.sysid,
+                                     v.offboard_loss_timeout),
+            bytewise=v.autopilot.bytewise_params, overrides=config.params,
             loss=config.param_loss, seed=config.telemetry.seed)
         self._update_mav_type()
 
@@ -302,7 +302,7 @@ class PlantServer:
         if cmd == MAV_CMD_DO_SET_MODE:
             if not (math.isfinite(p1) and int(p1) & FLAG_CUSTOM_MODE_ENABLED):
                 return Result.FAILED
-            return v.set_mode(requested_custom_mode(v.autopilot, p2, p3))
+            return v.set_mode(v.autopilot.requested_mode(p2, p3))
         if cmd == MAV_CMD_COMPONENT_ARM_DISARM:
             if p1 not in (0.0, 1.0):
                 return Result.UNSUPPORTED

@@ -5,9 +5,14 @@ arrives, and drains :attr:`Vehicle.texts` (the STATUSTEXTs an autopilot would se
 motion is :class:`companion.sim.plant.RoverModel` (the paper's eqs. (1)-(2) with first-order
 actuators); this module only decides which (speed, turn-rate) commands it gets.
 
-Timers follow the firmware: ArduPilot's GUIDED speed/turn-rate and heading targets are dropped
-3 s after the last one arrived (Rover/mode_guided.cpp), PX4 leaves OFFBOARD for Hold when the
-setpoint stream stops for COM_OF_LOSS_T and only enters OFFBOARD after proof of life.
+Which autopilot it imitates is a profile (:mod:`companion.profiles`), and the profile answers
+every question that differs: an autopilot that needs an offboard warm-up (PX4) only enters its
+track mode after proof of life, watches the setpoint stream in any mode and leaves the track mode
+for its hold mode when the stream stops for COM_OF_LOSS_T; one without (ArduPilot) takes targets
+only in GUIDED and armed, forgets them on a mode change or disarming, and drops a speed /
+turn-rate or heading target 3 s after the last one arrived (Rover/mode_guided.cpp). Setpoints
+are read as the profile's encoding implies (velocity vectors: PX4's reading; else ArduPilot's),
+refusals, ACK results and texts are the profile's.
 """
 
 from __future__ import annotations
@@ -16,11 +21,12 @@ import math
 from dataclasses import dataclass, field
 from enum import IntEnum
 
+import companion.profiles as profiles
 from companion.core.angles import wrap
+from companion.profiles.autopilot import AutopilotProfile
 from companion.sim.plant import RoverModel, RoverParams, RoverState
 
 from . import guidance, modes
-from .modes import Autopilot
 from .setpoint import (STOP, HeadingSpeed, Pose, PositionTarget, Rejected, Setpoint, Target,
                        decode_ardupilot, decode_px4)
 
@@ -47,7 +53,7 @@ class Result(IntEnum):
 @dataclass(frozen=True)
 class VehicleConfig:
     params: RoverParams = field(default_factory=RoverParams.paper)
-    autopilot: Autopilot = Autopilot.ARDUPILOT
+    autopilot: AutopilotProfile = profiles.autopilot(profiles.DEFAULT_AUTOPILOT)
     arm_delay: float = 0.0                  # s of vehicle time during which arming is refused
     start: tuple[float, float, float] = (0.0, 0.0, 0.0)  # x north, y east, yaw
     guidance: guidance.GuidanceConfig = field(default_factory=guidance.GuidanceConfig)
@@ -67,6 +73,8 @@ class Vehicle:
         self.state = RoverState(x=x, y=y, yaw=wrap(yaw))
         self.t_us = 0   # integer microseconds: timers compare exactly, long runs do not drift
         self.autopilot = config.autopilot
+        # PX4-like: proof of life before the track mode, the stream watched in every mode
+        self._offboard = config.autopilot.offboard_warmup is not None
         self._modes = modes.mode_table(config.autopilot)
         self.custom_mode = modes.initial_mode(config.autopilot)
         self.armed = False
@@ -100,11 +108,10 @@ class Vehicle:
         mode = self._modes.get(custom_mode) if custom_mode is not None else None
         if mode is None or not mode.settable:
             self._say(SEVERITY_WARNING, f"Invalid mode: {custom_mode}")
-            return Result.FAILED if self.autopilot is Autopilot.ARDUPILOT else Result.DENIED
+            return Result(self.autopilot.plant.mode_refused)
         if custom_mode == self.custom_mode:
             return Result.ACCEPTED
-        if (self.autopilot is Autopilot.PX4 and mode.follows_setpoints
-                and not self._proof_of_life()):
+        if self._offboard and mode.follows_setpoints and not self._proof_of_life():
             self._say(SEVERITY_WARNING, OFFBOARD_REFUSED_TEXT)
             return Result.DENIED
         self._enter(mode)
@@ -117,22 +124,20 @@ class Vehicle:
             self._say(SEVERITY_WARNING, ARM_REFUSED_TEXT)
             return Result.TEMPORARILY_REJECTED
         self.armed = on
-        if not on and self.autopilot is Autopilot.ARDUPILOT:
+        if not on and not self._offboard:
             self.target, self._target_fresh = None, False
-        px4 = self.autopilot is Autopilot.PX4
-        self._say(SEVERITY_INFO, ("Armed by external command" if on else "Disarmed by external command")
-                  if px4 else ("Throttle armed" if on else "Throttle disarmed"))
+        armed_text, disarmed_text = self.autopilot.plant.arm_texts
+        self._say(SEVERITY_INFO, armed_text if on else disarmed_text)
         return Result.ACCEPTED
 
     def setpoint(self, sp: Setpoint) -> str:
         """Handle one SET_POSITION_TARGET_LOCAL_NED addressed to us; returns what became of it."""
-        px4 = self.autopilot is Autopilot.PX4
-        if px4:
+        if self._offboard:
             self._note_stream()
         elif not (self.armed and self.mode.follows_setpoints):
             return self._ignored("not guided and armed")
         pose = Pose(self.state.x, self.state.y, self.state.yaw)
-        decode = decode_px4 if px4 else decode_ardupilot
+        decode = decode_px4 if self.autopilot.setpoint.velocity_vector else decode_ardupilot
         target = decode(sp, pose, self.config.params.max_speed)
         if isinstance(target, Rejected):
             return self._ignored(target.reason)
@@ -144,10 +149,10 @@ class Vehicle:
     def step(self, dt: float) -> None:
         """Advance ``dt`` seconds: timers first (they act on this instant), then the dynamics."""
         if self.mode.follows_setpoints:
-            if self.autopilot is Autopilot.ARDUPILOT:
-                self._guided_timeout()
-            else:
+            if self._offboard:
                 self._offboard_loss()
+            else:
+                self._guided_timeout()
         speed, rate = self.commands()
         p = self.config.params
         if p.velocity_vector:
@@ -180,7 +185,7 @@ class Vehicle:
     # --- internals --------------------------------------------------------------------------
     def _enter(self, mode: modes.Mode) -> None:
         self.custom_mode = mode.custom_mode
-        if self.autopilot is Autopilot.ARDUPILOT:
+        if not self._offboard:
             # entering GUIDED starts stopped; other modes hold still
             self.target, self._target_fresh = None, False
         self._say(SEVERITY_INFO, f"Mode changed to {mode.name}")

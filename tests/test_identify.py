@@ -21,7 +21,8 @@ from companion.core.signals import Reference
 from companion.ident import channels
 from companion.ident.excite import Excitation, Plan
 from companion.ident.fit import BOUND, FITTED, PRIOR, Series, fit, join, rms
-from companion.ident.priors import DEFAULTS, from_autopilot
+from companion.profiles import ardupilot
+from companion.profiles.priors import defaults
 from companion.live.flightlog import CSV_FIELDS
 from companion.sim.plant import RoverModel, RoverParams, RoverState
 from companion.sim.response import respond
@@ -113,7 +114,7 @@ def test_the_search_runs_respond_s_model_one_channel_at_a_time():
 
 def test_fit_recovers_known_parameters_from_noisy_data():
     series = synthetic(TRUE, 60.0, speed_amp=4.5, rate_amp=2.6)
-    result = fit(series, DEFAULTS)
+    result = fit(series, defaults())
     p = result.params
     assert all(s == FITTED for s in result.status.values()), result.status
     for name in ("max_accel", "max_decel", "max_yaw_accel", "max_yaw_decel", "max_yaw_rate"):
@@ -137,10 +138,10 @@ def test_logs_fitted_together_determine_what_each_leaves_to_its_prior():
     turning = synthetic(TRUE, 33.0, speed_amp=0.0, rate_amp=2.6, seed=3, stop=3.0)
     driving = synthetic(TRUE, 33.0, speed_amp=4.5, rate_amp=0.0, seed=4, stop=3.0)
     for part, blind in ((turning, "max_accel"), (driving, "max_yaw_accel")):
-        assert fit(part, DEFAULTS).status[blind] == PRIOR
+        assert fit(part, defaults()).status[blind] == PRIOR
     both = join([turning, driving])
     assert len(both.t) == len(turning.t) + len(driving.t) and np.all(np.diff(both.t) > 0)
-    result = fit(both, DEFAULTS)
+    result = fit(both, defaults())
     assert within(result.params.max_accel, TRUE.max_accel, 0.05), result.params
     assert within(result.params.max_yaw_accel, TRUE.max_yaw_accel, 0.05), result.params
     for part in (turning, driving):
@@ -150,7 +151,7 @@ def test_logs_fitted_together_determine_what_each_leaves_to_its_prior():
 def test_parameters_the_log_does_not_excite_take_their_priors():
     # Small setpoints: no clamp is reached, no turn fast enough for the coupling to bite.
     series = synthetic(TRUE, 40.0, speed_amp=1.2, rate_amp=0.9, seed=2)
-    priors = from_autopilot({"ATC_STR_RAT_MAX": 100.0, "CRUISE_SPEED": 3.0,
+    priors = ardupilot.priors({"ATC_STR_RAT_MAX": 100.0, "CRUISE_SPEED": 3.0,
                              "CRUISE_THROTTLE": 60.0})
     result = fit(series, priors.params)
     assert result.status["max_yaw_rate"] == PRIOR
@@ -168,7 +169,7 @@ def test_a_prior_the_log_contradicts_becomes_the_bound_the_log_allows():
     # Top speed prior 2 m/s, but the vehicle is seen at 3.3 m/s without reaching its clamp.
     series = synthetic(TRUE.with_(max_speed=6.0, turn_speed_coupling=0.0), 40.0,
                        speed_amp=3.4, rate_amp=0.3, seed=3)
-    priors = from_autopilot({"CRUISE_SPEED": 1.0, "CRUISE_THROTTLE": 50.0})
+    priors = ardupilot.priors({"CRUISE_SPEED": 1.0, "CRUISE_THROTTLE": 50.0})
     result = fit(series, priors.params)
     assert result.status["max_speed"] == BOUND
     assert 3.2 <= result.params.max_speed <= 4.5

@@ -10,13 +10,16 @@ import pytest
 from companion.sim.plant import RoverParams
 from sitl_plant import modes, setpoint as sp
 from sitl_plant.clock import LockstepGate, Pacer
-from sitl_plant.modes import Autopilot
+from companion.profiles import ardupilot, px4 as px4_profile
 from sitl_plant.streams import ATTITUDE, LOCAL_POSITION_NED, StreamSchedule
 from sitl_plant.telemetry import TelemetryConfig, TelemetryPipe
 from sitl_plant.vehicle import (GUIDED_TIMEOUT_TEXT, OFFBOARD_LOST_TEXT, Result, Vehicle,
                                 VehicleConfig)
 
 DT = 0.001
+AP_GUIDED, AP_HOLD = ardupilot.PROFILE.mode_number("GUIDED"), ardupilot.PROFILE.mode_number("HOLD")
+PX4_OFFBOARD = px4_profile.PROFILE.mode_number("OFFBOARD")
+PX4_HOLD = px4_profile.PROFILE.mode_number("LOITER")        # PX4's Hold, AUTO_LOITER
 
 
 def run(v: Vehicle, seconds: float) -> None:
@@ -26,7 +29,7 @@ def run(v: Vehicle, seconds: float) -> None:
 
 def guided_armed(**kw) -> Vehicle:
     v = Vehicle(VehicleConfig(**kw))
-    assert v.set_mode(modes.AP_GUIDED) is Result.ACCEPTED
+    assert v.set_mode(AP_GUIDED) is Result.ACCEPTED
     assert v.arm(True) is Result.ACCEPTED
     v.pop_texts()
     return v
@@ -40,11 +43,11 @@ def rate_setpoint(speed: float, rate: float) -> sp.Setpoint:
 def test_modes_and_base_mode_flags():
     v = Vehicle()
     assert v.custom_mode == 0 and v.base_mode & modes.FLAG_CUSTOM_MODE_ENABLED
-    assert v.set_mode(modes.AP_GUIDED) is Result.ACCEPTED
+    assert v.set_mode(AP_GUIDED) is Result.ACCEPTED
     assert v.base_mode & modes.FLAG_GUIDED_ENABLED and not v.base_mode & modes.FLAG_SAFETY_ARMED
     v.arm(True)
     assert v.base_mode & modes.FLAG_SAFETY_ARMED
-    assert v.set_mode(2) is Result.FAILED and v.custom_mode == modes.AP_GUIDED  # no mode 2
+    assert v.set_mode(2) is Result.FAILED and v.custom_mode == AP_GUIDED  # no mode 2
     assert v.set_mode(16) is Result.FAILED                                   # INITIALISING
     assert v.set_mode(None) is Result.FAILED
     assert "Mode changed to GUIDED" in [t for _, t in v.pop_texts()]
@@ -63,7 +66,7 @@ def test_setpoints_ignored_unless_guided_and_armed():
     v.arm(True)
     assert v.setpoint(rate_setpoint(1.0, 0.0)) == "not guided and armed"      # MANUAL, armed
     v.arm(False)
-    v.set_mode(modes.AP_GUIDED)
+    v.set_mode(AP_GUIDED)
     assert v.setpoint(rate_setpoint(1.0, 0.0)) == "not guided and armed"      # GUIDED, disarmed
     run(v, 0.5)
     assert v.state.x == 0.0 and v.state.v == 0.0
@@ -90,7 +93,7 @@ def test_guided_timeout_after_exactly_three_seconds():
     run(v, 0.002)
     assert v.commands() == (0.0, 0.0)
     assert [t for _, t in v.pop_texts()] == [GUIDED_TIMEOUT_TEXT]
-    assert v.custom_mode == modes.AP_GUIDED          # stays in GUIDED
+    assert v.custom_mode == AP_GUIDED          # stays in GUIDED
     run(v, 5.0)
     assert not v.pop_texts()                          # said once
 
@@ -108,11 +111,11 @@ def test_entering_guided_starts_stopped_and_hold_stops():
     v = guided_armed()
     v.setpoint(rate_setpoint(1.0, 0.0))
     run(v, 0.5)
-    v.set_mode(modes.AP_HOLD)
+    v.set_mode(AP_HOLD)
     assert v.commands() == (0.0, 0.0)
     run(v, 0.5)
     assert abs(v.state.v) < 1e-3
-    v.set_mode(modes.AP_GUIDED)
+    v.set_mode(AP_GUIDED)
     assert v.target is None and v.commands() == (0.0, 0.0)
 
 
@@ -168,7 +171,7 @@ def test_velocity_speed_clamped_to_vehicle_limit():
 
 # --- PX4 personality ---------------------------------------------------------------------------
 def px4() -> Vehicle:
-    return Vehicle(VehicleConfig(autopilot=Autopilot.PX4))
+    return Vehicle(VehicleConfig(autopilot=px4_profile.PROFILE))
 
 
 def stream(v: Vehicle, seconds: float, hz: float = 10.0, vx: float = 1.0) -> None:
@@ -181,22 +184,22 @@ def stream(v: Vehicle, seconds: float, hz: float = 10.0, vx: float = 1.0) -> Non
 
 def test_px4_offboard_needs_proof_of_life():
     v = px4()
-    assert v.set_mode(modes.PX4_OFFBOARD) is Result.DENIED
+    assert v.set_mode(PX4_OFFBOARD) is Result.DENIED
     stream(v, 0.5)
-    assert v.set_mode(modes.PX4_OFFBOARD) is Result.DENIED        # only half a second
+    assert v.set_mode(PX4_OFFBOARD) is Result.DENIED        # only half a second
     stream(v, 0.6, hz=1.5)
-    assert v.set_mode(modes.PX4_OFFBOARD) is Result.DENIED        # too slow (< 2 Hz)
+    assert v.set_mode(PX4_OFFBOARD) is Result.DENIED        # too slow (< 2 Hz)
     stream(v, 1.05)
-    assert v.set_mode(modes.PX4_OFFBOARD) is Result.ACCEPTED
+    assert v.set_mode(PX4_OFFBOARD) is Result.ACCEPTED
     assert v.custom_mode == 6 << 16
-    assert modes.requested_custom_mode(Autopilot.PX4, 256 + 4, 3) is None   # no aliasing
-    assert modes.requested_custom_mode(Autopilot.PX4, 4, 3) == modes.PX4_HOLD
+    assert px4_profile.PROFILE.requested_mode(256 + 4, 3) is None   # no aliasing
+    assert px4_profile.PROFILE.requested_mode(4, 3) == PX4_HOLD
 
 
 def test_px4_follows_velocity_vector_ignores_yaw_rate_and_falls_back_to_hold():
     v = px4()
     stream(v, 1.1)
-    v.set_mode(modes.PX4_OFFBOARD)
+    v.set_mode(PX4_OFFBOARD)
     v.arm(True)
     stream(v, 2.0)
     v.setpoint(sp.Setpoint(sp.FRAME_LOCAL_NED, 3559, vx=1.0))
@@ -204,7 +207,7 @@ def test_px4_follows_velocity_vector_ignores_yaw_rate_and_falls_back_to_hold():
     assert v.state.v == pytest.approx(1.0, rel=1e-3)
     v.pop_texts()
     run(v, 0.499)
-    assert v.custom_mode == modes.PX4_OFFBOARD
+    assert v.custom_mode == PX4_OFFBOARD
     run(v, 0.01)
     assert v.custom_mode == (4 << 16) | (3 << 24)
     assert OFFBOARD_LOST_TEXT in [t for _, t in v.pop_texts()]

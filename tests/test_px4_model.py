@@ -24,7 +24,7 @@ from companion.core.trajectory import Ellipse
 from companion.errors import UserError
 from companion.ident.excite import Home, Plan, VectorExcitation
 from companion.ident.fit import FITTED, Series, fit, rms
-from companion.ident.priors import from_px4
+from companion.profiles import px4
 from companion.mission.feasibility import check
 from companion.sim import vehicle_file
 from companion.sim.batch import SimConfig, simulate
@@ -169,7 +169,7 @@ def _manoeuvre(params: RoverParams, seconds: float = 60.0, rate: float = 40.0) -
 def test_the_velocity_vector_fit_finds_the_course_gain_and_the_turning_radius():
     truth = PX4_ROVER.with_(course_gain=4.0, min_turn_radius=0.7)
     series = _manoeuvre(truth)
-    prior = from_px4({"RO_SPEED_LIM": 3.0, "RA_WHEEL_BASE": 0.577,
+    prior = px4.priors({"RO_SPEED_LIM": 3.0, "RA_WHEEL_BASE": 0.577,
                       "RA_MAX_STR_ANG": 0.5236}).params  # course gain 2, radius 1 m: off
     result = fit(series, prior)
     p = result.params
@@ -186,7 +186,7 @@ def test_the_velocity_vector_fit_finds_the_course_gain_and_the_turning_radius():
 
 
 def test_px4_priors_from_its_parameters():
-    p = from_px4({"RO_SPEED_LIM": 3.0, "RO_ACCEL_LIM": 3.0, "RO_DECEL_LIM": 3.0, "RO_YAW_P": 5.0,
+    p = px4.priors({"RO_SPEED_LIM": 3.0, "RO_ACCEL_LIM": 3.0, "RO_DECEL_LIM": 3.0, "RO_YAW_P": 5.0,
                   "RO_YAW_RATE_LIM": 180.0, "RA_WHEEL_BASE": 0.321,
                   "RA_MAX_STR_ANG": 0.5236}).params
     assert p.max_speed == 3.0 and p.course_gain == 5.0

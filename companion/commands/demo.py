@@ -22,6 +22,7 @@ import tempfile
 from dataclasses import replace
 from pathlib import Path
 
+from .. import profiles
 from ..errors import UserError
 from .arguments import (add_gain_arguments, add_safety_arguments, add_zenoh_arguments,
                         non_negative, positive)
@@ -43,7 +44,8 @@ def register(subparsers) -> None:
                    help="plant: a vehicle file (companion identify) instead of a preset")
     p.add_argument("--d-cen", type=non_negative, dest="d_cen", default=DEFAULT_D_CEN, metavar="M",
                    help=f"plant's axle-to-tracked-point distance (default {DEFAULT_D_CEN:g})")
-    p.add_argument("--autopilot", choices=("ardupilot", "px4"), default="ardupilot")
+    p.add_argument("--autopilot", choices=list(profiles.AUTOPILOTS),
+                   default=profiles.DEFAULT_AUTOPILOT)
     p.add_argument("--lockstep", action=argparse.BooleanOptionalAction, default=None,
                    help="plant waits for each setpoint (default on, off when --speedup is given)")
     p.add_argument("--speedup", type=positive, metavar="N", help="plant runs N x real time")
@@ -85,9 +87,9 @@ def plant_argv(args, port: int, rate: float) -> list[str]:
             "--preset", args.preset, "--d-cen", repr(args.d_cen), "--autopilot", args.autopilot,
             "--loop-rate", f"{loop_rate:g}"]
     if args.vehicle:
-        # an identified vehicle is a real one: its autopilot sends on scheduler ticks
-        argv += ["--vehicle", args.vehicle] + (["--tick-aligned"] if args.autopilot == "ardupilot"
-                                               else [])
+        # an identified vehicle is a real one: its autopilot may send on scheduler ticks
+        ticks = profiles.autopilot(args.autopilot).plant.tick_aligned
+        argv += ["--vehicle", args.vehicle] + (["--tick-aligned"] if ticks else [])
     if lockstep:
         argv.append("--lockstep")
     if args.speedup is not None:

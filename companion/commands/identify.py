@@ -47,7 +47,6 @@ setpoint, then HOLD; what was flown is still fitted when long enough).
 
 DEFAULT_SPACE = 10.0       # m: --space
 MANOEUVRE_S = 85.0         # vehicle s of manoeuvre: the script (~75 s) and its returns, < 90 s
-HEADROOM = 1.2             # setpoints this far above the autopilot's limits, so the clamps show
 
 
 def register(subparsers) -> None:
@@ -143,7 +142,7 @@ def identify_log(paths: str | list[str], fit_opts: FitOptions, autopilot: dict[s
     the log in the file when the path is not worth keeping (``--no-log``)."""
     from ..ident.data import autopilot_params, read_series
     from ..ident.fit import fit, join, rms
-    from ..ident.priors import AUTOPILOT_PARAMS, PX4_PARAMS, from_autopilot, from_px4
+    from .. import profiles
     from ..ident.record import Report, vehicle_file
     from ..sim.vehicle_file import save
 
@@ -155,11 +154,9 @@ def identify_log(paths: str | list[str], fit_opts: FitOptions, autopilot: dict[s
         raise UserError(f"LOG {' + '.join(paths)}: {exc}") from None
     check = read_series(fit_opts.check)[0] if fit_opts.check else None   # a bad one fails before the fit
     for path in paths:              # what was read live, then the first log's, win
-        autopilot = {**autopilot_params(path, AUTOPILOT_PARAMS + PX4_PARAMS), **autopilot}
-    if series.vector:            # PX4's velocity vectors: its rover parameters, its course loop
-        priors = from_px4({k: v for k, v in autopilot.items() if k in PX4_PARAMS})
-    else:
-        priors = from_autopilot(autopilot)
+        autopilot = {**autopilot_params(path, profiles.prior_params()), **autopilot}
+    # the autopilot such setpoints are for (velocity vectors: PX4's rover parameters, its course loop)
+    priors = profiles.from_setpoints(series.vector).priors_from(autopilot)
     if prior is not None:       # an earlier fit of this vehicle: what this log leaves open
         from ..ident.priors import Priors
         from dataclasses import fields
@@ -268,9 +265,7 @@ def fly_and_fit(options, fit: FitOptions, space: float):
     """Fly the manoeuvre (within ``space`` m) through run's live loop with ``options`` (a
     FlightOptions), then fit its log: (exit code, report or None when stopped before the
     manoeuvre ended, the flight's summary)."""
-    from ..ident.excite import Excitation, Plan, VectorExcitation
-    from ..ident.priors import AUTOPILOT_PARAMS, PX4_PARAMS, from_autopilot, from_px4
-    from ..live.link import ARDUPILOT, PX4
+    from ..ident.excite import Excitation, manoeuvre
     from ..live.params import read_values
     from .flight import Flight, logger, refuse_user_error
     from .options import LogOptions
@@ -283,37 +278,15 @@ def fly_and_fit(options, fit: FitOptions, space: float):
     made: list[Excitation] = []
 
     def make_tracker(link, limits):
-        """Read the autopilot's limits (the priors), size the manoeuvre, build the tracker."""
-        if link.vehicle.autopilot == PX4:
-            return px4_tracker(link, limits)
-        if link.vehicle.autopilot != ARDUPILOT:
-            raise UserError(f"identify drives ArduPilot's speed / turn-rate setpoints or PX4's "
-                            f"velocity vectors; this vehicle runs {link.vehicle.autopilot}")
-        read.update(read_values(link, AUTOPILOT_PARAMS))
-        log("autopilot parameters: " + (", ".join(f"{k} {v:g}" for k, v in sorted(read.items()))
-                                        or "none answered; default priors"))
-        prior = from_autopilot(read).params
-        plan = Plan(space=space,
-                    max_speed=min(limits.max_speed, HEADROOM * prior.max_speed),
-                    max_yaw_rate=min(limits.max_yaw_rate, HEADROOM * prior.max_yaw_rate),
-                    decel=min(prior.decel, prior.max_accel), top_speed=prior.max_speed)
-        log(f"manoeuvre within {plan.space:g} m: setpoints up to {plan.max_speed:.2f} m/s, "
-            f"{plan.max_yaw_rate:.2f} rad/s")
-        made.append(Excitation(plan))
-        return made[-1]
-
-    def px4_tracker(link, limits):
-        """PX4: its rover parameters (the priors, a velocity-vector model) and the velocity-
-        vector manoeuvre (no turning on the spot: an Ackermann rover cannot)."""
-        read.update(read_values(link, PX4_PARAMS))
-        log("PX4 parameters: " + (", ".join(f"{k} {v:g}" for k, v in sorted(read.items()))
-                                  or "none answered; default priors"))
-        prior = from_px4(read).params
-        plan = Plan(space=space, max_speed=min(limits.max_speed, prior.max_speed),
-                    max_yaw_rate=min(limits.max_yaw_rate, prior.max_yaw_rate),
-                    decel=min(prior.decel, prior.max_accel), top_speed=prior.max_speed)
-        log(f"velocity-vector manoeuvre within {plan.space:g} m: up to {plan.max_speed:.2f} m/s")
-        made.append(VectorExcitation(plan))
+        """Read the autopilot's limits (the priors), size the manoeuvre, build the tracker (the
+        autopilot's profile says which parameters, and which manoeuvre)."""
+        profile = link.vehicle.profile
+        read.update(read_values(link, profile.ident.params))
+        log(f"{profile.ident.params_label} parameters: "
+            + (", ".join(f"{k} {v:g}" for k, v in sorted(read.items()))
+               or "none answered; default priors"))
+        made.append(manoeuvre(profile, profile.priors_from(read).params, space, limits))
+        log(made[-1].describe())
         return made[-1]
 
     scratch = None

@@ -23,6 +23,10 @@ deceleration, along the arc of its current turn: braking keeps the turn) and whe
 ``space`` less a margin, and farther out than the rover is now, a *return* takes over: brake,
 turn to face home, drive back to within 40 % of the radius; the script then resumes at its next
 segment. Turning and returning are data too: the fit uses whatever was commanded.
+
+Which manoeuvre, and how far above the autopilot's limits it asks, is the autopilot profile's
+(:func:`manoeuvre`): speed / turn-rate steps for an autopilot that takes them, the velocity-vector
+manoeuvre (:class:`VectorExcitation`, nothing on the spot) for one steered by velocity vectors.
 """
 
 from __future__ import annotations
@@ -30,7 +34,10 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+from ..core.limits import Limits
 from ..core.signals import Command, Estimate, Measurement, Reference
+from ..profiles.autopilot import AutopilotProfile
+from ..sim.plant import RoverParams
 
 REACTION = 0.5          # s at the current speed before braking bites (delay + lag), for the guard
 STOP_STEP = 0.05        # s, the guard's integration step for the stopping arc
@@ -297,6 +304,11 @@ class Excitation:
                 return self._drive_home(yaw, dx, dy, dist)
             raise ValueError(f"unknown segment kind {seg.kind!r}")
 
+    def describe(self) -> str:
+        p = self.plan
+        return (f"manoeuvre within {p.space:g} m: setpoints up to {p.max_speed:.2f} m/s, "
+                f"{p.max_yaw_rate:.2f} rad/s")
+
     def _command(self, cmd: tuple[float, float], yaw: float) -> Command:
         p = self.plan
         speed = max(-p.max_speed, min(p.max_speed, cmd[0]))
@@ -420,6 +432,23 @@ class VectorExcitation:
         self.index = min(self.index + 1, len(self.segments) - 1)
         self._seg_t0, self._course = t, None
 
+    def describe(self) -> str:
+        return (f"velocity-vector manoeuvre within {self.plan.space:g} m: up to "
+                f"{self.plan.max_speed:.2f} m/s")
+
     def _vector(self, speed: float, course: float, offset: float) -> Command:
         speed = max(0.0, min(self.plan.max_speed, speed))
         return Command(speed, offset, speed * math.cos(course), speed * math.sin(course))
+
+
+def manoeuvre(profile: AutopilotProfile, prior: RoverParams, space: float,
+              limits: Limits) -> Excitation | VectorExcitation:
+    """The excitation tracker for a vehicle of this autopilot whose priors are ``prior``: within
+    ``space`` m, setpoints up to the profile's headroom x the autopilot's limits (so the clamps
+    show) and no more than the companion's ``limits``; the velocity-vector manoeuvre where the
+    profile's setpoints are velocity vectors."""
+    h = profile.ident.headroom
+    plan = Plan(space=space, max_speed=min(limits.max_speed, h * prior.max_speed),
+                max_yaw_rate=min(limits.max_yaw_rate, h * prior.max_yaw_rate),
+                decel=min(prior.decel, prior.max_accel), top_speed=prior.max_speed)
+    return VectorExcitation(plan) if profile.setpoint.velocity_vector else Excitation(plan)

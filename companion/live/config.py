@@ -39,7 +39,6 @@ class RunnerConfig:
     arm_timeout: float = 60.0         # wall s to see the vehicle armed
     lost_timeout: float = 30.0        # wall s in failsafe before giving up
     retry_interval: float = 1.0       # wall s between mode / arm / HOLD requests
-    offboard_warmup: float = 1.2      # vehicle s of setpoints before asking PX4 for OFFBOARD
     hold_timeout: float = 2.0         # wall s to see HOLD confirmed when stopping
     period: float | None = None       # nominal telemetry period, for missed-cycle counts
     heartbeat_lost: float = 3.0       # wall s without a vehicle heartbeat -> failsafe

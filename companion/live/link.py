@@ -1,14 +1,13 @@
 """The MAVLink connection to one vehicle: pymavlink underneath, the companion's vocabulary on top.
 
-Connect, wait for the vehicle's heartbeat, tell ArduPilot from PX4, ask for pose telemetry at a
-rate (reading the COMMAND_ACKs and falling back to a rate the vehicle accepts), read parameters
-(PARAM_REQUEST_READ, for ``companion identify``'s priors), change mode, arm, and encode the
-tracker's command as SET_POSITION_TARGET_LOCAL_NED:
-
-* ArduPilot: frame BODY_NED, type_mask 1511 (use vx, vy, yaw_rate), vx = v_ref, vy = 0,
-  yaw_rate = omega_ref: Rover's ``set_desired_turn_rate_and_speed``, the paper's two inputs;
-* PX4: frame LOCAL_NED, type_mask 3559 (use vx, vy), (vx, vy) = u_p; PX4 rovers ignore yaw and
-  yaw rate and steer along the velocity themselves.
+Connect, wait for the vehicle's heartbeat and pick its autopilot's profile
+(:mod:`companion.profiles`), ask for pose telemetry at a rate (reading the COMMAND_ACKs and
+falling back to a rate the vehicle accepts), change mode, arm, and encode the tracker's command
+as SET_POSITION_TARGET_LOCAL_NED. What differs between autopilots is the profile's: the mode
+table (names as pymavlink gives them), how DO_SET_MODE asks for a mode, and the setpoint
+encoding (:class:`~companion.profiles.autopilot.SetpointEncoding`: ArduPilot's speed and yaw rate
+in BODY_NED, Rover's ``set_desired_turn_rate_and_speed``, the paper's two inputs; PX4's velocity
+vector u_p in LOCAL_NED, along which PX4 rovers steer themselves).
 
 Each setpoint carries the ``time_boot_ms`` of the telemetry sample it answers (ArduPilot and PX4
 ignore the field), so a log or a test can pair every setpoint with its sample.
@@ -39,18 +38,11 @@ from ..mav.sockets import size_receive_buffer  # noqa: E402
 from ..errors import UserError  # noqa: E402
 from ..core.signals import Command  # noqa: E402
 from .config import LinkConfig  # noqa: E402,F401  (its home; imported from here too)
+from .. import profiles  # noqa: E402
+from ..profiles.autopilot import AutopilotProfile, ModeTable  # noqa: E402
 
 mavlink = mavutil.mavlink
 
-ARDUPILOT, PX4 = "ardupilot", "px4"
-AUTOPILOTS = {mavlink.MAV_AUTOPILOT_ARDUPILOTMEGA: ARDUPILOT, mavlink.MAV_AUTOPILOT_PX4: PX4}
-# The mode that follows our setpoints, and the one we hand the vehicle back in (pymavlink's
-# names: PX4's "Hold" is AUTO_LOITER, which mavutil calls "LOITER").
-TRACK_MODE = {ARDUPILOT: "GUIDED", PX4: "OFFBOARD"}
-HOLD_MODE = {ARDUPILOT: "HOLD", PX4: "LOITER"}
-
-MASK_SPEED_YAW_RATE = 1511   # 0x05E7: ignore position, vz, acceleration, yaw
-MASK_VELOCITY = 3559         # 0x0DE7: ignore position, vz, acceleration, yaw, yaw rate
 ACCEPTED = mavlink.MAV_RESULT_ACCEPTED
 # Rates to fall back to, fastest first, when the vehicle refuses the one asked for.
 FALLBACK_RATES = (1000.0, 800.0, 500.0, 400.0, 250.0, 200.0, 100.0, 50.0, 40.0, 25.0, 20.0,
@@ -61,8 +53,13 @@ FALLBACK_RATES = (1000.0, 800.0, 500.0, 400.0, 250.0, 200.0, 100.0, 50.0, 40.0, 
 class VehicleInfo:
     sysid: int
     compid: int
-    autopilot: str       # ARDUPILOT or PX4
+    profile: AutopilotProfile      # from the first heartbeat's autopilot field
     mav_type: int
+
+    @property
+    def autopilot(self) -> str:
+        """The autopilot's name ("ardupilot", "px4"): for logs and JSON."""
+        return self.profile.name
 
 
 class Link:
@@ -92,10 +89,9 @@ class Link:
         # rewrites (a stranger's heartbeat, a corrupted one claiming another vehicle type).
         self._mode = ""
         self._armed = False
-        self._mode_map: dict[str, int] = {}
-        self._mask = MASK_SPEED_YAW_RATE
-        self._frame = mavlink.MAV_FRAME_BODY_NED
-        self._speed_yaw_rate = True
+        self._modes = ModeTable()                 # the vehicle's, from its profile and MAV_TYPE
+        # the setpoint encoding, from the profile (see send_command)
+        self._frame, self._mask, self._vector = 0, 0, False
         self.setpoints_sent = 0
         self._recv_failed = False                 # the last read raised (see wait)
         self.last_ack: dict[int, int] = {}        # command id -> last result
@@ -128,7 +124,7 @@ class Link:
         return msg
 
     def _note_heartbeat(self, msg: Any) -> None:
-        self._mode = mavutil.mode_string_v10(msg)
+        self._mode = self.vehicle.profile.mode_name(self._modes, msg.base_mode, msg.custom_mode)
         self._armed = bool(msg.base_mode & mavlink.MAV_MODE_FLAG_SAFETY_ARMED)
 
     def wait(self, timeout: float) -> None:
@@ -158,7 +154,7 @@ class Link:
         mode number would be read in another table (pymavlink names modes by type)."""
         v = self.vehicle
         return (self.is_vehicle(msg) and msg.type == v.mav_type
-                and AUTOPILOTS.get(msg.autopilot) == v.autopilot)
+                and msg.autopilot in v.profile.mav_autopilot)
 
     @property
     def mode(self) -> str:
@@ -183,21 +179,20 @@ class Link:
                 continue
             if cfg.sysid is not None and msg.get_srcSystem() != cfg.sysid:
                 continue
-            autopilot = AUTOPILOTS.get(msg.autopilot)
-            if autopilot is None:
+            profile = profiles.from_heartbeat(msg.autopilot)
+            if profile is None:
+                known = " and ".join(p.label for p in profiles.AUTOPILOTS.values())
                 raise UserError(f"system {msg.get_srcSystem()} runs an autopilot this companion "
                                 f"does not drive (MAV_AUTOPILOT {msg.autopilot}); "
-                                "ArduPilot and PX4 are supported")
-            self.vehicle = VehicleInfo(msg.get_srcSystem(), msg.get_srcComponent(), autopilot,
+                                f"{known} are supported")
+            self.vehicle = VehicleInfo(msg.get_srcSystem(), msg.get_srcComponent(), profile,
                                        msg.type)
             self.master.target_system = self.vehicle.sysid
             self.master.target_component = self.vehicle.compid
+            self._modes = profile.modes_for(msg.type)
+            sp = profile.setpoint
+            self._frame, self._mask, self._vector = sp.frame, sp.type_mask, sp.velocity_vector
             self._note_heartbeat(msg)
-            self._mode_map = (dict(mavutil.px4_map) if autopilot == PX4
-                              else mavutil.mode_mapping_byname(msg.type) or {})
-            if autopilot == PX4:
-                self._mask, self._frame = MASK_VELOCITY, mavlink.MAV_FRAME_LOCAL_NED
-                self._speed_yaw_rate = False
             return self.vehicle
         if should_stop():
             raise KeyboardInterrupt
@@ -256,18 +251,15 @@ class Link:
 
     # --- commands used inside the control loop (never wait) ---------------------------------
     def request_mode(self, name: str) -> None:
-        """MAV_CMD_DO_SET_MODE for a mode name (pymavlink's mode tables for either autopilot,
-        chosen once from the vehicle's first heartbeat)."""
-        mapping = self._mode_map
-        if name not in mapping:
+        """MAV_CMD_DO_SET_MODE for a mode name (the profile's mode table for the vehicle's
+        MAV_TYPE, chosen once from its first heartbeat; the parameters as the profile says)."""
+        mode = self._modes.by_name(name)
+        if mode is None:
             raise UserError(f"the vehicle has no mode {name!r}")
-        if self.vehicle.autopilot == PX4:
-            self.master.set_mode_px4(*mapping[name])
-        else:
-            self.master.set_mode_apm(mapping[name])
+        self.command(mavlink.MAV_CMD_DO_SET_MODE, *self.vehicle.profile.set_mode_params(mode))
 
     def mode_names(self) -> set[str]:
-        return set(self._mode_map)
+        return set(self._modes.names())
 
     def request_arm(self) -> None:
         self.master.arducopter_arm()   # MAV_CMD_COMPONENT_ARM_DISARM param1 = 1, any vehicle
@@ -279,18 +271,18 @@ class Link:
     def send_command(self, cmd: Command, time_boot_ms: int) -> None:
         """The tracker's command as SET_POSITION_TARGET_LOCAL_NED (see the module docstring)."""
         v = self.vehicle
-        if self._speed_yaw_rate:
-            self.mav.set_position_target_local_ned_send(
-                time_boot_ms, v.sysid, v.compid, self._frame, self._mask,
-                0.0, 0.0, 0.0, cmd.speed, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, cmd.yaw_rate)
-        else:
+        if self._vector:
             self.mav.set_position_target_local_ned_send(
                 time_boot_ms, v.sysid, v.compid, self._frame, self._mask,
                 0.0, 0.0, 0.0, cmd.ux, cmd.uy, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+        else:
+            self.mav.set_position_target_local_ned_send(
+                time_boot_ms, v.sysid, v.compid, self._frame, self._mask,
+                0.0, 0.0, 0.0, cmd.speed, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, cmd.yaw_rate)
         self.setpoints_sent += 1
 
     def send_stop(self, time_boot_ms: int = 0) -> None:
-        """Zero speed and zero turn rate (zero velocity for PX4)."""
+        """Zero speed and zero turn rate (or the zero velocity vector)."""
         self.send_command(STOP, time_boot_ms)
 
 

@@ -8,8 +8,8 @@
 
 Values travel as a float32 either way. ArduPilot puts integers in it as their value ("C cast");
 PX4 puts their bytes in it ("bytewise", MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_BYTEWISE), so an
-INT32 of 5 arrives as the float whose bits are 5 (7e-45). :func:`decode` / :func:`encode` turn
-either into the number a person means.
+INT32 of 5 arrives as the float whose bits are 5 (7e-45): the autopilot's profile says which
+(``bytewise_params``). :func:`decode` / :func:`encode` turn either into the number a person means.
 
 Other messages read while waiting are handed to ``observe`` (the caller may want the STATUSTEXTs
 and SYS_STATUS that arrive meanwhile) and otherwise dropped: only for set-up, never inside the
@@ -24,7 +24,7 @@ import time
 from dataclasses import dataclass
 from typing import Any, Callable, Iterable
 
-from .link import PX4, Link, mavlink
+from .link import Link, mavlink
 
 INT_TYPES = {mavlink.MAV_PARAM_TYPE_UINT8: "<B", mavlink.MAV_PARAM_TYPE_INT8: "<b",
              mavlink.MAV_PARAM_TYPE_UINT16: "<H", mavlink.MAV_PARAM_TYPE_INT16: "<h",
@@ -68,7 +68,7 @@ class ParamClient:
     def __init__(self, link: Link, observe: Callable[[Any], None] = lambda msg: None):
         self.link = link
         self.observe = observe
-        self.bytewise = link.vehicle.autopilot == PX4
+        self.bytewise = link.vehicle.profile.bytewise_params
         self.count: int | None = None          # the vehicle's param_count, once known
         self.retried: int = 0                  # indices asked for again after the list
 

@@ -34,7 +34,7 @@ import gc
 import json
 import math
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from enum import Enum
 from pathlib import Path
 from typing import Any, Callable, Sequence
@@ -43,7 +43,7 @@ from . import events as ev
 from ..errors import ExitCode, UserError
 from .events import ControlChannel, ControlRequest, LoopRecord, Sink, StatusEvent
 from ..core.limits import Limits
-from .link import HOLD_MODE, PX4, TRACK_MODE, Link
+from .link import Link
 from ..core.signals import Command, Measurement
 from .config import RunnerConfig
 from .stats import TrackingStats
@@ -75,6 +75,77 @@ class Outcome:
     failsafes: int
 
 
+
+# The loop's state, in the pieces that change together (Runner.__init__ makes one of each).
+
+@dataclass(slots=True)
+class Heard:
+    """What the vehicle last said, and when: wall s on the companion's clock, vehicle s on its."""
+    sample_wall: float = 0.0              # the last valid pose sample arrived
+    heartbeat_wall: float = 0.0           # the last heartbeat of our vehicle arrived
+    heartbeat_lost_said: bool = False     # "no vehicle heartbeat" logged, "back" not yet
+    vehicle_t: float = 0.0                # the last valid sample's vehicle time
+    pose: tuple[float, float, float] | None = None   # the last valid sample's x, y, yaw
+    waited: bool = True                   # idle since the last position sample was handled
+
+
+@dataclass(slots=True)
+class MissionClock:
+    """Mission time: 0 at the first tracking sample, standing still outside TRACKING. A segment
+    is a run of tracked samples with no gap longer than ``max_gap`` vehicle s."""
+    max_gap: float
+    time: float = 0.0                     # the mission time of the last tracked sample
+    offset: float = 0.0                   # the mission time at the segment's start
+    segment_t0: float | None = None       # its first sample's vehicle time; None: the next
+    #                                       tracked sample starts a segment
+
+
+@dataclass(slots=True)
+class Engagement:
+    """Getting the vehicle into the track mode and armed (ENGAGING), and where that leads."""
+    after: State                          # TRACKING, PAUSED or READY once engaged
+    since: float = 0.0                    # wall s engaging began
+    mode_seen: bool = False               # a heartbeat since then showed the track mode
+    warm_t0: float | None = None          # vehicle s the offboard warm-up's stream began
+    next_arm_try: float = 0.0             # wall s
+    said_arm_wait: bool = False
+
+
+@dataclass(slots=True)
+class ModeRequest:
+    """The last mode asked for (the track mode, or the hold mode) and when to ask again."""
+    name: str | None = None
+    next_try: float = 0.0                 # wall s
+
+
+@dataclass(slots=True)
+class Stopping:
+    """Failsafe and the end: a stop asked for, the failsafe's start and what it interrupted,
+    whether the end wants the hold mode and whether the vehicle confirmed it."""
+    requested: str | None = None          # request_stop's reason (a signal handler's)
+    failsafe_since: float = 0.0           # wall s
+    resume_to: State = State.WAITING      # the state the failsafe interrupted
+    wants_hold: bool = False              # _finish asked for the hold mode
+    hold_confirmed: bool = False          # by an ACK or a heartbeat
+
+
+@dataclass(slots=True)
+class Timers:
+    """Wall-clock deadlines of the loop."""
+    started: float = 0.0                  # run() began
+    next_timer: float = 0.0               # _timers runs at least this often
+    next_heartbeat: float = 0.0           # the companion's own heartbeat, 1 Hz
+    next_refusal_log: float = 0.0         # at most one "refused telemetry" line a second
+
+
+@dataclass(slots=True)
+class Counters:
+    failsafes: int = 0
+    sink_errors: int = 0
+    tracker_resets: int = 0
+    refusals_logged: dict[str, int] = field(default_factory=dict)   # as last logged
+
+
 class Runner:
     def __init__(self, link: Link, tracker: Any, mission: Any, config: RunnerConfig,
                  limits: Limits, sinks: Sequence[Sink] = (), control: ControlChannel | None = None,
@@ -82,57 +153,61 @@ class Runner:
                  origin: tuple[float, float] | None = None):
         self.link, self.tracker, self.mission = link, tracker, mission
         self.origin = origin              # the vehicle's EKF origin (lat, lon), when known
-        self._pose: tuple[float, float, float] | None = None   # the last valid sample's
         self.config, self.limits, self.log = config, limits, log
         self.sinks = list(sinks)
         self.control = control
         v = link.vehicle
+        self.profile = v.profile          # the autopilot's: modes, offboard warm-up
         self.telemetry = TelemetryCheck(v.sysid, v.compid, max_attitude_age=config.stale_timeout)
         self.stats = TrackingStats(mission.duration, config.period)
-        self.track_mode, self.hold_mode = TRACK_MODE[v.autopilot], HOLD_MODE[v.autopilot]
-        self.px4 = v.autopilot == PX4
         self.state = State.WAITING
         self.trajectory = None            # anchored at the first tracking sample
-        self.mission_time = 0.0
-        self._mission_offset = 0.0
-        self._segment_t0: float | None = None
-        self._stop_reason: str | None = None
-        self._waited = True               # idle since the last position sample was handled
-        self._last_sample_wall = 0.0
-        self._last_heartbeat_wall = 0.0
-        self._heartbeat_lost_said = False
-        self._last_vt = 0.0
-        # A gap this long between tracked samples resets the tracker (at least 5 periods).
-        self._max_gap = max(config.max_gap, 5.0 * (config.period or 0.0))
-        self.tracker_resets = 0
-        self._after_engage = State.TRACKING if config.autostart else State.READY
-        self._mode_request: str | None = None
-        self._mode_acked = False
-        self._mode_seen = False           # heartbeat showed our mode since we engaged
-        self._next_try = self._next_arm_try = 0.0
-        self._engage_since = 0.0
-        self._warm_t0: float | None = None
-        self._said_arm_wait = False
-        self._failsafe_since = 0.0
-        self._hold_confirmed = False
-        self.failsafes = 0
-        self.sink_errors = 0
-        self._next_refusal_log = 0.0
-        self._refusals_logged: dict[str, int] = {}
         self.outcome: Outcome | None = None
+        self.heard = Heard()
+        # A gap this long between tracked samples resets the tracker (at least 5 periods).
+        self.clock = MissionClock(max_gap=max(config.max_gap, 5.0 * (config.period or 0.0)))
+        self.engagement = Engagement(after=State.TRACKING if config.autostart else State.READY)
+        self.mode_request = ModeRequest()
+        self.stopping = Stopping()
+        self.timers = Timers()
+        self.counters = Counters()
+
+    @property
+    def track_mode(self) -> str:
+        return self.profile.track_mode
+
+    @property
+    def hold_mode(self) -> str:
+        return self.profile.hold_mode
+
+    @property
+    def mission_time(self) -> float:
+        return self.clock.time
+
+    @property
+    def failsafes(self) -> int:
+        return self.counters.failsafes
+
+    @property
+    def sink_errors(self) -> int:
+        return self.counters.sink_errors
+
+    @property
+    def tracker_resets(self) -> int:
+        return self.counters.tracker_resets
 
     # --- public -----------------------------------------------------------------------------
     def request_stop(self, reason: str) -> None:
         """Ask the loop to stop the rover and end (safe to call from a signal handler)."""
-        if self._stop_reason is None:
-            self._stop_reason = reason
+        if self.stopping.requested is None:
+            self.stopping.requested = reason
 
     def run(self) -> Outcome:
         link, clock = self.link, time.perf_counter
         now = clock()
-        self._started = self._last_sample_wall = self._last_heartbeat_wall = now
-        self._next_timer = now
-        self._next_heartbeat = now
+        self.timers.started = self.heard.sample_wall = self.heard.heartbeat_wall = now
+        self.timers.next_timer = now
+        self.timers.next_heartbeat = now
         v = link.vehicle
         self._emit(ev.CONNECTED, f"{v.autopilot} system {v.sysid}",
                    {"autopilot": v.autopilot, "sysid": v.sysid, "compid": v.compid})
@@ -154,9 +229,10 @@ class Runner:
         finally:
             gc.unfreeze()
         self._wait_for_hold()
-        self._emit(ev.STOPPED, self.outcome.reason, {"exit_code": self.outcome.exit_code,
-                                                     "hold_confirmed": self._hold_confirmed})
-        self.outcome.hold_confirmed = self._hold_confirmed
+        self._emit(ev.STOPPED, self.outcome.reason,
+                   {"exit_code": self.outcome.exit_code,
+                    "hold_confirmed": self.stopping.hold_confirmed})
+        self.outcome.hold_confirmed = self.stopping.hold_confirmed
         for sink in self.sinks:
             self._safely(sink.close)
         return self.outcome
@@ -164,8 +240,8 @@ class Runner:
     def _loop(self, recv, on_position, attitude, clock) -> None:
         link = self.link
         while self.state is not State.DONE:
-            if self._stop_reason is not None:
-                self._finish(self._stop_reason, ExitCode.OK)
+            if self.stopping.requested is not None:
+                self._finish(self.stopping.requested, ExitCode.OK)
                 break
             if self.control is not None:
                 for request in self.control.poll():
@@ -173,9 +249,9 @@ class Runner:
             t_read = clock()
             msg = recv()
             if msg is None:
-                self._waited = True
+                self.heard.waited = True
                 self._timers(t_read)
-                link.wait(min(MAX_WAIT, max(0.0, self._next_timer - clock())))
+                link.wait(min(MAX_WAIT, max(0.0, self.timers.next_timer - clock())))
                 continue
             kind = msg.get_type()
             if kind == "LOCAL_POSITION_NED":
@@ -189,22 +265,24 @@ class Runner:
             elif kind == "STATUSTEXT" and link.is_vehicle(msg):
                 self.log("vehicle says: " + "".join(c if c.isprintable() else "?"
                                                      for c in msg.text))
-            if t_read >= self._next_timer:
+            if t_read >= self.timers.next_timer:
                 self._timers(t_read)
 
     # --- per message ------------------------------------------------------------------------
     def _on_position(self, msg: Any, t_read: float) -> None:
         s = self.telemetry.position(msg)
         if s is None:
-            if t_read >= self._next_refusal_log:
+            if t_read >= self.timers.next_refusal_log:
                 self._log_refusals(t_read)
             return
-        self._last_sample_wall = t_read
-        prev_vt, self._last_vt = self._last_vt, s.t
-        self._pose = (s.x, s.y, s.yaw)
+        heard = self.heard
+        heard.sample_wall = t_read
+        prev_vt, heard.vehicle_t = heard.vehicle_t, s.t
+        heard.pose = (s.x, s.y, s.yaw)
         state = self.state
         if state is State.TRACKING:
-            if self._segment_t0 is not None and s.t - prev_vt > self._max_gap:
+            clock = self.clock
+            if clock.segment_t0 is not None and s.t - prev_vt > clock.max_gap:
                 self._new_segment(s.t - prev_vt)
             self._track(s, t_read)
         else:
@@ -220,10 +298,10 @@ class Runner:
                 self._enter_engaging(State.WAITING)
             self.link.send_stop(s.time_boot_ms)
             if self.state is State.ENGAGING:
-                if self._warm_t0 is None:
-                    self._warm_t0 = s.t
+                if self.engagement.warm_t0 is None:
+                    self.engagement.warm_t0 = s.t
                 self._engage(t_read)
-        self._waited = False
+        heard.waited = False
 
     def _start_problem(self, mission: Any, x: float, y: float, yaw: float) -> str | None:
         """Why ``mission`` must not start with the rover at (x, y, yaw), or None."""
@@ -241,38 +319,38 @@ class Runner:
                 "raise the limit (0: no limit)")
 
     def _heartbeat_fresh(self, now: float) -> bool:
-        return now - self._last_heartbeat_wall <= self.config.heartbeat_lost
+        return now - self.heard.heartbeat_wall <= self.config.heartbeat_lost
 
     def _new_segment(self, gap: float) -> None:
         """Samples resume after a gap: forget the filter and integrators (no huge-dt step)."""
         self.tracker.reset()
-        self.tracker_resets += 1
+        self.counters.tracker_resets += 1
         self.stats.lost(gap)
-        self._segment_t0 = None
+        self.clock.segment_t0 = None
         self.log(f"{gap:.3f} s of vehicle time without a sample: filter and integrators reset")
 
     def _log_refusals(self, now: float) -> None:
         """At most one line a second: how many samples were refused, and why."""
-        self._next_refusal_log = now + 1.0
+        self.timers.next_refusal_log = now + 1.0
         counts = _nonzero(self.telemetry.rejected)
-        if counts != self._refusals_logged:
-            self._refusals_logged = counts
+        if counts != self.counters.refusals_logged:
+            self.counters.refusals_logged = counts
             self.log(f"refused telemetry so far (never used): {counts}")
 
     def _track(self, s, t_read: float) -> None:
-        if self._segment_t0 is None:
+        clock = self.clock
+        if clock.segment_t0 is None:
             if self.trajectory is None:
                 self.trajectory = self.mission.anchored(s.x, s.y, s.yaw)
-            self._segment_t0 = s.t
-            self._mission_offset = self.mission_time
+            clock.segment_t0 = s.t
+            clock.offset = clock.time
             self.stats.segment_start()
-        mt = self._mission_offset + (s.t - self._segment_t0)
+        mt = clock.offset + (s.t - clock.segment_t0)
+        clock.time = mt
         if mt >= self.mission.duration - 1e-9:
-            self.mission_time = mt
             self._emit(ev.MISSION_DONE, f"{self.mission.duration:g} s of mission tracked")
             self._finish("mission_done", ExitCode.OK, s.time_boot_ms)
             return
-        self.mission_time = mt
         ref = self.trajectory.sample(mt)
         cmd = self.tracker.step(s.t, Measurement(s.x, s.y, s.yaw, s.vx, s.vy, s.yaw_rate), ref)
         problem = self._check(cmd)
@@ -284,7 +362,7 @@ class Runner:
         latency = time.perf_counter() - t_read
         ex, ey = ref.x - s.x, ref.y - s.y
         e2 = ex * ex + ey * ey
-        self.stats.add(mt, s.t, e2, latency, not self._waited)
+        self.stats.add(mt, s.t, e2, latency, not self.heard.waited)
         if self.sinks:
             self._record(s, mt, ref, cmd, e2)
 
@@ -314,47 +392,46 @@ class Runner:
     def _on_heartbeat(self, msg: Any) -> None:
         if not self.link.is_vehicle_heartbeat(msg):
             return
-        self._last_heartbeat_wall = time.perf_counter()
-        if self._heartbeat_lost_said:
-            self._heartbeat_lost_said = False
+        self.heard.heartbeat_wall = time.perf_counter()
+        if self.heard.heartbeat_lost_said:
+            self.heard.heartbeat_lost_said = False
             self.log("vehicle heartbeat back")
         mode, armed = self.link.mode, self.link.armed
         state = self.state
         if state in ACTIVE and mode == self.track_mode:
-            self._mode_seen = True
-        if state in (State.READY, State.TRACKING, State.PAUSED) and self._mode_seen:
+            self.engagement.mode_seen = True
+        if state in (State.READY, State.TRACKING, State.PAUSED) and self.engagement.mode_seen:
             if mode != self.track_mode:
                 self._override(f"mode changed to {mode} by someone else")
             elif not armed:
                 self._override("vehicle disarmed by someone else")
         elif state is State.FAILSAFE and mode == self.hold_mode:
-            self._hold_confirmed = True
+            self.stopping.hold_confirmed = True
         if state is State.ENGAGING:
             self._engage(time.perf_counter())
 
     def _on_ack(self, msg: Any) -> None:
         if not self.link.is_vehicle(msg) or not self.link.is_for_us(msg):
             return
-        if msg.command == 176 and self._mode_request is not None:   # MAV_CMD_DO_SET_MODE
+        if msg.command == 176 and self.mode_request.name is not None:   # MAV_CMD_DO_SET_MODE
             if msg.result == 0:
-                self._mode_acked = True
-                if self._mode_request == self.hold_mode:
-                    self._hold_confirmed = True
+                if self.mode_request.name == self.hold_mode:
+                    self.stopping.hold_confirmed = True
             else:
-                self.log(f"vehicle refused mode {self._mode_request} (COMMAND_ACK result "
+                self.log(f"vehicle refused mode {self.mode_request.name} (COMMAND_ACK result "
                          f"{msg.result})")
         elif msg.command == 400 and msg.result != 0:               # MAV_CMD_COMPONENT_ARM_DISARM
             self.log(f"vehicle refused to arm (COMMAND_ACK result {msg.result}); retrying")
 
     # --- timers -----------------------------------------------------------------------------
     def _timers(self, now: float) -> None:
-        self._next_timer = now + TIMER_EVERY
+        self.timers.next_timer = now + TIMER_EVERY
         cfg, state = self.config, self.state
-        if now >= self._next_heartbeat:
+        if now >= self.timers.next_heartbeat:
             self.link.send_heartbeat()
-            self._next_heartbeat = now + 1.0
+            self.timers.next_heartbeat = now + 1.0
         if state is State.WAITING:
-            if now - self._started > cfg.telemetry_timeout:
+            if now - self.timers.started > cfg.telemetry_timeout:
                 t = self.telemetry
                 detail = (f" ({t.received} LOCAL_POSITION_NED refused: "
                           f"{_nonzero(t.rejected)})" if t.received else "")
@@ -362,92 +439,94 @@ class Runner:
                 self._finish(f"no valid pose telemetry within {cfg.telemetry_timeout:g} s"
                              f"{detail}", ExitCode.USER_ERROR, hold=False)
         elif state is State.FAILSAFE:
-            if not self._heartbeat_fresh(now) and not self._heartbeat_lost_said:
-                self._heartbeat_lost_said = True
+            if not self._heartbeat_fresh(now) and not self.heard.heartbeat_lost_said:
+                self.heard.heartbeat_lost_said = True
                 self.log(f"no vehicle heartbeat for {cfg.heartbeat_lost:g} s")
             if self.telemetry.backwards_streak >= 3:
                 self._finish("failsafe: the vehicle restarted (time_boot_ms went back); "
                              "not resuming a mission on a rebooted vehicle", ExitCode.FAULT)
-            elif now - self._failsafe_since > cfg.lost_timeout:
+            elif now - self.stopping.failsafe_since > cfg.lost_timeout:
                 self._finish(f"failsafe: telemetry lost for {cfg.lost_timeout:g} s", ExitCode.FAULT)
-            elif now >= self._next_try and not self._hold_confirmed:
+            elif now >= self.mode_request.next_try and not self.stopping.hold_confirmed:
                 self.link.send_stop()
                 self._request_mode(self.hold_mode, now)
         elif state in ACTIVE:
-            if now - self._last_sample_wall > cfg.stale_timeout:
+            if now - self.heard.sample_wall > cfg.stale_timeout:
                 self._failsafe(now)
             elif not self._heartbeat_fresh(now):
-                self._heartbeat_lost_said = True
+                self.heard.heartbeat_lost_said = True
                 self._failsafe(now, f"heartbeat lost: none from the vehicle for "
-                                    f"{now - self._last_heartbeat_wall:.2f} s")
+                                    f"{now - self.heard.heartbeat_wall:.2f} s")
             elif state is State.ENGAGING:
                 self._engage(now)
 
     def _failsafe(self, now: float, reason: str | None = None) -> None:
         if reason is None:
-            gap = now - self._last_sample_wall
+            gap = now - self.heard.sample_wall
             reason = f"telemetry stale: no valid sample for {gap:.2f} s"
         self.log(f"{reason}; stopping the rover (zero setpoint, {self.hold_mode})")
         self.link.send_stop()
-        self._hold_confirmed = False
+        stopping = self.stopping
+        stopping.hold_confirmed = False
         self._request_mode(self.hold_mode, now)
-        self._resume_to = self.state if self.state is not State.ENGAGING else self._after_engage
+        stopping.resume_to = (self.state if self.state is not State.ENGAGING
+                              else self.engagement.after)
         self.state = State.FAILSAFE
-        self._failsafe_since = now
-        self.failsafes += 1
+        stopping.failsafe_since = now
+        self.counters.failsafes += 1
         self._emit(ev.FAILSAFE, reason, {"rejected": dict(self.telemetry.rejected)})
 
     def _recover(self) -> None:
         """Telemetry is back: forget the filter and integrators, re-engage, then carry on."""
         self.tracker.reset()
-        self.log(f"telemetry back after {time.perf_counter() - self._failsafe_since:.2f} s; "
+        out = time.perf_counter() - self.stopping.failsafe_since
+        self.log(f"telemetry back after {out:.2f} s; "
                  f"re-engaging {self.track_mode} with the filter and integrators reset")
-        self._enter_engaging(self._resume_to)
+        self._enter_engaging(self.stopping.resume_to)
         self._emit(ev.RESUMED, "telemetry back")
 
     # --- engaging: mode, then arming ---------------------------------------------------------
     def _enter_engaging(self, resume_to: State) -> None:
         self.state = State.ENGAGING
-        self._after_engage = (resume_to if resume_to in (State.TRACKING, State.PAUSED, State.READY)
-                              else self._after_engage)
-        self._engage_since = time.perf_counter()
-        self._mode_request, self._mode_acked, self._mode_seen = None, False, False
-        self._warm_t0 = None
-        self._next_try = self._next_arm_try = 0.0
-        self._segment_t0 = None
+        e = self.engagement
+        if resume_to in (State.TRACKING, State.PAUSED, State.READY):
+            e.after = resume_to
+        e.since = time.perf_counter()
+        e.mode_seen, e.warm_t0, e.next_arm_try = False, None, 0.0
+        self.mode_request.name, self.mode_request.next_try = None, 0.0
+        self.clock.segment_t0 = None
 
     def _request_mode(self, name: str, now: float) -> None:
-        if self._mode_request != name:
-            self._mode_acked = False
-        self._mode_request = name
+        self.mode_request.name = name
         self.link.request_mode(name)
-        self._next_try = now + self.config.retry_interval
+        self.mode_request.next_try = now + self.config.retry_interval
 
     def _engage(self, now: float) -> None:
-        cfg, link = self.config, self.link
-        if self.px4 and (self._warm_t0 is None or self._last_vt - self._warm_t0 < cfg.offboard_warmup):
-            return   # PX4 refuses OFFBOARD until setpoints have streamed for a while
+        cfg, link, e = self.config, self.link, self.engagement
+        warmup = self.profile.offboard_warmup
+        if warmup is not None and (e.warm_t0 is None or self.heard.vehicle_t - e.warm_t0 < warmup):
+            return   # the vehicle refuses the track mode until setpoints have streamed a while
         # Only a heartbeat that arrived since engaging began counts: after an outage the last
         # one still says GUIDED while the vehicle sits in the HOLD we sent it.
-        if not self._mode_seen:
-            if now - self._engage_since > cfg.mode_timeout:
+        if not e.mode_seen:
+            if now - e.since > cfg.mode_timeout:
                 self._finish(f"failsafe: the vehicle did not enter {self.track_mode} within "
                              f"{cfg.mode_timeout:g} s", ExitCode.FAULT)
-            elif now >= self._next_try:
+            elif now >= self.mode_request.next_try:
                 self._request_mode(self.track_mode, now)
             return
         if not link.armed:
-            if now - self._engage_since > cfg.arm_timeout:
+            if now - e.since > cfg.arm_timeout:
                 self._finish(f"failsafe: the vehicle was not armed within {cfg.arm_timeout:g} s"
                              + ("" if cfg.arm else " (use --arm to arm it from here)"), ExitCode.FAULT)
-            elif cfg.arm and now >= self._next_arm_try:
+            elif cfg.arm and now >= e.next_arm_try:
                 link.request_arm()
-                self._next_arm_try = now + cfg.retry_interval
-            elif not cfg.arm and not self._said_arm_wait:
-                self._said_arm_wait = True
+                e.next_arm_try = now + cfg.retry_interval
+            elif not cfg.arm and not e.said_arm_wait:
+                e.said_arm_wait = True
                 self.log("waiting for the vehicle to be armed (or pass --arm)")
             return
-        target = self._after_engage
+        target = e.after
         self.state = target
         if target is State.TRACKING:
             self.log(f"{self.track_mode} and armed: tracking '{self.mission.name}'")
@@ -462,11 +541,12 @@ class Runner:
         if stop:
             self.link.send_stop(time_boot_ms)
         if hold:
-            self._hold_confirmed = self._hold_confirmed and self.state is State.FAILSAFE
+            stopping = self.stopping   # a HOLD confirmed in failsafe stands; an older one not
+            stopping.hold_confirmed = stopping.hold_confirmed and self.state is State.FAILSAFE
             self._request_mode(self.hold_mode, time.perf_counter())
         self.state = State.DONE
-        self.outcome = Outcome(reason, code, False, self.failsafes)
-        self._wants_hold = hold
+        self.outcome = Outcome(reason, code, False, self.counters.failsafes)
+        self.stopping.wants_hold = hold
         self.log(f"stopped: {reason}")
 
     def _override(self, why: str) -> None:
@@ -484,12 +564,12 @@ class Runner:
 
     def _wait_for_hold(self) -> None:
         """Until HOLD shows (ACK or heartbeat), answer telemetry with zero setpoints."""
-        if not getattr(self, "_wants_hold", False):
+        if not self.stopping.wants_hold:
             return
         link, clock = self.link, time.perf_counter
         deadline = clock() + self.config.hold_timeout
         retry = clock() + 0.5
-        while not self._hold_confirmed and (now := clock()) < deadline:
+        while not self.stopping.hold_confirmed and (now := clock()) < deadline:
             msg = link.recv()
             if msg is None:
                 if now >= retry:
@@ -509,10 +589,10 @@ class Runner:
                     link.send_stop(sample.time_boot_ms)
             elif (kind == "HEARTBEAT" and link.is_vehicle_heartbeat(msg)
                   and link.mode == self.hold_mode):
-                self._hold_confirmed = True
+                self.stopping.hold_confirmed = True
             elif kind == "COMMAND_ACK":
                 self._on_ack(msg)
-        if not self._hold_confirmed:
+        if not self.stopping.hold_confirmed:
             self.log(f"{self.hold_mode} not confirmed by the vehicle within "
                      f"{self.config.hold_timeout:g} s")
 
@@ -524,7 +604,7 @@ class Runner:
         elif verb == "start":
             if state is State.READY:
                 self.state = State.TRACKING
-                self._segment_t0 = None
+                self.clock.segment_t0 = None
                 self._emit(ev.TRACKING, self.mission.name)
                 req.reply(True, f"tracking '{self.mission.name}'")
             else:
@@ -533,16 +613,16 @@ class Runner:
             if state is State.TRACKING:
                 self.state = State.PAUSED
                 self._emit(ev.PAUSED, "requested")
-                req.reply(True, f"paused at mission time {self.mission_time:.2f} s")
+                req.reply(True, f"paused at mission time {self.clock.time:.2f} s")
             else:
                 req.reply(False, f"cannot pause while {state.value}")
         elif verb == "resume":
             if state is State.PAUSED:
                 self.tracker.reset()   # the rover stood still: start the filter afresh
                 self.state = State.TRACKING
-                self._segment_t0 = None
+                self.clock.segment_t0 = None
                 self._emit(ev.RESUMED, "requested")
-                req.reply(True, f"resumed at mission time {self.mission_time:.2f} s")
+                req.reply(True, f"resumed at mission time {self.clock.time:.2f} s")
             else:
                 req.reply(False, f"cannot resume while {state.value}")
         elif verb == "abort":
@@ -574,34 +654,34 @@ class Runner:
                              "not read the vehicle's EKF origin: start the run with a geodetic "
                              "mission to fly one")
             return
-        problem = self._pose and self._start_problem(new, *self._pose)
+        problem = self.heard.pose and self._start_problem(new, *self.heard.pose)
         if problem:
             req.reply(False, problem)
             return
         self.mission, self.trajectory = new, None
-        self.mission_time, self._mission_offset, self._segment_t0 = 0.0, 0.0, None
+        self.clock.time, self.clock.offset, self.clock.segment_t0 = 0.0, 0.0, None
         self.stats = TrackingStats(new.duration, self.config.period)
         if self.state is State.PAUSED:
             self.state = State.READY
             self.tracker.reset()
-        self._after_engage = State.READY
+        self.engagement.after = State.READY
         self._emit(ev.MISSION_LOADED, new.name, {"source": new.source, "duration": new.duration})
         req.reply(True, f"loaded '{new.name}' ({new.duration:g} s); send `start`")
 
     def status(self) -> dict[str, Any]:
         t = self.telemetry
         return {"state": self.state.value, "mission": self.mission.name,
-                "mission_time": self.mission_time, "duration": self.mission.duration,
+                "mission_time": self.clock.time, "duration": self.mission.duration,
                 "mode": self.link.mode, "armed": self.link.armed, "cycles": self.stats.cycles,
                 "telemetry_received": t.received, "telemetry_rejected": dict(t.rejected),
-                "failsafes": self.failsafes,
+                "failsafes": self.counters.failsafes,
                 "signing_rejected": getattr(self.link, "signing_rejected", 0)}
 
     # --- sinks ------------------------------------------------------------------------------
     def _emit(self, kind: str, reason: str = "", detail: dict | None = None) -> None:
         if not self.sinks:
             return
-        event = StatusEvent(kind, reason, self._last_vt or None, detail or {})
+        event = StatusEvent(kind, reason, self.heard.vehicle_t or None, detail or {})
         for sink in self.sinks:
             self._safely(sink.status, event)
 
@@ -610,8 +690,8 @@ class Runner:
         try:
             fn(*args)
         except Exception as exc:  # noqa: BLE001
-            self.sink_errors += 1
-            if self.sink_errors == 1:
+            self.counters.sink_errors += 1
+            if self.counters.sink_errors == 1:
                 self.log(f"a sink failed ({type(exc).__name__}: {exc}); carrying on")
 
 

@@ -114,7 +114,7 @@ def fly(s: RunSettings, sinks: Sequence[Sink] = (), control: ControlChannel | No
     (``companion identify`` flies its excitation manoeuvre so); it runs once the vehicle is
     known and its telemetry rate agreed, and may read from the link (parameters) meanwhile.
     """
-    from .link import HOLD_MODE, TRACK_MODE, Link
+    from .link import Link
 
     wall0 = time.perf_counter()
     check_controller(s.controller, s.gains)
@@ -127,8 +127,8 @@ def fly(s: RunSettings, sinks: Sequence[Sink] = (), control: ControlChannel | No
         vehicle = link.wait_vehicle(stop)
         log(f"{vehicle.autopilot} vehicle, system {vehicle.sysid} component {vehicle.compid}, "
             f"mode {link.mode}, {'armed' if link.armed else 'disarmed'}")
-        for name in (TRACK_MODE[vehicle.autopilot], HOLD_MODE[vehicle.autopilot]):
-            if name not in (link.master.mode_mapping() or {}):
+        for name in (vehicle.profile.track_mode, vehicle.profile.hold_mode):
+            if name not in link.mode_names():
                 raise UserError(f"the vehicle reports no {name} mode (MAV_TYPE {vehicle.mav_type})")
         mission, origin = s.mission, None
         if mission.geodetic:

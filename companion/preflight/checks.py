@@ -6,7 +6,12 @@ parameter or message looked at, its value, what to set and why. A row may carry 
 parameter values ``companion preflight --fix`` would set; only what has one right answer for
 every rover gets one (failsafe settings), never a vehicle's own limits.
 
-Facts behind the rules (``vehicle-interfaces.md``; ArduPilot Rover, PX4 sources):
+What differs between autopilots is their profile's (:mod:`companion.profiles`, found by
+``Observed.autopilot``): the parameter names and the values wanted
+(:class:`~companion.profiles.autopilot.PreflightFacts`: how the frame shows the steering kind,
+the failsafe, the rate cap, the inner-loop limits), the track mode; what a steering kind is, its
+verdict and why, is its steering profile's. Facts behind the rules (``vehicle-interfaces.md``;
+ArduPilot Rover, PX4 sources):
 
 * HEARTBEAT type 10 is a ground rover, 11 a boat (ArduPilot Rover sends 11 with FRAME_CLASS 2);
 * skid steering is SERVOn_FUNCTION 73 (throttle left) and 74 (throttle right); Ackermann is 26
@@ -17,7 +22,8 @@ Facts behind the rules (``vehicle-interfaces.md``; ArduPilot Rover, PX4 sources)
   failsafe trips at FS_EKF_THRESH (0.8) on the variances, ground stations go red there;
 * the GCS failsafe watches heartbeats of MAV_GCS_SYSID (SYSID_MYGCS before 2025; a range up to
   MAV_GCS_SYSID_HI); MAV_OPTIONS bit 0 (SYSID_ENFORCE before) drops every other system's
-  messages, the companion's setpoints included;
+  messages, the companion's setpoints included; PX4's offboard-loss failsafe watches the
+  setpoint stream itself (COM_OF_LOSS_T, then COM_OBL_RC_ACT);
 * a message rate above 0.8 x SCHED_LOOP_RATE is refused.
 """
 
@@ -27,8 +33,11 @@ import math
 from dataclasses import dataclass, field
 from typing import Mapping
 
+from .. import profiles
+from ..profiles.autopilot import (AirframeFrame, AutopilotProfile, GcsFailsafe, OffboardFailsafe,
+                                  ServoFrame, TopSpeedParams)
+
 OK, WARN, FAIL = "ok", "warn", "fail"
-ARDUPILOT, PX4 = "ardupilot", "px4"
 MAV_TYPE_GROUND_ROVER, MAV_TYPE_SURFACE_BOAT = 10, 11
 PREARM_BIT = 0x10000000                     # MAV_SYS_STATUS_PREARM_CHECK
 EKF_ATTITUDE, EKF_VEL_HORIZ, EKF_POS_REL, EKF_POS_ABS = 1, 2, 8, 16
@@ -36,9 +45,6 @@ EKF_UNINITIALIZED, EKF_GPS_GLITCHING = 1024, 32768
 EKF_WARN, EKF_FAIL = 0.5, 0.8               # variance ratios (FS_EKF_THRESH's default is 0.8)
 RATE_CAP = 0.8                              # streams up to 0.8 x SCHED_LOOP_RATE
 LIMIT_TOLERANCE = 0.25                      # vehicle file vs autopilot, relative
-SKID = (73, 74)                             # SERVOn_FUNCTION throttle left / right
-ACKERMANN = (26, 70)                        # ground steering, throttle
-TRACK_MODE = {ARDUPILOT: "GUIDED", PX4: "OFFBOARD"}
 # MAV_SYS_STATUS_SENSOR bits worth naming when unhealthy
 SENSOR_NAMES = {0x1: "gyro", 0x2: "accelerometer", 0x4: "compass", 0x8: "barometer",
                 0x20: "GPS", 0x8000: "motor outputs", 0x200000: "AHRS",
@@ -89,7 +95,7 @@ class Limits:
 
 @dataclass(frozen=True)
 class Observed:
-    autopilot: str                          # ARDUPILOT or PX4
+    autopilot: str                          # a profile's name (companion.profiles.AUTOPILOTS)
     mav_type: int
     modes: frozenset[str]                   # the mode names the vehicle type has
     armed: bool = False
@@ -105,6 +111,10 @@ class Observed:
     origin: tuple[float, float] | None = None        # GPS_GLOBAL_ORIGIN lat, lon (deg)
     streams: Streams | None = None
     limits: Limits | None = None
+
+    @property
+    def profile(self) -> AutopilotProfile:
+        return profiles.autopilot(self.autopilot)
 
 
 def _num(value: float) -> str:
@@ -141,59 +151,70 @@ def _servo_functions(params: Mapping[str, float]) -> dict[int, list[str]]:
 
 
 def check_steering(obs: Observed) -> list[Check]:
-    """Skid-steer or Ackermann, from the frame and the servo functions (the paper's model is a
+    """Skid-steer or Ackermann (a steering profile), from the frame and the servo functions or
+    the airframe, as the autopilot's profile says it shows (the paper's model is a
     differential-drive rover)."""
-    p = obs.params
-    if obs.autopilot == PX4:
-        missing = _param("CA_AIRFRAME", obs, "6 (Rover (Differential))",
-                         "the frame tells skid steering from Ackermann")
-        if missing:
-            return [missing]
-        frame = int(p["CA_AIRFRAME"])
-        kinds = {6: "skid-steer (Rover (Differential))", 5: "Ackermann (Rover (Ackermann))",
-                 13: "mecanum (Rover (Mecanum))"}
-        value = f"{kinds.get(frame, 'not a rover')} (CA_AIRFRAME {frame})"
-        if frame == 6:
-            return [Check("CA_AIRFRAME", OK, value, "6", "a differential-drive rover: the "
-                          "vehicle model's kind")]
-        status = WARN if frame in kinds else FAIL
-        return [Check("CA_AIRFRAME", status, value, "6 (Rover (Differential))",
-                      _ACKERMANN_WHY if frame == 5 else
-                      "the companion's model is a differential-drive rover"
-                      if frame in kinds else "the airframe is not a rover")]
-    missing = _param("FRAME_CLASS", obs, "1 (rover) or 2 (boat)",
-                     "the frame tells a rover from a balance bot")
+    frame = obs.profile.preflight.frame
+    if isinstance(frame, AirframeFrame):
+        return _steering_by_airframe(obs, frame)
+    return _steering_by_servos(obs, frame)
+
+
+def _steering_by_airframe(obs: Observed, frame: AirframeFrame) -> list[Check]:
+    model, name = profiles.model_steering(), frame.param
+    want = f"{model.airframe} ({model.airframe_label})"
+    missing = _param(name, obs, want, "the frame tells skid steering from Ackermann")
     if missing:
         return [missing]
-    frame_class = int(p["FRAME_CLASS"])
+    airframe = int(obs.params[name])
+    kind = profiles.steering_by_airframe(airframe)
+    label = (f"{kind.label} ({kind.airframe_label})" if kind is not None
+             else frame.other_rovers.get(airframe, "not a rover"))
+    value = f"{label} ({name} {airframe})"
+    if kind is model:
+        return [Check(name, OK, value, f"{model.airframe}", model.why)]
+    if kind is not None:
+        return [Check(name, kind.verdict, value, want, kind.why)]
+    if airframe in frame.other_rovers:
+        return [Check(name, WARN, value, want, "the companion's model is a differential-drive "
+                      "rover")]
+    return [Check(name, FAIL, value, want, "the airframe is not a rover")]
+
+
+def _steering_by_servos(obs: Observed, frame: ServoFrame) -> list[Check]:
+    p = obs.params
+    classes = " or ".join(f"{k} ({v})" for k, v in frame.classes.items())
+    missing = _param(frame.class_param, obs, classes, "the frame tells a rover from a balance bot")
+    if missing:
+        return [missing]
+    frame_class = int(p[frame.class_param])
     servos = _servo_functions(p)
-    skid = all(f in servos for f in SKID)
-    ackermann = all(f in servos for f in ACKERMANN)
-    outputs = ", ".join(f"{n} {f}" for f in (*SKID, *ACKERMANN) for n in servos.get(f, []))
-    name = "FRAME_CLASS, SERVOn_FUNCTION"
-    if frame_class not in (1, 2):
-        return [Check(name, FAIL, f"FRAME_CLASS {frame_class}", "1 (rover) or 2 (boat)",
+    kind = profiles.steering_by_servos(set(servos))
+    model = profiles.model_steering()
+    outputs = ", ".join(f"{n} {f}" for s in profiles.STEERING.values()
+                        for f in s.servo_functions for n in servos.get(f, []))
+    name = f"{frame.class_param}, SERVOn_FUNCTION"
+    if frame_class not in frame.classes:
+        return [Check(name, FAIL, f"{frame.class_param} {frame_class}", classes,
                       "not a rover or boat frame (3 is a balance bot): the companion's model "
                       "does not describe it")]
-    frame_type = int(p.get("FRAME_TYPE", 0) or 0)
+    frame_type = int(p.get(frame.type_param, 0) or 0)
     if frame_type != 0:
-        return [Check(name, WARN, f"FRAME_TYPE {frame_type} (omni)", "FRAME_TYPE 0",
+        return [Check(name, WARN, f"{frame.type_param} {frame_type} (omni)",
+                      f"{frame.type_param} 0",
                       "an omni frame moves sideways too; the companion commands only speed "
                       "and turn rate")]
-    if skid:
-        return [Check(name, OK, f"skid-steer ({outputs})", "throttle left 73 / right 74",
-                      "a differential-drive rover: the vehicle model's kind")]
-    if ackermann:
-        return [Check(name, WARN, f"Ackermann ({outputs})", "skid steering (73 / 74)",
-                      _ACKERMANN_WHY)]
+    if kind is model:
+        return [Check(name, OK, f"{kind.label} ({outputs})", kind.servo_text, kind.why)]
+    if kind is not None:
+        model_servos = " / ".join(map(str, model.servo_functions))
+        return [Check(name, kind.verdict, f"{kind.label} ({outputs})",
+                      f"{model.name} steering ({model_servos})", kind.why)]
+    either = " or ".join(f"{' and '.join(map(str, s.servo_functions))} ({s.label})"
+                         for s in profiles.STEERING.values())
     return [Check(name, FAIL, "no throttle outputs" + (f" ({outputs})" if outputs else ""),
-                  "SERVOn_FUNCTION 73 and 74 (skid) or 26 and 70 (Ackermann)",
+                  f"SERVOn_FUNCTION {either}",
                   "no motor output is assigned to throttle: the rover cannot move")]
-
-
-_ACKERMANN_WHY = ("an Ackermann rover cannot turn in place and its turn rate follows its "
-                  "speed; the paper's model is a differential drive: identify the vehicle "
-                  "(companion identify) and keep paths within its turning circle")
 
 
 # --------------------------------------------------------------------------- the link
@@ -222,15 +243,15 @@ def check_streams(obs: Observed) -> list[Check]:
         return [Check(name, FAIL, value, want, "pose telemetry does not arrive: the control "
                       "loop has nothing to run on")]
     refused = [k for k, r in s.results.items() if r not in (0, None)]
-    loop = obs.params.get("SCHED_LOOP_RATE")
+    loop_param = obs.profile.preflight.loop_rate_param
+    loop = obs.params.get(loop_param) if loop_param else None
     if refused:
         need = math.ceil(asked / RATE_CAP)
-        fix = ({"SCHED_LOOP_RATE": float(need)}
-               if loop is not None and obs.autopilot == ARDUPILOT and loop < need else {})
-        extra = (f"; SCHED_LOOP_RATE {loop:g} allows {RATE_CAP * loop:g} Hz, {need} allows "
+        fix = {loop_param: float(need)} if loop is not None and loop < need else {}
+        extra = (f"; {loop_param} {loop:g} allows {RATE_CAP * loop:g} Hz, {need} allows "
                  f"{asked:g} Hz (after a reboot)" if fix else "")
         return [Check(name, WARN, value + f", refused for {', '.join(refused)}",
-                      f"{want}" + (f" (SCHED_LOOP_RATE {need})" if fix else ""),
+                      f"{want}" + (f" ({loop_param} {need})" if fix else ""),
                       "the vehicle refused the rate; the companion falls back to a slower one"
                       + extra, fix)]
     slow = [k for k, v in measured.items() if v < 0.8 * asked]
@@ -330,7 +351,7 @@ def check_prearm(obs: Observed) -> list[Check]:
 
 
 def check_track_mode(obs: Observed) -> list[Check]:
-    mode = TRACK_MODE.get(obs.autopilot, "GUIDED")
+    mode = obs.profile.track_mode
     if mode in obs.modes:
         return [Check(mode, OK, "available", f"{mode} available",
                       "the mode in which the vehicle follows the companion's setpoints")]
@@ -340,53 +361,63 @@ def check_track_mode(obs: Observed) -> list[Check]:
 
 # --------------------------------------------------------------------------- failsafes
 
-def _gcs_sysid_names(params: Mapping[str, float]) -> tuple[str, str, str | None]:
-    """(GCS system id parameter, its upper bound or '', enforce parameter) of this firmware."""
-    if "MAV_GCS_SYSID" in params:
-        return "MAV_GCS_SYSID", "MAV_GCS_SYSID_HI", "MAV_OPTIONS"
-    return "SYSID_MYGCS", "", "SYSID_ENFORCE"
+def check_failsafes(obs: Observed) -> list[Check]:
+    """The autopilot's failsafe for a companion that falls silent, as its profile names it."""
+    facts = obs.profile.preflight.failsafe
+    if isinstance(facts, OffboardFailsafe):
+        return _offboard_failsafe(obs, facts)
+    return _gcs_failsafe(obs, facts)
 
 
-def check_failsafes_ardupilot(obs: Observed) -> list[Check]:
+def _gcs_sysid_names(f: GcsFailsafe, params: Mapping[str, float]) -> tuple[str, str, str]:
+    """(GCS system id parameter, its upper bound or '', enforce parameter) of this firmware:
+    the first spelling it has, else the oldest."""
+    return next((names for names in f.sysid_params if names[0] in params), f.sysid_params[-1])
+
+
+def _gcs_failsafe(obs: Observed, f: GcsFailsafe) -> list[Check]:
     p, out = obs.params, []
     me = obs.companion_sysid
-    missing = _param("FS_GCS_ENABLE", obs, "1", "the GCS failsafe notices a dead companion")
+    track = obs.profile.track_mode
+    missing = _param(f.enable, obs, "1", "the GCS failsafe notices a dead companion")
     if missing:
         out.append(missing)
-    elif p["FS_GCS_ENABLE"] == 0:
-        out.append(Check("FS_GCS_ENABLE", WARN, "0 (off)", "1",
+    elif p[f.enable] == 0:
+        out.append(Check(f.enable, WARN, "0 (off)", "1",
                          f"the companion's heartbeat (system {me}) is a GCS heartbeat: with "
-                         "the failsafe on, a companion that dies is noticed within "
-                         "FS_GCS_TIMEOUT and FS_ACTION runs; off, the rover keeps its last "
-                         "setpoint for 3 s (the guided timeout), then stops armed in GUIDED",
-                         {"FS_GCS_ENABLE": 1.0}))
+                         f"the failsafe on, a companion that dies is noticed within "
+                         f"{f.timeout} and {f.action} runs; off, {f.silent_companion}",
+                         {f.enable: 1.0}))
     else:
-        out.append(Check("FS_GCS_ENABLE", OK, _num(p["FS_GCS_ENABLE"]), "1",
-                         "a companion (or ground station) that falls silent triggers FS_ACTION"))
-    missing = _param("FS_ACTION", obs, "2 (Hold)", "what the failsafe does")
+        out.append(Check(f.enable, OK, _num(p[f.enable]), "1",
+                         f"a companion (or ground station) that falls silent triggers {f.action}"))
+    missing = _param(f.action, obs, f.action_hold_label, "what the failsafe does")
     if missing:
         out.append(missing)
-    elif p["FS_ACTION"] == 0:
-        out.append(Check("FS_ACTION", WARN, "0 (nothing)", "2 (Hold)",
+    elif p[f.action] == 0:
+        out.append(Check(f.action, WARN, "0 (nothing)", f.action_hold_label,
                          "a failsafe that does nothing leaves the rover driving",
-                         {"FS_ACTION": 2.0}))
+                         {f.action: float(f.action_hold)}))
     else:
-        out.append(Check("FS_ACTION", OK, _num(p["FS_ACTION"]), "2 (Hold)",
-                         "the failsafe takes the rover out of GUIDED"))
-    missing = _param("FS_GCS_TIMEOUT", obs, "5 s", "how long a silent companion goes unnoticed")
+        out.append(Check(f.action, OK, _num(p[f.action]), f.action_hold_label,
+                         f"the failsafe takes the rover out of {track}"))
+    lo_t, hi_t = f.timeout_range
+    missing = _param(f.timeout, obs, f"{f.timeout_fix:g} s",
+                     "how long a silent companion goes unnoticed")
     if missing:
         out.append(missing)
     else:
-        t = p["FS_GCS_TIMEOUT"]
-        if 2.0 <= t <= 10.0:
-            out.append(Check("FS_GCS_TIMEOUT", OK, f"{t:g} s", "2 to 10 s",
+        t = p[f.timeout]
+        if lo_t <= t <= hi_t:
+            out.append(Check(f.timeout, OK, f"{t:g} s", f"{lo_t:g} to {hi_t:g} s",
                              "longer than a few lost 1 Hz heartbeats, short enough to matter"))
         else:
-            out.append(Check("FS_GCS_TIMEOUT", WARN, f"{t:g} s", "2 to 10 s (5)",
-                             "the companion sends a heartbeat each second: under 2 s a few "
-                             "lost ones trip it, over 10 s a dead companion goes unnoticed",
-                             {"FS_GCS_TIMEOUT": 5.0}))
-    sysid_name, hi_name, enforce_name = _gcs_sysid_names(p)
+            out.append(Check(f.timeout, WARN, f"{t:g} s", f"{lo_t:g} to {hi_t:g} s "
+                             f"({f.timeout_fix:g})",
+                             f"the companion sends a heartbeat each second: under {lo_t:g} s a "
+                             f"few lost ones trip it, over {hi_t:g} s a dead companion goes "
+                             "unnoticed", {f.timeout: f.timeout_fix}))
+    sysid_name, hi_name, enforce_name = _gcs_sysid_names(f, p)
     missing = _param(sysid_name, obs, f"{me}", "which system the GCS failsafe watches")
     if missing:
         out.append(missing)
@@ -412,47 +443,39 @@ def check_failsafes_ardupilot(obs: Observed) -> list[Check]:
     return out
 
 
-def check_failsafes_px4(obs: Observed) -> list[Check]:
+def _offboard_failsafe(obs: Observed, f: OffboardFailsafe) -> list[Check]:
     p, out = obs.params, []
-    missing = _param("COM_OF_LOSS_T", obs, "1 s or less", "how long PX4 follows a lost stream")
+    who = obs.profile.label
+    t_max = f.loss_timeout_max
+    missing = _param(f.loss_timeout, obs, f"{t_max:g} s or less",
+                     f"how long {who} follows a lost stream")
     if missing:
         out.append(missing)
     else:
-        t = p["COM_OF_LOSS_T"]
-        ok = 0.0 < t <= 1.0
-        out.append(Check("COM_OF_LOSS_T", OK if ok else WARN, f"{t:g} s", "0 < t <= 1 s",
-                         "PX4 holds the last setpoint this long after the companion falls "
+        t = p[f.loss_timeout]
+        ok = 0.0 < t <= t_max
+        out.append(Check(f.loss_timeout, OK if ok else WARN, f"{t:g} s", f"0 < t <= {t_max:g} s",
+                         f"{who} holds the last setpoint this long after the companion falls "
                          "silent" + ("" if ok else ": the rover drives blind meanwhile"),
-                         {} if ok else {"COM_OF_LOSS_T": 1.0}))
-    missing = _param("COM_OBL_RC_ACT", obs, "5 (Hold)", "what PX4 does when offboard is lost")
+                         {} if ok else {f.loss_timeout: t_max}))
+    hold = f"{f.action_hold} ({f.action_names[f.action_hold]})"
+    missing = _param(f.action, obs, hold, f"what {who} does when offboard is lost")
     if missing:
         out.append(missing)
     else:
-        act = int(p["COM_OBL_RC_ACT"])
-        names = {0: "Position", 1: "Altitude", 2: "Stabilized/Manual", 3: "Return", 4: "Land",
-                 5: "Hold", 6: "Terminate", 7: "Disarm"}
-        value = f"{act} ({names.get(act, '?')})"
-        if act == 5:
-            out.append(Check("COM_OBL_RC_ACT", OK, value, "5 (Hold)",
+        act = int(p[f.action])
+        value = f"{act} ({f.action_names.get(act, '?')})"
+        if act == f.action_hold:
+            out.append(Check(f.action, OK, value, hold,
                              "a lost companion leaves the rover stopped"))
         else:
-            out.append(Check("COM_OBL_RC_ACT", WARN, value, "5 (Hold)",
+            out.append(Check(f.action, WARN, value, hold,
                              "on offboard loss the rover should stop where it is, not wait for "
-                             "a pilot's sticks or drive away", {"COM_OBL_RC_ACT": 5.0}))
+                             "a pilot's sticks or drive away", {f.action: float(f.action_hold)}))
     return out
 
 
 # --------------------------------------------------------------------------- inner loops
-
-# (parameter, unit, to SI, Limits field, what the model does with it, 0 allowed)
-_AP_LIMITS = (
-    ("ATC_ACCEL_MAX", "m/s^2", 1.0, "max_accel", "the speed loop's acceleration limit", False),
-    ("ATC_DECEL_MAX", "m/s^2", 1.0, "max_decel", "the speed loop's deceleration limit", True),
-    ("ATC_STR_RAT_MAX", "deg/s", math.pi / 180, "max_yaw_rate", "the turn-rate limit", False),
-    ("ATC_STR_ACC_MAX", "deg/s^2", math.pi / 180, "max_yaw_accel",
-     "the turn-rate loop's acceleration limit", False),
-)
-
 
 def _compare(name: str, autopilot_si: float, model_si: float, unit_scale: float, unit: str,
              value: str, limits: Limits) -> Check | None:
@@ -466,57 +489,61 @@ def _compare(name: str, autopilot_si: float, model_si: float, unit_scale: float,
 
 
 def check_limits(obs: Observed) -> list[Check]:
-    """The inner-loop limits the vehicle model starts from (companion.ident.priors)."""
-    if obs.autopilot != ARDUPILOT:
+    """The inner-loop limits the vehicle model starts from (the profile's priors,
+    companion.profiles), where the autopilot's profile names them."""
+    facts = obs.profile.preflight
+    if not facts.limits:
         return [Check("inner-loop limits", WARN, "not read", "the rover's speed and turn-rate "
-                      "limits", "PX4's rover limit parameters differ between releases: "
-                      "identify the vehicle (companion identify) for its model")]
+                      "limits", facts.limits_unread)]
     p, out, lim = obs.params, [], obs.limits
-    for name, unit, scale, attr, what, zero_ok in _AP_LIMITS:
-        want = f">= 0 {unit} (0: as ATC_ACCEL_MAX)" if zero_ok else f"> 0 {unit}"
+    for param in facts.limits:
+        name, unit, scale, what = param.name, param.unit, param.to_si, param.what
+        want = (f">= 0 {unit} (0: as {param.zero_as})" if param.zero_as else f"> 0 {unit}")
         missing = _param(name, obs, want, f"{what} of the vehicle model")
         if missing:
             out.append(missing)
             continue
         v = p[name]
         value = f"{v:g} {unit}"
-        if v < 0 or (v == 0 and not zero_ok):
+        if v < 0 or (v == 0 and not param.zero_as):
             out.append(Check(name, WARN, value + (" (no limit)" if v == 0 else ""),
                              want, f"{what}: without it the vehicle answers a step "
                              "at once and the model's rate limit is a guess"))
             continue
         if lim is not None:
-            model = getattr(lim, attr)
-            ap = (p["ATC_ACCEL_MAX"] if v == 0 and attr == "max_decel" else v) * scale
+            model = getattr(lim, param.field)
+            # 0: as another parameter (unknown when not reported: nothing to compare)
+            ap = (p.get(param.zero_as, math.nan) if v == 0 and param.zero_as else v) * scale
             row = _compare(name, ap, model, scale, unit, value, lim)
             if row is not None:
                 out.append(row)
                 continue
         out.append(Check(name, OK, value, want, f"{what}: the vehicle model starts from it"))
-    out.append(_top_speed(obs))
+    if facts.top_speed is not None:
+        out.append(_top_speed(obs, facts.top_speed))
     return out
 
 
-def _top_speed(obs: Observed) -> Check:
+def _top_speed(obs: Observed, f: TopSpeedParams) -> Check:
     p = obs.params
-    name = "WP_SPEED, CRUISE_SPEED / CRUISE_THROTTLE"
-    missing = _param("CRUISE_SPEED", obs, "> 0 m/s", "the speed at CRUISE_THROTTLE")
+    name = f"{f.wp_speed}, {f.cruise_speed} / {f.cruise_throttle}"
+    missing = _param(f.cruise_speed, obs, "> 0 m/s", f"the speed at {f.cruise_throttle}")
     if missing:
         return missing
-    cruise, throttle = p["CRUISE_SPEED"], p.get("CRUISE_THROTTLE", 0.0)
-    wp = p.get("WP_SPEED", 0.0)
+    cruise, throttle = p[f.cruise_speed], p.get(f.cruise_throttle, 0.0)
+    wp = p.get(f.wp_speed, 0.0)
     if not (cruise > 0 and 0 < throttle <= 100):
-        return Check(name, WARN, f"CRUISE_SPEED {cruise:g}, CRUISE_THROTTLE {throttle:g}",
-                     "CRUISE_SPEED > 0 at CRUISE_THROTTLE 1..100 %",
+        return Check(name, WARN, f"{f.cruise_speed} {cruise:g}, {f.cruise_throttle} {throttle:g}",
+                     f"{f.cruise_speed} > 0 at {f.cruise_throttle} 1..100 %",
                      "the throttle feed-forward and the model's top speed come from these")
     full = cruise * 100.0 / throttle
     top = wp if 0 < wp <= full else full
-    value = f"top speed {top:.3g} m/s (WP_SPEED {wp:g}, full throttle {full:.3g})"
+    value = f"top speed {top:.3g} m/s ({f.wp_speed} {wp:g}, full throttle {full:.3g})"
     if obs.limits is not None:
         row = _compare(name, top, obs.limits.max_speed, 1.0, "m/s", value, obs.limits)
         if row is not None:
             return row
-    return Check(name, OK, value, "> 0", "GUIDED holds speed setpoints to this")
+    return Check(name, OK, value, "> 0", f"{obs.profile.track_mode} holds speed setpoints to this")
 
 
 # --------------------------------------------------------------------------- all of them
@@ -525,8 +552,7 @@ def run_checks(obs: Observed) -> list[Check]:
     rows = (check_vehicle(obs) + check_steering(obs) + check_protocol(obs)
             + check_streams(obs) + check_origin(obs) + check_ekf(obs) + check_prearm(obs)
             + check_track_mode(obs))
-    rows += check_failsafes_px4(obs) if obs.autopilot == PX4 else check_failsafes_ardupilot(obs)
-    return rows + check_limits(obs) + check_signing(obs)
+    return rows + check_failsafes(obs) + check_limits(obs) + check_signing(obs)
 
 
 def exit_code(rows: list[Check]) -> int:

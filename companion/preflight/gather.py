@@ -1,9 +1,10 @@
 """Read what the preflight checks need from a live vehicle, and set parameters (--fix).
 
 In order, on one :class:`~companion.live.link.Link`: the vehicle's heartbeat; every parameter
-(:class:`~companion.live.params.ParamClient`); SYS_STATUS, EKF_STATUS_REPORT (PX4:
-ESTIMATOR_STATUS) and GPS_GLOBAL_ORIGIN asked for with MAV_CMD_REQUEST_MESSAGE, and ArduPilot's
-pre-arm messages with MAV_CMD_RUN_PREARM_CHECKS; then the pose streams asked for at the loop's
+(:class:`~companion.live.params.ParamClient`); SYS_STATUS, the estimator's status (the profile's
+``estimator_messages``: EKF_STATUS_REPORT, PX4's ESTIMATOR_STATUS too) and GPS_GLOBAL_ORIGIN
+asked for with MAV_CMD_REQUEST_MESSAGE, and the pre-arm messages with MAV_CMD_RUN_PREARM_CHECKS
+where the profile says the autopilot answers it (ArduPilot); then the pose streams asked for at the loop's
 rate (MAV_CMD_SET_MESSAGE_INTERVAL), measured on the vehicle's clock for a while, and handed back
 to their default rate (interval 0). Nothing here arms, changes mode or sends a setpoint.
 """
@@ -15,7 +16,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from ..errors import UserError
-from ..live.link import ARDUPILOT, PX4, Link, LinkConfig, mavlink
+from ..live.link import Link, LinkConfig, mavlink
 from ..live.origin import from_message
 from ..live.params import Param, ParamClient
 from .checks import Ekf, Limits, Observed, Streams
@@ -23,8 +24,6 @@ from .checks import Ekf, Limits, Observed, Streams
 POSE = {"LOCAL_POSITION_NED": mavlink.MAVLINK_MSG_ID_LOCAL_POSITION_NED,
         "ATTITUDE": mavlink.MAVLINK_MSG_ID_ATTITUDE}
 MSG_SYS_STATUS = mavlink.MAVLINK_MSG_ID_SYS_STATUS
-MSG_EKF = mavlink.MAVLINK_MSG_ID_EKF_STATUS_REPORT
-MSG_ESTIMATOR = mavlink.MAVLINK_MSG_ID_ESTIMATOR_STATUS
 MSG_ORIGIN = mavlink.MAVLINK_MSG_ID_GPS_GLOBAL_ORIGIN
 MAV_CMD_RUN_PREARM_CHECKS = 401
 SETTLE_S = 0.3
@@ -98,15 +97,15 @@ class Probe:
 
     def read_status(self, timeout: float) -> None:
         """SYS_STATUS, the estimator's status and the EKF origin, each asked for once a second
-        until it arrives or ``timeout`` passes; ArduPilot's pre-arm messages when disarmed."""
+        until it arrives or ``timeout`` passes; the pre-arm messages when disarmed (where the
+        autopilot answers MAV_CMD_RUN_PREARM_CHECKS)."""
         link, seen = self.link, self.seen
-        autopilot = link.vehicle.autopilot
-        wanted = {"SYS_STATUS": MSG_SYS_STATUS, "GPS_GLOBAL_ORIGIN": MSG_ORIGIN,
-                  "EKF_STATUS_REPORT": MSG_EKF}
-        if autopilot == PX4:
-            wanted["ESTIMATOR_STATUS"] = MSG_ESTIMATOR
+        facts = link.vehicle.profile.preflight
+        estimators = facts.estimator_messages
+        wanted = {"SYS_STATUS": MSG_SYS_STATUS, "GPS_GLOBAL_ORIGIN": MSG_ORIGIN}
+        wanted.update((k, getattr(mavlink, f"MAVLINK_MSG_ID_{k}")) for k in estimators)
         before = {k: seen.latest.get(k) for k in wanted}
-        if autopilot == ARDUPILOT and not link.armed:
+        if facts.prearm_command and not link.armed:
             link.command(MAV_CMD_RUN_PREARM_CHECKS)
         deadline = time.monotonic() + timeout
         texts_at = len(seen.texts)
@@ -115,12 +114,11 @@ class Probe:
             return seen.latest.get(kind) is not None and seen.latest.get(kind) is not before[kind]
 
         def estimator_done() -> bool:
-            return fresh("EKF_STATUS_REPORT") or fresh("ESTIMATOR_STATUS")
+            return any(fresh(k) for k in estimators)
 
         while time.monotonic() < deadline:
             pending = [k for k in wanted if not fresh(k)
-                       and not (k in ("EKF_STATUS_REPORT", "ESTIMATOR_STATUS")
-                                and estimator_done())]
+                       and not (k in estimators and estimator_done())]
             if not pending:
                 break
             for kind in pending:
@@ -128,7 +126,7 @@ class Probe:
             self.pump(min(1.0, deadline - time.monotonic()),
                       done=lambda: all(fresh(k) for k in pending))
         # the pre-arm messages follow the command's ACK: give them a moment
-        if autopilot == ARDUPILOT and not link.armed:
+        if facts.prearm_command and not link.armed:
             self.pump(0.5)
         self.prearm_texts = tuple(t for t in seen.texts[texts_at:]
                                   if t.lower().startswith(("prearm", "arm:")))

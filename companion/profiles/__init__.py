@@ -1,0 +1,64 @@
+"""Profiles: what differs between autopilots (ardupilot, px4) and between steering kinds (skid, ackermann), one module each behind one small interface.
+
+May import: ``core``, ``sim`` (rover parameters, for priors), ``errors``; no I/O, no pymavlink.
+"""
+
+from __future__ import annotations
+
+from . import ackermann, ardupilot, px4, skid, steering
+from .autopilot import AutopilotProfile
+from .steering import SteeringProfile
+
+# Adding one: a module beside these with its PROFILE, and one line here.
+AUTOPILOTS: dict[str, AutopilotProfile] = {p.name: p for p in (
+    ardupilot.PROFILE,
+    px4.PROFILE,
+)}
+STEERING: dict[str, SteeringProfile] = {p.name: p for p in (
+    skid.PROFILE,
+    ackermann.PROFILE,
+)}
+DEFAULT_AUTOPILOT = next(iter(AUTOPILOTS))     # the plant's and the demo's default
+
+
+def autopilot(name: str) -> AutopilotProfile:
+    """The profile called ``name`` (KeyError for another: the registry's names are the
+    flags' choices)."""
+    return AUTOPILOTS[name]
+
+
+def from_heartbeat(mav_autopilot: int) -> AutopilotProfile | None:
+    """The profile of a HEARTBEAT's ``autopilot`` field; None for an autopilot not driven here."""
+    return next((p for p in AUTOPILOTS.values() if mav_autopilot in p.mav_autopilot), None)
+
+
+def from_setpoints(velocity_vector: bool) -> AutopilotProfile:
+    """The first profile whose setpoints are velocity vectors (or speed / yaw rate): which
+    autopilot a log's setpoints were written for, when nothing else says."""
+    return next(p for p in AUTOPILOTS.values() if p.setpoint.velocity_vector == velocity_vector)
+
+
+def prior_params() -> tuple[str, ...]:
+    """Every profile's identification parameters (a .tlog may hold any of them)."""
+    return tuple(dict.fromkeys(n for p in AUTOPILOTS.values() for n in p.ident.params))
+
+
+def model_steering() -> SteeringProfile:
+    """The steering kind the vehicle model is (preflight's ``ok``): the paper's differential
+    drive."""
+    return next(s for s in STEERING.values() if s.verdict == steering.OK)
+
+
+def steering_by_airframe(airframe: int) -> SteeringProfile | None:
+    return next((s for s in STEERING.values() if s.airframe == airframe), None)
+
+
+def steering_by_servos(functions: set[int] | frozenset[int]) -> SteeringProfile | None:
+    """The first steering kind whose output functions are all assigned."""
+    return next((s for s in STEERING.values()
+                 if all(f in functions for f in s.servo_functions)), None)
+
+
+__all__ = ["AUTOPILOTS", "STEERING", "DEFAULT_AUTOPILOT", "AutopilotProfile", "SteeringProfile",
+           "autopilot", "from_heartbeat", "from_setpoints", "prior_params", "model_steering",
+           "steering_by_airframe", "steering_by_servos"]

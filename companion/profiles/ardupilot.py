@@ -1,0 +1,228 @@
+"""ArduPilot Rover: its ids, modes, setpoints, parameters, preflight facts, priors and what the plant emulates of it.
+
+* HEARTBEAT autopilot 3 (MAV_AUTOPILOT_ARDUPILOTMEGA); the mode number is ``custom_mode``
+  itself (Rover/mode.h), ``base_mode`` as Rover/GCS_Rover.cpp makes it; pymavlink's rover table
+  names them (ground rovers and boats; another MAV_TYPE has another table, none here).
+* GUIDED follows the companion, HOLD stands still. Setpoints: frame BODY_NED, type_mask 1511
+  (use vx, vy, yaw_rate), vx = v_ref, vy = 0, yaw_rate = omega_ref: Rover's
+  ``set_desired_turn_rate_and_speed``, the paper's two inputs. GUIDED takes them at once and
+  drops them 3 s after the last (no warm-up).
+* Parameters travel as their value ("C cast").
+* Preflight: the frame from FRAME_CLASS / FRAME_TYPE / SERVOn_FUNCTION, the GCS failsafe
+  (FS_GCS_ENABLE, FS_ACTION, FS_GCS_TIMEOUT, MAV_GCS_SYSID; SYSID_MYGCS before 2025), the rate
+  cap 0.8 x SCHED_LOOP_RATE, the inner-loop limits ATC_* and the top speed.
+* Identification priors from ATC_* and the cruise / waypoint speeds (:func:`priors`).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import TYPE_CHECKING, Mapping
+
+from . import skid
+from .autopilot import (FLAG_CUSTOM_MODE_ENABLED, FLAG_GUIDED_ENABLED, FLAG_MANUAL_INPUT_ENABLED,
+                        MAV_AUTOPILOT_ARDUPILOTMEGA, MAV_FRAME_BODY_NED, MAV_RESULT_FAILED,
+                        MAV_TYPE_GROUND_ROVER, MAV_TYPE_SURFACE_BOAT, PARAM_INT8, PARAM_INT16,
+                        PARAM_REAL32, AutopilotProfile, GcsFailsafe, IdentFacts, LimitParam, Mode,
+                        ModeTable, PlantFacts, PreflightFacts, ServoFrame, SetpointEncoding,
+                        TopSpeedParams)
+from .priors import Priors, defaults, finite
+
+if TYPE_CHECKING:
+    from ..sim.plant import RoverParams
+
+_MANUAL, _AUTO = FLAG_MANUAL_INPUT_ENABLED, FLAG_GUIDED_ENABLED
+# Rover/mode.h; base_mode: MANUAL_INPUT for modes with manual input, GUIDED for autopilot modes.
+MODES = ModeTable((
+    Mode("MANUAL", 0, _MANUAL),
+    Mode("ACRO", 1, _MANUAL),
+    Mode("LEARNING", 2, _MANUAL),      # gone from Rover since 3.2; pymavlink still names it
+    Mode("STEERING", 3, _MANUAL),
+    Mode("HOLD", 4, 0),
+    Mode("LOITER", 5, _AUTO),
+    Mode("FOLLOW", 6, _AUTO),
+    Mode("SIMPLE", 7, _MANUAL),
+    Mode("DOCK", 8, _AUTO),
+    Mode("CIRCLE", 9, _AUTO),
+    Mode("AUTO", 10, _AUTO),
+    Mode("RTL", 11, _AUTO),
+    Mode("SMART_RTL", 12, _AUTO),
+    Mode("GUIDED", 15, _AUTO),
+    Mode("INITIALISING", 16, 0),
+))
+
+
+def set_mode_params(mode: Mode) -> tuple[float, float, float]:
+    """MAV_CMD_DO_SET_MODE: param1 CUSTOM_MODE_ENABLED, param2 the mode number."""
+    return float(FLAG_CUSTOM_MODE_ENABLED), float(mode.custom_mode), 0.0
+
+
+def requested_mode(param2: float, param3: float) -> int | None:
+    """The mode number a MAV_CMD_DO_SET_MODE asks for (param2); None for NaN / inf."""
+    try:
+        number, _ = int(param2), int(param3)
+    except (ValueError, OverflowError):
+        return None
+    return number
+
+
+def mode_name(table: ModeTable, base_mode: int, custom_mode: int) -> str:
+    """The mode a heartbeat reports, named as pymavlink's ``mode_string_v10`` names it."""
+    if not base_mode & FLAG_CUSTOM_MODE_ENABLED:
+        return "Mode(0x%08x)" % base_mode
+    mode = table.by_number(custom_mode)
+    return mode.name if mode is not None else "Mode(%u)" % custom_mode
+
+
+# --------------------------------------------------------------------------- priors
+
+# The autopilot parameters a live identification reads (PARAM_REQUEST_READ).
+PRIOR_PARAMS = ("ATC_ACCEL_MAX", "ATC_DECEL_MAX", "ATC_STR_ACC_MAX", "ATC_STR_DEC_MAX",
+                "ATC_STR_RAT_MAX", "CRUISE_SPEED", "CRUISE_THROTTLE", "WP_SPEED",
+                "MOT_STR_THR_MIX")
+
+
+def priors(values: Mapping[str, float]) -> Priors:
+    """Priors from ArduPilot Rover's parameters (``{name: value}``, any subset; others default).
+
+    How they map onto :class:`companion.sim.plant.RoverParams` (APM_Control/AR_AttitudeControl.cpp):
+
+    * ``ATC_ACCEL_MAX`` (m/s^2, 0 = no limit) -> ``max_accel``; ``ATC_DECEL_MAX`` (0 = as accel)
+      -> ``max_decel`` (None: the identified acceleration limit);
+    * ``ATC_STR_ACC_MAX`` (deg/s^2, 0 = no limit) -> ``max_yaw_accel``; ``ATC_STR_DEC_MAX`` where
+      the firmware has it (0 = as accel) -> ``max_yaw_decel``;
+    * ``ATC_STR_RAT_MAX`` (deg/s, 0 = no limit) -> ``max_yaw_rate``;
+    * ``WP_SPEED`` (m/s) -> ``max_speed``: GUIDED holds a faster speed setpoint to it (as seen
+      on SITL: docs/design/vehicle-model.md); no faster than full throttle,
+      CRUISE_SPEED * 100 / CRUISE_THROTTLE (ArduPilot's throttle feed-forward assumes speed
+      proportional to throttle), which is the prior without WP_SPEED.
+
+    ``MOT_STR_THR_MIX`` is read and recorded but sets nothing: how steering and throttle share
+    the motors is not the model's coupling share, which only a turn at speed shows.
+    """
+    changes: dict[str, float | None] = {}
+    source: dict[str, str] = {}
+
+    def take(name: str, value: float | None, why: str) -> None:
+        changes[name] = value
+        source[name] = why
+
+    accel = finite(values, "ATC_ACCEL_MAX")
+    if accel is not None:
+        take("max_accel", accel if accel > 0 else math.inf, f"ATC_ACCEL_MAX {accel:g}")
+    decel = finite(values, "ATC_DECEL_MAX")
+    if decel is not None:
+        take("max_decel", decel if decel > 0 else None, f"ATC_DECEL_MAX {decel:g}")
+    yaw_accel = finite(values, "ATC_STR_ACC_MAX")
+    if yaw_accel is not None:
+        take("max_yaw_accel", math.radians(yaw_accel) if yaw_accel > 0 else math.inf,
+             f"ATC_STR_ACC_MAX {yaw_accel:g} deg/s^2")
+    yaw_decel = finite(values, "ATC_STR_DEC_MAX")
+    if yaw_decel is not None:
+        take("max_yaw_decel", math.radians(yaw_decel) if yaw_decel > 0 else None,
+             f"ATC_STR_DEC_MAX {yaw_decel:g} deg/s^2")
+    rate = finite(values, "ATC_STR_RAT_MAX")
+    if rate is not None:
+        take("max_yaw_rate", math.radians(rate) if rate > 0 else math.inf,
+             f"ATC_STR_RAT_MAX {rate:g} deg/s")
+    cruise, throttle = finite(values, "CRUISE_SPEED"), finite(values, "CRUISE_THROTTLE")
+    full = (cruise * 100.0 / throttle) if cruise and throttle and cruise > 0 and throttle > 0 \
+        else None
+    wp_speed = finite(values, "WP_SPEED")
+    if wp_speed is not None and wp_speed > 0 and (full is None or wp_speed <= full):
+        take("max_speed", wp_speed, f"WP_SPEED {wp_speed:g}")
+    elif full is not None:
+        take("max_speed", full, f"CRUISE_SPEED {cruise:g} / CRUISE_THROTTLE {throttle:g} %")
+    return Priors(defaults().with_(**changes), source)
+
+
+# --------------------------------------------------------------------------- the plant
+
+PLANT_CRUISE_THROTTLE = 50.0   # %: the plant's top speed is reached at full throttle, twice this
+
+
+def _limit(value: float | None, scale: float = 1.0) -> float:
+    """ArduPilot's convention: 0 is 'no limit'."""
+    return 0.0 if value is None or not math.isfinite(value) else float(value) * scale
+
+
+def plant_params(vehicle: RoverParams, loop_rate: float, sysid: int,
+                 offboard_loss_timeout: float) -> list[tuple[str, float, int]]:
+    """What ``sitl_plant`` serves as this autopilot: the limits from the rover it models in
+    ArduPilot's units (0 for none), a skid-steer frame, the failsafes at the firmware's
+    defaults, SCHED_LOOP_RATE its loop rate."""
+    deg = 180.0 / math.pi
+    top = _limit(vehicle.max_speed)
+    left, right = skid.PROFILE.servo_functions
+    return [
+        ("ATC_ACCEL_MAX", _limit(vehicle.max_accel), PARAM_REAL32),
+        ("ATC_DECEL_MAX", _limit(vehicle.max_decel), PARAM_REAL32),
+        ("ATC_STR_ACC_MAX", _limit(vehicle.max_yaw_accel, deg), PARAM_REAL32),
+        ("ATC_STR_DEC_MAX", _limit(vehicle.max_yaw_decel, deg), PARAM_REAL32),
+        ("ATC_STR_RAT_MAX", _limit(vehicle.max_yaw_rate, deg), PARAM_REAL32),
+        ("CRUISE_SPEED", top * PLANT_CRUISE_THROTTLE / 100.0, PARAM_REAL32),
+        ("CRUISE_THROTTLE", PLANT_CRUISE_THROTTLE, PARAM_INT8),
+        ("FRAME_CLASS", 1, PARAM_INT8), ("FRAME_TYPE", 0, PARAM_INT8),
+        ("FS_ACTION", 2, PARAM_INT8), ("FS_GCS_ENABLE", 0, PARAM_INT8),
+        ("FS_GCS_TIMEOUT", 5.0, PARAM_REAL32),
+        ("MAV_GCS_SYSID", 255, PARAM_INT16), ("MAV_OPTIONS", 0, PARAM_INT16),
+        ("MAV_SYSID", sysid, PARAM_INT16),
+        ("MOT_STR_THR_MIX", 0.5, PARAM_REAL32),
+        ("SCHED_LOOP_RATE", round(loop_rate), PARAM_INT16),
+        ("SERVO1_FUNCTION", left, PARAM_INT16), ("SERVO2_FUNCTION", 0, PARAM_INT16),
+        ("SERVO3_FUNCTION", right, PARAM_INT16), ("SERVO4_FUNCTION", 0, PARAM_INT16),
+        ("WP_SPEED", top, PARAM_REAL32),
+    ]
+
+
+# --------------------------------------------------------------------------- the profile
+
+PROFILE = AutopilotProfile(
+    name="ardupilot", label="ArduPilot",
+    mav_autopilot=(MAV_AUTOPILOT_ARDUPILOTMEGA,),
+    modes=MODES, mode_types=frozenset({MAV_TYPE_GROUND_ROVER, MAV_TYPE_SURFACE_BOAT}),
+    track_mode="GUIDED", hold_mode="HOLD",
+    set_mode_params=set_mode_params, requested_mode=requested_mode, mode_name=mode_name,
+    setpoint=SetpointEncoding(frame=MAV_FRAME_BODY_NED, type_mask=1511,   # 0x05E7
+                              velocity_vector=False),
+    offboard_warmup=None,
+    bytewise_params=False,
+    preflight=PreflightFacts(
+        frame=ServoFrame(class_param="FRAME_CLASS", classes={1: "rover", 2: "boat"},
+                         type_param="FRAME_TYPE"),
+        failsafe=GcsFailsafe(
+            enable="FS_GCS_ENABLE", action="FS_ACTION", action_hold=2.0,
+            action_hold_label="2 (Hold)", timeout="FS_GCS_TIMEOUT", timeout_range=(2.0, 10.0),
+            timeout_fix=5.0,
+            sysid_params=(("MAV_GCS_SYSID", "MAV_GCS_SYSID_HI", "MAV_OPTIONS"),
+                          ("SYSID_MYGCS", "", "SYSID_ENFORCE")),
+            silent_companion="the rover keeps its last setpoint for 3 s (the guided timeout), "
+                             "then stops armed in GUIDED"),
+        loop_rate_param="SCHED_LOOP_RATE",
+        limits=(
+            LimitParam("ATC_ACCEL_MAX", "m/s^2", 1.0, "max_accel",
+                       "the speed loop's acceleration limit"),
+            LimitParam("ATC_DECEL_MAX", "m/s^2", 1.0, "max_decel",
+                       "the speed loop's deceleration limit", zero_as="ATC_ACCEL_MAX"),
+            LimitParam("ATC_STR_RAT_MAX", "deg/s", math.pi / 180, "max_yaw_rate",
+                       "the turn-rate limit"),
+            LimitParam("ATC_STR_ACC_MAX", "deg/s^2", math.pi / 180, "max_yaw_accel",
+                       "the turn-rate loop's acceleration limit"),
+        ),
+        top_speed=TopSpeedParams(wp_speed="WP_SPEED", cruise_speed="CRUISE_SPEED",
+                                 cruise_throttle="CRUISE_THROTTLE"),
+        limits_unread="",
+        estimator_messages=("EKF_STATUS_REPORT",),
+        prearm_command=True),
+    ident=IdentFacts(params=PRIOR_PARAMS, priors=priors, headroom=1.2,
+                     params_label="autopilot"),
+    plant=PlantFacts(
+        modes=("MANUAL", "ACRO", "STEERING", "HOLD", "LOITER", "FOLLOW", "SIMPLE", "AUTO", "RTL",
+               "SMART_RTL", "GUIDED", "INITIALISING"),
+        unsettable=("INITIALISING",),
+        initial_mode="MANUAL",          # Rover's INITIAL_MODE default: stands still without RC
+        mode_refused=MAV_RESULT_FAILED,
+        arm_texts=("Throttle armed", "Throttle disarmed"),
+        tick_aligned=True,              # 40 Hz on a 50 Hz scheduler: 20 / 20 / 20 / 40 ms
+        params=plant_params),
+)

@@ -1,0 +1,241 @@
+"""What an autopilot profile says: everything the companion and the plant do differently per autopilot.
+
+One :class:`AutopilotProfile` per autopilot (``ardupilot.py``, ``px4.py``), registered in
+``companion/profiles/__init__.py``. Code outside ``companion/profiles/`` never asks which
+autopilot it talks to; it reads the answer from the profile (``tests/test_profiles.py`` reads
+the code for any test of an autopilot's name). The profile holds facts, not I/O:
+
+* ids: the HEARTBEAT's MAV_AUTOPILOT value(s);
+* modes: the mode table (pymavlink's names <-> HEARTBEAT ``custom_mode`` and ``base_mode``), the
+  mode that follows the companion's setpoints and the one it hands the vehicle back in, how
+  MAV_CMD_DO_SET_MODE asks for a mode and how a heartbeat names one;
+* the setpoint encoding of SET_POSITION_TARGET_LOCAL_NED (frame, type mask, speed and yaw rate
+  or the velocity vector u_p) and the offboard warm-up (setpoints streamed before the track mode
+  is asked for; None: none needed);
+* the parameter protocol's encoding (bytewise or C cast);
+* the preflight facts (:class:`PreflightFacts`: parameter names and the values the checks want);
+* the identification facts (:class:`IdentFacts`: the parameters read, the priors made of them,
+  the manoeuvre's headroom);
+* what ``sitl_plant`` emulates differently (:class:`PlantFacts`).
+
+Pure: no pymavlink (the MAVLink numbers it needs are spelled out below, checked against
+pymavlink's by ``tests/test_profiles.py``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Callable, Mapping
+
+from .priors import Priors
+
+# MAVLink numbers (common.xml), here so the profiles need no pymavlink.
+MAV_AUTOPILOT_ARDUPILOTMEGA = 3
+MAV_AUTOPILOT_PX4 = 12
+MAV_TYPE_GROUND_ROVER, MAV_TYPE_SURFACE_BOAT = 10, 11
+MAV_FRAME_LOCAL_NED, MAV_FRAME_BODY_NED = 1, 8
+FLAG_CUSTOM_MODE_ENABLED = 1
+FLAG_AUTO_ENABLED = 4
+FLAG_GUIDED_ENABLED = 8
+FLAG_STABILIZE_ENABLED = 16
+FLAG_MANUAL_INPUT_ENABLED = 64
+FLAG_SAFETY_ARMED = 128
+MAV_RESULT_DENIED, MAV_RESULT_FAILED = 2, 4
+PARAM_INT8, PARAM_INT16, PARAM_INT32, PARAM_REAL32 = 2, 4, 6, 9
+
+
+# --------------------------------------------------------------------------- modes
+
+@dataclass(frozen=True)
+class Mode:
+    name: str            # pymavlink's name (what the companion logs and asks for)
+    custom_mode: int     # HEARTBEAT.custom_mode
+    base_flags: int = 0  # HEARTBEAT.base_mode bits besides CUSTOM_MODE_ENABLED and SAFETY_ARMED
+
+
+@dataclass(frozen=True)
+class ModeTable:
+    """An autopilot's flight modes, by name and by number."""
+
+    modes: tuple[Mode, ...] = ()
+
+    def by_name(self, name: str) -> Mode | None:
+        return next((m for m in self.modes if m.name == name), None)
+
+    def by_number(self, custom_mode: int) -> Mode | None:
+        return next((m for m in self.modes if m.custom_mode == custom_mode), None)
+
+    def names(self) -> frozenset[str]:
+        return frozenset(m.name for m in self.modes)
+
+
+# --------------------------------------------------------------------------- setpoints
+
+@dataclass(frozen=True)
+class SetpointEncoding:
+    """How the tracker's command goes out as SET_POSITION_TARGET_LOCAL_NED.
+
+    ``velocity_vector`` False: (vx, vy, yaw_rate) = (v_ref, 0, omega_ref) in ``frame`` (the
+    paper's two inputs); True: (vx, vy) = u_p, the autopilot ignores yaw and yaw rate and steers
+    along the velocity itself (and a plant emulating it reads setpoints so)."""
+
+    frame: int
+    type_mask: int
+    velocity_vector: bool
+
+
+# --------------------------------------------------------------------------- preflight facts
+
+@dataclass(frozen=True)
+class ServoFrame:
+    """The steering kind shows in the frame class and the output functions (ArduPilot):
+    ``class_param`` must be one of ``classes``, ``type_param`` 0, and a steering kind's
+    SERVOn_FUNCTION values (:attr:`companion.profiles.steering.SteeringProfile.servo_functions`)
+    all assigned."""
+
+    class_param: str
+    classes: Mapping[int, str]          # accepted frame classes -> what they are
+    type_param: str
+
+
+@dataclass(frozen=True)
+class AirframeFrame:
+    """The steering kind is one airframe parameter (PX4's CA_AIRFRAME): a steering kind's
+    :attr:`~companion.profiles.steering.SteeringProfile.airframe`, or one of ``other_rovers``."""
+
+    param: str
+    other_rovers: Mapping[int, str]     # rover airframes no steering profile describes
+
+
+@dataclass(frozen=True)
+class GcsFailsafe:
+    """A failsafe on the ground station's heartbeat (the companion's counts): on / off, what it
+    does, after how long, and which system id it watches (several firmware spellings)."""
+
+    enable: str
+    action: str
+    action_hold: float                  # the value that stops the rover
+    action_hold_label: str
+    timeout: str
+    timeout_range: tuple[float, float]  # s, inclusive
+    timeout_fix: float
+    sysid_params: tuple[tuple[str, str, str], ...]   # (watched id, its upper bound or '', enforce)
+    silent_companion: str               # what happens without the failsafe
+
+
+@dataclass(frozen=True)
+class OffboardFailsafe:
+    """A failsafe on the setpoint stream itself (PX4's offboard loss): how long the last
+    setpoint is followed, and what the vehicle then does."""
+
+    loss_timeout: str
+    loss_timeout_max: float             # s
+    action: str
+    action_hold: int
+    action_names: Mapping[int, str]
+
+
+@dataclass(frozen=True)
+class LimitParam:
+    """One inner-loop limit parameter, as the vehicle model reads it."""
+
+    name: str
+    unit: str
+    to_si: float
+    field: str                          # companion.preflight.checks.Limits field
+    what: str
+    zero_as: str | None = None          # 0 means "as this parameter" (None: 0 is no limit)
+
+
+@dataclass(frozen=True)
+class TopSpeedParams:
+    """Top speed = the waypoint speed, no faster than full throttle (cruise speed scaled)."""
+
+    wp_speed: str
+    cruise_speed: str
+    cruise_throttle: str
+
+
+@dataclass(frozen=True)
+class PreflightFacts:
+    frame: ServoFrame | AirframeFrame
+    failsafe: GcsFailsafe | OffboardFailsafe
+    loop_rate_param: str | None         # a stream above 0.8 x it is refused (None: no such cap)
+    limits: tuple[LimitParam, ...]      # () : not read, ``limits_unread`` says why
+    top_speed: TopSpeedParams | None
+    limits_unread: str
+    estimator_messages: tuple[str, ...]  # asked for with MAV_CMD_REQUEST_MESSAGE, first wins
+    prearm_command: bool                 # MAV_CMD_RUN_PREARM_CHECKS makes it say what fails
+
+
+# --------------------------------------------------------------------------- identification
+
+@dataclass(frozen=True)
+class IdentFacts:
+    """What identification reads and assumes. The manoeuvre follows the setpoint encoding:
+    speed / turn-rate steps (with turns in place) or velocity vectors (no turn in place)."""
+
+    params: tuple[str, ...]                         # read with PARAM_REQUEST_READ (or a .tlog)
+    priors: Callable[[Mapping[str, float]], Priors]  # {name: value} (any subset) -> priors
+    headroom: float                                 # setpoints up to this x the limits
+    params_label: str                               # for the log line naming what was read
+
+
+# --------------------------------------------------------------------------- the plant
+
+@dataclass(frozen=True)
+class PlantFacts:
+    """What ``sitl_plant`` emulates of this autopilot besides the profile's own facts."""
+
+    modes: tuple[str, ...]             # the modes it has (names of the mode table)
+    unsettable: tuple[str, ...]        # reported, never entered on request
+    initial_mode: str
+    mode_refused: int                  # MAV_RESULT of a refused mode change
+    arm_texts: tuple[str, str]         # STATUSTEXT when armed, disarmed
+    tick_aligned: bool                 # telemetry on the scheduler's ticks (a real vehicle's)
+    # (name, value, MAV_PARAM_TYPE) served, from the rover, loop rate, sysid, offboard timeout
+    params: Callable[..., list[tuple[str, float, int]]]
+
+
+# --------------------------------------------------------------------------- the profile
+
+@dataclass(frozen=True)
+class AutopilotProfile:
+    name: str                                      # "ardupilot": flags, logs, JSON
+    label: str                                     # "ArduPilot": for people
+    mav_autopilot: tuple[int, ...]                 # HEARTBEAT.autopilot; the first is sent
+    modes: ModeTable
+    mode_types: frozenset[int] | None              # MAV_TYPEs the table is for (None: all)
+    track_mode: str                                # follows the companion's setpoints
+    hold_mode: str                                 # stands still; the companion hands back in it
+    # MAV_CMD_DO_SET_MODE's (param1, param2, param3) for a mode, and back (param2, param3 ->
+    # custom_mode, None for a mode that cannot be asked so)
+    set_mode_params: Callable[[Mode], tuple[float, float, float]]
+    requested_mode: Callable[[float, float], int | None]
+    # the heartbeat's mode name (as pymavlink's mode_string_v10 gives it)
+    mode_name: Callable[[ModeTable, int, int], str]
+    setpoint: SetpointEncoding
+    offboard_warmup: float | None                  # vehicle s of setpoints before the track
+    # mode is asked for: the vehicle refuses it without a stream and leaves it when the stream
+    # stops (PX4's offboard); None: targets are taken in the mode and time out (ArduPilot GUIDED)
+    bytewise_params: bool                          # integers' bytes in PARAM_VALUE's float
+    preflight: PreflightFacts
+    ident: IdentFacts
+    plant: PlantFacts
+
+    def modes_for(self, mav_type: int) -> ModeTable:
+        """The mode table for a vehicle of this MAV_TYPE (empty for a type it does not cover)."""
+        if self.mode_types is None or mav_type in self.mode_types:
+            return self.modes
+        return ModeTable()
+
+    def priors_from(self, values: Mapping[str, float]) -> Priors:
+        """The identification priors from the parameters read (only this profile's count)."""
+        return self.ident.priors({k: v for k, v in values.items() if k in self.ident.params})
+
+    def mode_number(self, name: str) -> int:
+        """``custom_mode`` of a mode of the table (KeyError for another name)."""
+        mode = self.modes.by_name(name)
+        if mode is None:
+            raise KeyError(f"{self.label} has no mode {name!r}")
+        return mode.custom_mode

@@ -1,0 +1,199 @@
+"""PX4 (rovers, PX4 main 2025-2026): its ids, modes, setpoints, parameters, preflight facts, priors and what the plant emulates of it.
+
+* HEARTBEAT autopilot 12 (MAV_AUTOPILOT_PX4); ``custom_mode`` packs a main mode and a sub mode,
+  ``main << 16 | sub << 24`` (px4_custom_mode.h); pymavlink's ``px4_map`` names them (the sub
+  mode counts only in AUTO; PX4's "Hold" is AUTO_LOITER, which pymavlink calls LOITER).
+* OFFBOARD follows the companion, LOITER (Hold) stands still. Setpoints: frame LOCAL_NED,
+  type_mask 3559 (use vx, vy), (vx, vy) = u_p: PX4 rovers ignore yaw and yaw rate and steer
+  along the velocity with their own speed and course loops. OFFBOARD is refused until setpoints
+  have streamed for a while (the companion streams :data:`OFFBOARD_WARMUP` s first) and left for
+  Hold when they stop for COM_OF_LOSS_T.
+* Parameters travel bytewise (MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_BYTEWISE: an INT32's bytes
+  in the float).
+* Preflight: the frame from CA_AIRFRAME, the offboard-loss failsafe (COM_OF_LOSS_T,
+  COM_OBL_RC_ACT), ESTIMATOR_STATUS besides EKF_STATUS_REPORT; its rover limits are not read
+  (their names differ between releases).
+* Identification priors from RO_* and RA_* (:func:`priors`): a velocity-vector model with PX4's
+  course loop and the turning radius.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import TYPE_CHECKING, Mapping
+
+from . import skid
+from .autopilot import (FLAG_AUTO_ENABLED, FLAG_CUSTOM_MODE_ENABLED, FLAG_GUIDED_ENABLED,
+                        FLAG_MANUAL_INPUT_ENABLED, FLAG_STABILIZE_ENABLED, MAV_AUTOPILOT_PX4,
+                        MAV_FRAME_LOCAL_NED, MAV_RESULT_DENIED, PARAM_INT32, PARAM_REAL32,
+                        AirframeFrame, AutopilotProfile, IdentFacts, Mode, ModeTable,
+                        OffboardFailsafe, PlantFacts, PreflightFacts, SetpointEncoding)
+from .priors import Priors, defaults, finite
+
+if TYPE_CHECKING:
+    from ..sim.plant import RoverParams
+
+MAIN_AUTO = 4
+OFFBOARD_WARMUP = 1.2      # vehicle s of setpoints before asking for OFFBOARD
+
+
+def custom_mode(main: int, sub: int = 0) -> int:
+    """PX4's custom_mode word: main mode in bits 16-23, sub mode in bits 24-31."""
+    return (int(main) & 0xFF) << 16 | (int(sub) & 0xFF) << 24
+
+
+def _split(word: int) -> tuple[int, int]:
+    return (word >> 16) & 0xFF, (word >> 24) & 0xFF
+
+
+_MAN = FLAG_MANUAL_INPUT_ENABLED | FLAG_STABILIZE_ENABLED
+_AUTO = FLAG_AUTO_ENABLED | FLAG_GUIDED_ENABLED | FLAG_STABILIZE_ENABLED
+# pymavlink's px4_map (main, sub; base_mode besides CUSTOM_MODE_ENABLED)
+MODES = ModeTable((
+    Mode("MANUAL", custom_mode(1), _MAN),
+    Mode("STABILIZED", custom_mode(7), _MAN),
+    Mode("ACRO", custom_mode(5), FLAG_MANUAL_INPUT_ENABLED),
+    Mode("RATTITUDE", custom_mode(8), FLAG_MANUAL_INPUT_ENABLED),
+    Mode("ALTCTL", custom_mode(2), _MAN),
+    Mode("POSCTL", custom_mode(3), _MAN),
+    Mode("LOITER", custom_mode(MAIN_AUTO, 3), _AUTO),
+    Mode("MISSION", custom_mode(MAIN_AUTO, 4), _AUTO),
+    Mode("RTL", custom_mode(MAIN_AUTO, 5), _AUTO),
+    Mode("LAND", custom_mode(MAIN_AUTO, 6), _AUTO),
+    Mode("RTGS", custom_mode(MAIN_AUTO, 7), _AUTO),
+    Mode("FOLLOWME", custom_mode(MAIN_AUTO, 8), _AUTO),
+    Mode("OFFBOARD", custom_mode(6), _AUTO),
+    Mode("TAKEOFF", custom_mode(MAIN_AUTO, 2), _AUTO),
+))
+
+
+def set_mode_params(mode: Mode) -> tuple[float, float, float]:
+    """MAV_CMD_DO_SET_MODE: param1 the base mode, param2 the main mode, param3 the sub mode."""
+    main, sub = _split(mode.custom_mode)
+    return float(FLAG_CUSTOM_MODE_ENABLED | mode.base_flags), float(main), float(sub)
+
+
+def requested_mode(param2: float, param3: float) -> int | None:
+    """The custom_mode a MAV_CMD_DO_SET_MODE asks for (param2 main, param3 sub mode); None for
+    NaN / inf or a value that would alias another mode once packed."""
+    try:
+        main, sub = int(param2), int(param3)
+    except (ValueError, OverflowError):
+        return None
+    if not (0 <= main <= 0xFF and 0 <= sub <= 0xFF):
+        return None
+    return custom_mode(main, sub)
+
+
+def mode_name(table: ModeTable, base_mode: int, word: int) -> str:
+    """The mode a heartbeat reports, as pymavlink's ``interpret_px4_mode`` names it: by the
+    main mode, and the sub mode in AUTO only (base_mode says nothing reliable on PX4 1.12+)."""
+    main, sub = _split(word)
+    mode = table.by_number(custom_mode(main, sub if main == MAIN_AUTO else 0))
+    return mode.name if mode is not None else "UNKNOWN"
+
+
+# --------------------------------------------------------------------------- priors
+
+# PX4 rover parameters a live identification reads on a PX4 vehicle (rover_ackermann /
+# rover_differential, PX4 main 2025-2026; RO_* are shared by every rover, RA_* are Ackermann's).
+PRIOR_PARAMS = ("RO_SPEED_LIM", "RO_ACCEL_LIM", "RO_DECEL_LIM", "RO_YAW_P", "RO_YAW_RATE_LIM",
+                "RO_YAW_ACCEL_LIM", "RO_YAW_DECEL_LIM", "RA_WHEEL_BASE", "RA_MAX_STR_ANG")
+
+
+
+def prior_defaults() -> RoverParams:
+    """PX4's velocity-vector interface (RoverParams.course_gain > 0) before any parameter is
+    known: a slow course loop and a wide turning circle (the cautious side), no skid-steer
+    coupling."""
+    return defaults().with_(course_gain=2.0, min_turn_radius=1.0, turn_speed_coupling=0.0,
+                            speed_turn_coupling=0.0, max_accel=1.0)
+
+
+def priors(values: Mapping[str, float]) -> Priors:
+    """Priors for a PX4 rover from its parameters (any subset of :data:`PRIOR_PARAMS`; others
+    default):
+
+    * ``RO_SPEED_LIM`` -> ``max_speed``; ``RO_ACCEL_LIM`` / ``RO_DECEL_LIM`` (m/s^2, 0 = none)
+      -> ``max_accel`` / ``max_decel``;
+    * ``RO_YAW_P`` (the course loop: yaw rate per rad of heading error) -> ``course_gain``;
+      ``RO_YAW_RATE_LIM``, ``RO_YAW_ACCEL_LIM``, ``RO_YAW_DECEL_LIM`` (deg/s, deg/s^2)
+      -> the turn-rate clamp and limits;
+    * ``RA_WHEEL_BASE`` / tan(``RA_MAX_STR_ANG``) (m, rad) -> ``min_turn_radius`` (Ackermann).
+    """
+    changes: dict[str, float | None] = {}
+    source: dict[str, str] = {}
+
+    def take(name: str, value: float | None, why: str) -> None:
+        changes[name] = value
+        source[name] = why
+
+    for key, name in (("RO_SPEED_LIM", "max_speed"), ("RO_ACCEL_LIM", "max_accel"),
+                      ("RO_DECEL_LIM", "max_decel")):
+        value = finite(values, key)
+        if value is not None:
+            take(name, value if value > 0 else math.inf, f"{key} {value:g}")
+    gain = finite(values, "RO_YAW_P")
+    if gain is not None and gain > 0:
+        take("course_gain", gain, f"RO_YAW_P {gain:g}")
+    for key, name in (("RO_YAW_RATE_LIM", "max_yaw_rate"), ("RO_YAW_ACCEL_LIM", "max_yaw_accel"),
+                      ("RO_YAW_DECEL_LIM", "max_yaw_decel")):
+        value = finite(values, key)
+        if value is not None:
+            take(name, math.radians(value) if value > 0 else math.inf, f"{key} {value:g} deg/s")
+    base, angle = finite(values, "RA_WHEEL_BASE"), finite(values, "RA_MAX_STR_ANG")
+    if base and angle and base > 0 and 0 < angle < math.pi / 2:
+        take("min_turn_radius", base / math.tan(angle),
+             f"RA_WHEEL_BASE {base:g} / tan(RA_MAX_STR_ANG {angle:g})")
+    elif values and base is None:
+        take("min_turn_radius", 0.0, "no RA_WHEEL_BASE: not an Ackermann rover")
+    return Priors(prior_defaults().with_(**changes), source)
+
+
+# --------------------------------------------------------------------------- the plant
+
+def plant_params(vehicle: RoverParams, loop_rate: float, sysid: int,
+                 offboard_loss_timeout: float) -> list[tuple[str, float, int]]:
+    """What ``sitl_plant`` serves as PX4: a differential rover's airframe, the offboard-loss
+    failsafe as the plant acts on it (its timeout, then Hold), its system id."""
+    return [("CA_AIRFRAME", skid.PROFILE.airframe, PARAM_INT32),
+            ("COM_OBL_RC_ACT", 5, PARAM_INT32),
+            ("COM_OF_LOSS_T", offboard_loss_timeout, PARAM_REAL32),
+            ("MAV_SYS_ID", sysid, PARAM_INT32)]
+
+
+# --------------------------------------------------------------------------- the profile
+
+PROFILE = AutopilotProfile(
+    name="px4", label="PX4",
+    mav_autopilot=(MAV_AUTOPILOT_PX4,),
+    modes=MODES, mode_types=None,
+    track_mode="OFFBOARD", hold_mode="LOITER",
+    set_mode_params=set_mode_params, requested_mode=requested_mode, mode_name=mode_name,
+    setpoint=SetpointEncoding(frame=MAV_FRAME_LOCAL_NED, type_mask=3559,   # 0x0DE7
+                              velocity_vector=True),
+    offboard_warmup=OFFBOARD_WARMUP,
+    bytewise_params=True,
+    preflight=PreflightFacts(
+        frame=AirframeFrame(param="CA_AIRFRAME", other_rovers={13: "mecanum (Rover (Mecanum))"}),
+        failsafe=OffboardFailsafe(
+            loss_timeout="COM_OF_LOSS_T", loss_timeout_max=1.0, action="COM_OBL_RC_ACT",
+            action_hold=5,
+            action_names={0: "Position", 1: "Altitude", 2: "Stabilized/Manual", 3: "Return",
+                          4: "Land", 5: "Hold", 6: "Terminate", 7: "Disarm"}),
+        loop_rate_param=None,
+        limits=(), top_speed=None,
+        limits_unread="PX4's rover limit parameters differ between releases: identify the "
+                      "vehicle (companion identify) for its model",
+        estimator_messages=("EKF_STATUS_REPORT", "ESTIMATOR_STATUS"),
+        prearm_command=False),
+    ident=IdentFacts(params=PRIOR_PARAMS, priors=priors, headroom=1.0, params_label="PX4"),
+    plant=PlantFacts(
+        modes=("MANUAL", "POSCTL", "LOITER", "OFFBOARD"),
+        unsettable=(),
+        initial_mode="MANUAL",
+        mode_refused=MAV_RESULT_DENIED,
+        arm_texts=("Armed by external command", "Disarmed by external command"),
+        tick_aligned=False,
+        params=plant_params),
+)

@@ -1,0 +1,29 @@
+"""What a steering-kind profile says: how a rover steers, as the autopilot's setup and the vehicle model show it.
+
+One :class:`SteeringProfile` per kind (``skid.py``, ``ackermann.py``), registered in
+``companion/profiles/__init__.py``: the output functions that make it on ArduPilot
+(SERVOn_FUNCTION), its PX4 airframe (CA_AIRFRAME), whether it turns in place, the preflight
+verdict on it (the paper's model is a differential drive: ``ok`` for that kind, ``warn`` with a
+why for the others) and the vehicle model's fields that describe it
+(:class:`companion.sim.plant.RoverParams`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+OK, WARN = "ok", "warn"        # companion.preflight.checks' statuses
+
+
+@dataclass(frozen=True)
+class SteeringProfile:
+    name: str                          # "skid": flags, files
+    label: str                         # "skid-steer": for people
+    servo_functions: tuple[int, ...]   # ArduPilot SERVOn_FUNCTION values, all assigned
+    servo_text: str                    # what they are, for people
+    airframe: int                      # PX4 CA_AIRFRAME
+    airframe_label: str                # PX4's name of that airframe
+    turns_in_place: bool
+    verdict: str                       # preflight: OK (the vehicle model's kind) or WARN
+    why: str                           # the preflight row's reason
+    model_fields: tuple[str, ...]      # RoverParams fields describing it (0: not this kind)
