@@ -23,7 +23,8 @@ DEFAULT_AUTOPILOT = next(iter(AUTOPILOTS))     # the plant's and the demo's defa
 
 def autopilot(name: str) -> AutopilotProfile:
     """The profile called ``name`` (KeyError for another: the registry's names are the
-    flags' choices)."""
+    flags' choices). This name is the function: the interface module is reached as
+    ``from companion.profiles.autopilot import ...``."""
     return AUTOPILOTS[name]
 
 
