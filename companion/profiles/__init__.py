@@ -9,7 +9,7 @@ from . import ackermann, ardupilot, px4, skid, steering
 from .autopilot import AutopilotProfile
 from .steering import SteeringProfile
 
-# Adding one: a module beside these with its PROFILE, and one line here.
+# Adding one: a module beside these with its PROFILE, and one line here (docs/design/profiles.md).
 AUTOPILOTS: dict[str, AutopilotProfile] = {p.name: p for p in (
     ardupilot.PROFILE,
     px4.PROFILE,
