@@ -212,7 +212,7 @@ def config_from_args(args: argparse.Namespace) -> PlantConfig:
                  if getattr(args, name) is not None}
     params = params.with_(**overrides)
     # no arming before the EKF runs, as on SITL
-    vehicle = VehicleConfig(params=params, autopilot=profiles.autopilot(args.autopilot),
+    vehicle = VehicleConfig(params=params, autopilot=profiles.autopilot_named(args.autopilot),
                             arm_delay=max(args.arm_delay, args.ekf_delay), start=tuple(args.start))
     telemetry = TelemetryConfig(noise_pos=args.noise_pos, noise_yaw=args.noise_yaw,
                                 latency=args.latency, dropout=args.dropout,

@@ -53,7 +53,7 @@ class Result(IntEnum):
 @dataclass(frozen=True)
 class VehicleConfig:
     params: RoverParams = field(default_factory=RoverParams.paper)
-    autopilot: AutopilotProfile = profiles.autopilot(profiles.DEFAULT_AUTOPILOT)
+    autopilot: AutopilotProfile = profiles.autopilot_named(profiles.DEFAULT_AUTOPILOT)
     arm_delay: float = 0.0                  # s of vehicle time during which arming is refused
     start: tuple[float, float, float] = (0.0, 0.0, 0.0)  # x north, y east, yaw
     guidance: guidance.GuidanceConfig = field(default_factory=guidance.GuidanceConfig)

@@ -24,7 +24,7 @@ from companion.profiles import ackermann, ardupilot, px4, skid
 from companion.profiles.priors import Priors
 from companion.sim.plant import RoverParams
 
-# the interface module (``profiles.autopilot`` itself is the registry's look-up function)
+# the interface module (the registry's look-up function is ``profiles.autopilot_named``)
 iface = importlib.import_module("companion.profiles.autopilot")
 ROOT = Path(__file__).resolve().parent.parent
 PROFILES_DIR = ROOT / "companion" / "profiles"
@@ -145,9 +145,9 @@ def test_the_reader_lets_the_profile_answer(code):
 def test_registry_names_ids_and_lookups():
     assert list(profiles.AUTOPILOTS) == ["ardupilot", "px4"]
     assert list(profiles.STEERING) == ["skid", "ackermann"]
-    assert profiles.autopilot("px4") is px4.PROFILE
+    assert profiles.autopilot_named("px4") is px4.PROFILE
     with pytest.raises(KeyError):
-        profiles.autopilot("betaflight")
+        profiles.autopilot_named("betaflight")
     assert profiles.from_heartbeat(3) is ardupilot.PROFILE
     assert profiles.from_heartbeat(12) is px4.PROFILE
     assert profiles.from_heartbeat(0) is None and profiles.from_heartbeat(8) is None

@@ -88,7 +88,7 @@ def plant_argv(args, port: int, rate: float) -> list[str]:
             "--loop-rate", f"{loop_rate:g}"]
     if args.vehicle:
         # an identified vehicle is a real one: its autopilot may send on scheduler ticks
-        ticks = profiles.autopilot(args.autopilot).plant.tick_aligned
+        ticks = profiles.autopilot_named(args.autopilot).plant.tick_aligned
         argv += ["--vehicle", args.vehicle] + (["--tick-aligned"] if ticks else [])
     if lockstep:
         argv.append("--lockstep")

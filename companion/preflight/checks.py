@@ -114,7 +114,7 @@ class Observed:
 
     @property
     def profile(self) -> AutopilotProfile:
-        return profiles.autopilot(self.autopilot)
+        return profiles.autopilot_named(self.autopilot)
 
 
 def _num(value: float) -> str:

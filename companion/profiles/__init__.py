@@ -21,10 +21,9 @@ STEERING: dict[str, SteeringProfile] = {p.name: p for p in (
 DEFAULT_AUTOPILOT = next(iter(AUTOPILOTS))     # the plant's and the demo's default
 
 
-def autopilot(name: str) -> AutopilotProfile:
+def autopilot_named(name: str) -> AutopilotProfile:
     """The profile called ``name`` (KeyError for another: the registry's names are the
-    flags' choices). This name is the function: the interface module is reached as
-    ``from companion.profiles.autopilot import ...``."""
+    flags' choices). Not ``autopilot``: that is the interface's module."""
     return AUTOPILOTS[name]
 
 
@@ -61,5 +60,5 @@ def steering_by_servos(functions: set[int] | frozenset[int]) -> SteeringProfile 
 
 
 __all__ = ["AUTOPILOTS", "STEERING", "DEFAULT_AUTOPILOT", "AutopilotProfile", "SteeringProfile",
-           "autopilot", "from_heartbeat", "from_setpoints", "prior_params", "model_steering",
+           "autopilot_named", "from_heartbeat", "from_setpoints", "prior_params", "model_steering",
            "steering_by_airframe", "steering_by_servos"]
