@@ -159,7 +159,9 @@ def test_pilot_switching_to_manual_ends_the_run_with_exit_3_and_no_more_setpoint
         code = comp.wait(15.0)
         r = comp.result()
         time.sleep(2.0)                          # ten vehicle seconds of heartbeats after it
-        modes = [m.custom_mode for m in gs.messages("HEARTBEAT", t_switch)]
+        # Heartbeats from after the ACK: one that left before the switch took effect may
+        # still arrive after the request (seen once: GUIDED, then MANUAL ever after).
+        modes = [m.custom_mode for m in gs.messages("HEARTBEAT", t_ack)]
         t_beat = next(w for w, m in gs.seen if w >= t_switch and m.get_type() == "HEARTBEAT"
                       and from_vehicle(m) and m.custom_mode == MANUAL)
     assert code == 3, comp.stderr
