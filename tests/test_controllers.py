@@ -122,20 +122,16 @@ def test_simulate_and_the_live_loop_build_the_same_tracker(name):
     """``companion simulate`` and ``companion run`` / ``demo`` (live.session) build their
     trackers through the registry: the same name, mission and rate give the same tracker,
     which answers the same inputs with the same commands."""
-    from companion.commands.simulate import build_tracker as simulate_tracker
     from companion.live import policy
-    from companion.live.config import LinkConfig
-    from companion.live.session import RunSettings, build_tracker as live_tracker
     from companion.mission import paper_ellipse
 
     mission = paper_ellipse()
     options = policy.GainOptions(max_speed=LIMITS.max_speed, max_yaw_rate=LIMITS.max_yaw_rate)
+    # simulate: resolve() before anything; the live loop: choose_gains() at the accepted rate
     resolved = policy.resolve(mission, options)
-    sim, sim_gains, sim_source = simulate_tracker(name, resolved)
-    settings = RunSettings(link=LinkConfig(url="udpin:127.0.0.1:0"), mission=mission,
-                           gains=options, controller=name)
-    live, live_gains, live_source = live_tracker(settings, mission, resolved.rate,
-                                                 resolved.limits)
+    sim, sim_gains, sim_source = policy.build_tracker(name, resolved.gains, resolved.limits)
+    choice = policy.choose_gains(mission, options, policy.KnownVehicle(), resolved.rate)
+    live, live_gains, live_source = policy.build_tracker(name, choice, resolved.limits)
     assert type(sim) is type(live) and sim.name == live.name == name
     assert sim_gains == live_gains and sim_source == live_source
     if name != "pzc":

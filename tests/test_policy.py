@@ -38,7 +38,8 @@ def _run(tmp_path: Path, *args: str) -> dict:
     return comp.result()
 
 
-@pytest.mark.parametrize("case", ["defaults", "vehicle file", "gains file and flags"])
+@pytest.mark.parametrize("case", ["defaults", "vehicle file", "gains file and flags",
+                                  "a baseline"])
 def test_simulate_and_run_resolve_the_same_gains_and_limits(tmp_path, case):
     mission = ellipse_mission(tmp_path / "m.toml", 2.0, f_r=0.04)
     args = ["--mission", str(mission)]
@@ -49,6 +50,8 @@ def test_simulate_and_run_resolve_the_same_gains_and_limits(tmp_path, case):
         TunedGains(FilterGains(300.0, 30.0), PZCGains(0.7, 0.9, velocity_ff=True),
                    rate_hz=40.0, w_c=20.0).save(gains)
         args += ["--gains", str(gains), "--max-speed", "1.5", "--max-yaw-rate", "0.8"]
+    elif case == "a baseline":
+        args += ["--controller", "pid", "--vehicle", str(SKID)]
     ran = _run(tmp_path, *args)
     sim = _simulate(*args)
     assert sim["rate_hz"] == ran["rate_accepted_hz"] == 40.0
@@ -60,6 +63,10 @@ def test_simulate_and_run_resolve_the_same_gains_and_limits(tmp_path, case):
         assert ran["gains"]["k_df"] == 300.0
     if case == "vehicle file":
         assert ran["gains_source"].startswith("vehicle ")
+    if case == "a baseline":
+        assert ran["controller"] == sim["controller"] == "pid"
+        assert ran["gains_source"].startswith("pid defaults")
+        assert ran["limits"]["max_speed"] < 6.0          # the vehicle file's, not the default
 
 
 def test_limits_are_the_flags_else_the_lower_of_mission_and_vehicle(tmp_path):

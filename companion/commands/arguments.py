@@ -23,24 +23,22 @@ DEFAULT_START_DISTANCE = 25.0   # m: --max-start-distance
 
 # --- value types ------------------------------------------------------------------------------
 
-def positive(text: str) -> float:
+def _finite(text: str, ok, want: str) -> float:
     try:
         value = float(text)
     except ValueError:
         raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
-    if not (math.isfinite(value) and value > 0):
-        raise argparse.ArgumentTypeError(f"must be a finite number > 0, not {text}")
+    if not (math.isfinite(value) and ok(value)):
+        raise argparse.ArgumentTypeError(f"must be a finite number {want}, not {text}")
     return value
+
+
+def positive(text: str) -> float:
+    return _finite(text, lambda v: v > 0, "> 0")
 
 
 def non_negative(text: str) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
-    if not (math.isfinite(value) and value >= 0):
-        raise argparse.ArgumentTypeError(f"must be a finite number >= 0, not {text}")
-    return value
+    return _finite(text, lambda v: v >= 0, ">= 0")
 
 
 def at_least_one(text: str) -> int:

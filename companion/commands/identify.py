@@ -93,8 +93,8 @@ class FitOptions:
     name: str | None = None             # --name
 
 
-def fit_options(args: argparse.Namespace, out: str | None = None) -> FitOptions:
-    return FitOptions(out=out or args.out, check=args.check, plot=args.plot, name=args.name)
+def fit_options(args: argparse.Namespace) -> FitOptions:
+    return FitOptions(out=args.out, check=args.check, plot=args.plot, name=args.name)
 
 
 def live_options(args: argparse.Namespace):

@@ -52,23 +52,6 @@ def register(subparsers) -> None:
     p.set_defaults(func=run)
 
 
-def build_tracker(controller: str, resolved) -> tuple[object, dict, str]:
-    """(the tracker ``controller`` names, its gains, where they came from) for the policy's
-    ``resolved`` rate, gains and limits: the policy's gains for a controller that flies the
-    filter + PZC gains, the controller's own defaults otherwise (as ``companion run`` builds
-    it: :func:`companion.live.session.build_tracker`)."""
-    from ..core import controllers
-    from ..live import policy
-    entry = controllers.get(controller)
-    if not entry.uses_pzc_gains:
-        return (controllers.build(controller, resolved.limits), entry.gains_dict(),
-                entry.defaults_source())
-    choice = resolved.gains
-    return (controllers.build(controller, resolved.limits, filter_gains=choice.filter,
-                              pzc_gains=choice.pzc),
-            policy.gains_dict(choice.filter, choice.pzc), choice.source)
-
-
 class _Recorder:
     """Wraps a tracker and keeps what it saw at each control step (for --plot)."""
 
@@ -96,7 +79,6 @@ class _Recorder:
 def run(args) -> int:
     from .. import mission as missions
     from ..live import policy
-    from ..live.session import check_controller
     from ..sim import vehicle_file
     from ..sim.batch import SimConfig, simulate
     from ..sim.plant import RoverParams
@@ -117,7 +99,7 @@ def run(args) -> int:
     print_warnings(mission, "companion simulate")
 
     options = sim_gain_options(args)
-    check_controller(args.controller, options)
+    policy.check_controller(args.controller, options)
     vehicle_path = args.vehicle or mission.vehicle_file
     vehicle = known_vehicle(vehicle_path, mission, options, "companion simulate",
                             not args.json, logger("companion simulate", args.json),
@@ -131,7 +113,8 @@ def run(args) -> int:
     if args.d_cen is not None:
         params = params.with_(d_cen=args.d_cen)
 
-    tracker, gains_values, gains_note = build_tracker(args.controller, resolved)
+    tracker, gains_values, gains_note = policy.build_tracker(args.controller, resolved.gains,
+                                                             limits)
     if args.plot:
         tracker = _Recorder(tracker)
 
@@ -148,8 +131,7 @@ def run(args) -> int:
                           "steady_rms": steady, "duration_s": mission.duration,
                           "controller": args.controller, "gains": gains_note,
                           "gains_values": gains_values,
-                          "limits": {"max_speed": _finite_or_none(limits.max_speed),
-                                     "max_yaw_rate": _finite_or_none(limits.max_yaw_rate)}}))
+                          "limits": policy.limits_dict(limits)}))
     else:
         print(f"mission     {mission.name} ({mission.source})")
         print(f"controller  {args.controller} at {rate:g} Hz; gains: {gains_note}")
@@ -161,10 +143,6 @@ def run(args) -> int:
             print(f"plot        {args.plot}")
     sys.stdout.flush()
     return ExitCode.OK
-
-
-def _finite_or_none(x: float) -> float | None:
-    return x if math.isfinite(x) else None
 
 
 def sim_gain_options(args):

@@ -24,6 +24,7 @@ import math
 from dataclasses import asdict, dataclass, field, replace
 from typing import Any
 
+from ..core import controllers
 from ..core.filter import FilterGains
 from ..core.limits import DEFAULT_LIMITS, Limits
 from ..core.pzc import PZCGains
@@ -161,3 +162,41 @@ def gains_dict(filt: FilterGains, pzc: PZCGains) -> dict[str, Any]:
     for key, value in asdict(pzc).items():
         d[key] = value if value is None or isinstance(value, (bool, str)) else float(value)
     return d
+
+
+def limits_dict(limits: Limits) -> dict[str, float | None]:
+    """The limits for a JSON result (``None``: no limit)."""
+    return {"max_speed": _finite_or_none(limits.max_speed),
+            "max_yaw_rate": _finite_or_none(limits.max_yaw_rate)}
+
+
+def _finite_or_none(x: float) -> float | None:
+    return x if math.isfinite(x) else None
+
+
+def check_controller(controller: str, options: GainOptions) -> None:
+    """A known controller, and no PZC gains asked of one that flies its own (a user error)."""
+    try:
+        entry = controllers.get(controller)
+    except ValueError as exc:
+        raise UserError(str(exc)) from None
+    o = options
+    given = [flag for flag, value in (("--gains", o.gains_file), ("--k-df", o.k_df),
+                                      ("--lambda-f", o.lambda_f), ("--k-dc", o.k_dc),
+                                      ("--lambda-c", o.lambda_c)) if value is not None]
+    if given and not entry.uses_pzc_gains:
+        raise UserError(f"{' and '.join(given)} set{'s' if len(given) == 1 else ''} the filter "
+                        f"+ PZC gains; --controller {controller} flies its own defaults")
+
+
+def build_tracker(controller: str, choice: Choice,
+                  limits: Limits) -> tuple[Any, dict[str, Any], str]:
+    """(the tracker ``controller`` names, its gains for the result, where they came from), for
+    ``run``, ``demo`` and ``simulate`` alike: the policy's ``choice`` for a controller that
+    flies the filter + PZC gains, the controller's own defaults otherwise."""
+    entry = controllers.get(controller)
+    if not entry.uses_pzc_gains:
+        return controllers.build(controller, limits), entry.gains_dict(), entry.defaults_source()
+    return (controllers.build(controller, limits, filter_gains=choice.filter,
+                              pzc_gains=choice.pzc),
+            gains_dict(choice.filter, choice.pzc), choice.source)

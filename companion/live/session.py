@@ -71,39 +71,6 @@ class StopSwitch:
         self.runner.request_stop(reason)
 
 
-def build_tracker(s: RunSettings, mission: Any, rate: float,
-                  limits: Limits) -> tuple[Any, dict[str, Any], str]:
-    """(the tracker ``s.controller`` names, its gains for the result, where they came from):
-    the policy's gains (:func:`companion.live.policy.choose_gains`) for a controller that flies
-    the filter + PZC gains, the controller's own defaults otherwise."""
-    entry = controllers.get(s.controller)
-    if not entry.uses_pzc_gains:
-        return controllers.build(s.controller, limits), entry.gains_dict(), entry.defaults_source()
-    choice = policy.choose_gains(mission, s.gains, s.vehicle, rate)
-    return (controllers.build(s.controller, limits, filter_gains=choice.filter,
-                              pzc_gains=choice.pzc),
-            policy.gains_dict(choice.filter, choice.pzc), choice.source)
-
-
-def check_controller(controller: str, gains: GainOptions) -> None:
-    """A known controller, and no PZC gains asked of one that flies its own (a user error)."""
-    try:
-        entry = controllers.get(controller)
-    except ValueError as exc:
-        raise UserError(str(exc)) from None
-    g = gains
-    given = [flag for flag, value in (("--gains", g.gains_file), ("--k-df", g.k_df),
-                                      ("--lambda-f", g.lambda_f), ("--k-dc", g.k_dc),
-                                      ("--lambda-c", g.lambda_c)) if value is not None]
-    if given and not entry.uses_pzc_gains:
-        raise UserError(f"{' and '.join(given)} set{'s' if len(given) == 1 else ''} the filter "
-                        f"+ PZC gains; --controller {controller} flies its own defaults")
-
-
-def _finite_or_none(x: float) -> float | None:
-    return x if math.isfinite(x) else None
-
-
 def fly(s: RunSettings, sinks: Sequence[Sink] = (), control: ControlChannel | None = None,
         log: Callable[[str], None] = lambda text: None,
         switch: StopSwitch | None = None,
@@ -117,7 +84,7 @@ def fly(s: RunSettings, sinks: Sequence[Sink] = (), control: ControlChannel | No
     from .link import Link
 
     wall0 = time.perf_counter()
-    check_controller(s.controller, s.gains)
+    policy.check_controller(s.controller, s.gains)
     # Before anything connects: a bad --gains file or limit is a user error.
     asked = policy.resolve(s.mission, s.gains, s.vehicle)
     rate, limits = asked.rate, asked.limits
@@ -142,11 +109,11 @@ def fly(s: RunSettings, sinks: Sequence[Sink] = (), control: ControlChannel | No
         log(f"telemetry at {accepted:g} Hz" if accepted else "telemetry rate not confirmed")
         limits_text = (f"limits: speed {limits.max_speed:g} m/s, "
                        f"yaw rate {limits.max_yaw_rate:g} rad/s")
+        choice = policy.choose_gains(mission, s.gains, s.vehicle, accepted or rate)
         if make_tracker is None:
-            tracker, gains, gains_source = build_tracker(s, mission, accepted or rate, limits)
+            tracker, gains, gains_source = policy.build_tracker(s.controller, choice, limits)
             log(f"controller {tracker.name}; gains: {gains_source}; {limits_text}")
         else:
-            choice = policy.choose_gains(mission, s.gains, s.vehicle, accepted or rate)
             gains, gains_source = policy.gains_dict(choice.filter, choice.pzc), choice.source
             log(f"gains: {gains_source}; {limits_text}")
             tracker = make_tracker(link, limits)
@@ -178,8 +145,7 @@ def fly(s: RunSettings, sinks: Sequence[Sink] = (), control: ControlChannel | No
         rate_requested_hz=rate, rate_accepted_hz=accepted,
         autopilot=vehicle.autopilot, sysid=vehicle.sysid,
         gains=gains, gains_source=gains_source,
-        limits={"max_speed": _finite_or_none(limits.max_speed),
-                "max_yaw_rate": _finite_or_none(limits.max_yaw_rate)},
+        limits=policy.limits_dict(limits),
         failsafes=outcome.failsafes, hold_confirmed=outcome.hold_confirmed,
         mission=runner.mission.name,
         extra={"controller": tracker.name,
