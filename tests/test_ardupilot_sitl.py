@@ -145,7 +145,7 @@ def test_sigterm_mid_mission_stops_the_rover_in_hold_and_exits_0(ardupilot, tmp_
 
 @pytest.mark.sitl
 @pytest.mark.slow
-def test_pilot_switching_to_manual_ends_the_run_with_exit_3_and_no_more_setpoints(ardupilot,
+def test_pilot_switching_to_manual_ends_the_run_with_exit_4_and_no_more_setpoints(ardupilot,
                                                                                    tmp_path):
     sitl = ardupilot(speedup=SPEEDUP)
     mission = circle_mission(tmp_path / "circle.toml", duration=300.0)
@@ -164,7 +164,7 @@ def test_pilot_switching_to_manual_ends_the_run_with_exit_3_and_no_more_setpoint
         modes = [m.custom_mode for m in gs.messages("HEARTBEAT", t_ack)]
         t_beat = next(w for w, m in gs.seen if w >= t_switch and m.get_type() == "HEARTBEAT"
                       and from_vehicle(m) and m.custom_mode == MANUAL)
-    assert code == 3, comp.stderr
+    assert code == 4, comp.stderr
     assert r["reason"] == "pilot_override: mode changed to MANUAL by someone else", r
     assert "pilot took over" in comp.stderr
     assert modes and set(modes) == {MANUAL}, modes      # nobody asked for another mode

@@ -126,7 +126,7 @@ def test_a_rebooted_vehicle_is_stopped_not_resumed(tmp_path):
     port = free_udp_port()
     with Companion(port, "--arm", "--json", "--mission", str(mission)) as comp, \
             FakeVehicle(port, script=reboot) as fake:
-        assert comp.wait(30.0) == 3, comp.stderr
+        assert comp.wait(30.0) == 7, comp.stderr
         r = comp.result()
     assert "restarted" in r["reason"]
     assert not any(0 < sp.time_boot_ms < 100_000 for sp in fake.setpoints)

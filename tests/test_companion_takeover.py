@@ -35,7 +35,7 @@ def test_pilot_takeover_stops_the_companion_within_one_cycle(tmp_path, how):
         code = comp.wait(30.0)
         r = comp.result()
         time.sleep(0.3)
-    assert code == 3, comp.stderr
+    assert code == 4, comp.stderr
     assert r["reason"] == "pilot_override: mode changed to HOLD by someone else"
     assert "pilot took over" in comp.stderr
     hold_hb = [s for s in proxy.plant_sent("HEARTBEAT") if s.msg.custom_mode == HOLD]

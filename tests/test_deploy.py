@@ -29,7 +29,7 @@ import pytest
 
 from companion import cli
 from companion.commands import run as run_command
-from companion.errors import ExitCode
+from companion.errors import NO_RESTART, ExitCode
 
 ROOT = Path(__file__).resolve().parents[1]
 UNIT = ROOT / "deploy" / "pzc-rover.service"
@@ -83,8 +83,9 @@ def restarts(service: configparser.SectionProxy, exit_code: int | None = None,
 def test_documented_exit_codes_end_the_service_and_crashes_restart_it():
     service = unit_service()
     codes = documented_exit_codes()
-    assert {0, 2, 3} <= set(codes), codes
-    assert "pilot" in codes[3] and "vehicle restarted" in codes[3], codes[3]
+    assert {0, 2, 3, 4, 5, 6, 7} <= set(codes), codes
+    assert "pilot" in codes[4] and "vehicle restarted" in codes[7], codes
+    assert "autopilot's own failsafe" in codes[5] and "estimate" in codes[6], codes
     for code, meaning in codes.items():
         assert not restarts(service, exit_code=code), \
             f"exit {code} ({meaning[:60]}...) would be restarted by {UNIT.name}"
@@ -112,11 +113,18 @@ def test_restart_policy_is_the_exit_code_enum():
     ``run`` means to return is in the list: the enum is the one statement of what they mean."""
     service = unit_service()
     prevent = {int(code) for code in service["RestartPreventExitStatus"].split()}
-    assert prevent == {ExitCode.USER_ERROR, ExitCode.FAULT}
+    assert prevent == {int(c) for c in NO_RESTART}
+    assert {ExitCode.USER_ERROR, ExitCode.FAULT, ExitCode.PILOT_OVERRIDE,
+            ExitCode.AUTOPILOT_FAILSAFE, ExitCode.ESTIMATE_UNHEALTHY,
+            ExitCode.VEHICLE_RESTARTED} == set(NO_RESTART)
+    # each named stop has a code of its own
+    named = [ExitCode.FAULT, ExitCode.PILOT_OVERRIDE, ExitCode.AUTOPILOT_FAILSAFE,
+             ExitCode.ESTIMATE_UNHEALTHY, ExitCode.VEHICLE_RESTARTED]
+    assert len({int(c) for c in named}) == len(named)
     assert ExitCode.OK not in prevent and not restarts(service, exit_code=ExitCode.OK)
     # what run --help documents is what the enum says, code for code
     documented = documented_exit_codes()
-    assert set(documented) == {ExitCode.OK, ExitCode.USER_ERROR, ExitCode.FAULT}
+    assert set(documented) == {ExitCode.OK, *NO_RESTART}
     # A crash is a Python traceback's exit 1 (run never returns CHECK_FAILED): restarted.
     assert restarts(service, exit_code=1)
 

@@ -344,7 +344,7 @@ def test_a_pilot_takeover_ends_the_manoeuvre_and_what_was_flown_is_fitted(vehicl
             as plant:
         p = companion("identify", "--connect", f"udpin:127.0.0.1:{plant.port}", "--arm",
                       "--out", str(out), "--json", "--no-zenoh", "--no-log", timeout=240.0)
-    assert p.returncode == 3, p.stderr
+    assert p.returncode == 4, p.stderr
     r = json.loads(p.stdout)
     assert r["flight"]["reason"].startswith("pilot_override")
     assert r["flight"]["tlog"] is None and r["log"].startswith("the manoeuvre flown")

@@ -138,7 +138,7 @@ def test_sigterm_mid_mission_stops_the_rover_in_hold_and_exits_0(px4, tmp_path):
 
 @pytest.mark.px4
 @pytest.mark.slow
-def test_a_mode_switch_by_the_ground_station_ends_the_run_with_exit_3_and_no_more_setpoints(
+def test_a_mode_switch_by_the_ground_station_ends_the_run_with_exit_4_and_no_more_setpoints(
         px4, tmp_path):
     sitl = px4()
     mission = ellipse_mission(tmp_path / "ellipse.toml", duration=300.0, f_r=0.04)
@@ -150,7 +150,7 @@ def test_a_mode_switch_by_the_ground_station_ends_the_run_with_exit_3_and_no_mor
         r = comp.result()
         time.sleep(2.0)                              # two more seconds of heartbeats
         modes = {m.custom_mode for m in gs.messages("HEARTBEAT", t_switch + 0.5)}
-    assert code == 3, comp.stderr
+    assert code == 4, comp.stderr
     assert r["reason"] == "pilot_override: mode changed to LOITER by someone else", r
     assert "pilot took over" in comp.stderr
     assert modes == {HOLD}, [hex(m) for m in modes]      # nobody asked for another mode

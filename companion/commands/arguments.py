@@ -12,7 +12,7 @@ import argparse
 import math
 import re
 
-from ..live.config import LINK, ORIGIN, RUNNER
+from ..live.config import BAD_ESTIMATE_ACTIONS, LINK, ORIGIN, RUNNER
 
 CONNECT_HELP = ("pymavlink connection string or serial device, e.g. /dev/ttyAMA0 or "
                 "/dev/ttyACM0,921600")
@@ -150,6 +150,27 @@ def add_timeout_arguments(p: argparse.ArgumentParser) -> None:
                    help=f"wait this long to see the vehicle armed (default {RUNNER.arm_timeout:g})")
     t.add_argument("--lost-timeout", type=positive, default=RUNNER.lost_timeout, metavar="S",
                    help=f"give up when telemetry stays lost for S (default {RUNNER.lost_timeout:g})")
+    h = p.add_argument_group("the vehicle's health (docs/field-faults.md)")
+    h.add_argument("--on-bad-estimate", choices=BAD_ESTIMATE_ACTIONS,
+                   default=RUNNER.on_bad_estimate,
+                   help="when the position estimate is flagged (GPS glitch or loss, variance) or "
+                        "steps: pause (zero setpoint, HOLD, reference held) and resume once "
+                        "healthy, or end the run (exit 6) (default "
+                        f"{RUNNER.on_bad_estimate})")
+    h.add_argument("--estimate-healthy-for", type=positive, metavar="S",
+                   default=RUNNER.estimate_healthy_for,
+                   help="resume after the estimate has been healthy this long (default "
+                        f"{RUNNER.estimate_healthy_for:g})")
+    h.add_argument("--estimate-step", type=positive, metavar="M", default=RUNNER.estimate_step,
+                   help="a LOCAL_POSITION_NED step its velocity does not explain by more than "
+                        f"M pauses the run (default {RUNNER.estimate_step:g})")
+    h.add_argument("--estimate-variance", type=positive, metavar="RATIO",
+                   default=RUNNER.estimate_variance,
+                   help="pause when an estimator test ratio passes RATIO (1 = its own gate; "
+                        f"default {RUNNER.estimate_variance:g})")
+    h.add_argument("--retake-after-failsafe", action="store_true",
+                   help="once the autopilot's own failsafe has cleared, take the vehicle back "
+                        "into GUIDED / OFFBOARD and go on (default: end the run, exit 5)")
 
 
 def add_safety_arguments(p: argparse.ArgumentParser) -> None:

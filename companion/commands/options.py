@@ -83,7 +83,11 @@ def runner_config(args: argparse.Namespace, **more: Any) -> RunnerConfig:
     """add_timeout_arguments + --arm (+ add_origin_arguments' --max-start-distance, if given)."""
     return RunnerConfig(arm=args.arm, stale_timeout=args.stale_timeout,
                         telemetry_timeout=args.telemetry_timeout, arm_timeout=args.arm_timeout,
-                        lost_timeout=args.lost_timeout, **more)
+                        lost_timeout=args.lost_timeout, on_bad_estimate=args.on_bad_estimate,
+                        estimate_healthy_for=args.estimate_healthy_for,
+                        estimate_step=args.estimate_step,
+                        estimate_variance=args.estimate_variance,
+                        retake_after_failsafe=args.retake_after_failsafe, **more)
 
 
 def start_limit(metres: float) -> float:

@@ -18,9 +18,13 @@ lambda_f 120, k_dc 5, lambda_c 12). Rate: --rate > the mission's rate_hz > the -
 exit codes: 0 mission done, or stopped on SIGTERM / Ctrl-C / abort
 after stopping the rover; 2 a user error (bad flag or file, no vehicle, no telemetry, no EKF
 origin for a mission placed by latitude / longitude, --origin far from the vehicle's, the
-mission's start too far); 3 stopped by a fault (telemetry lost for --lost-timeout, vehicle
-restarted, non-finite command, mode or arming refused, pilot took over). The rover is stopped
-(zero setpoint, then HOLD) whenever the companion stops it.
+mission's start too far); 3 stopped by the companion's own failsafe (telemetry lost for
+--lost-timeout, non-finite command, mode or arming refused); 4 pilot took over (a pilot or
+ground station changed the mode or disarmed); 5 the autopilot's own failsafe (EKF, GCS,
+battery, fence, radio) took the vehicle: not taken back; 6 the position estimate flagged or
+stepped (GPS glitch or loss) and --on-bad-estimate end, or unhealthy for --lost-timeout; 7
+vehicle restarted mid-mission. The rover is stopped (zero setpoint, then HOLD) whenever the
+companion stops it; after 4 and 5 it sends nothing more.
 """
 
 

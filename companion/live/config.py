@@ -47,6 +47,14 @@ class RunnerConfig:
     # before anything moves (inf: no limit); the first point of a far mission would otherwise
     # be chased in a straight line, across whatever lies between
     max_start_distance: float = math.inf
+    # The estimate's health and the autopilot's failsafes (companion.live.health)
+    on_bad_estimate: str = "pause"    # "pause": hold until healthy again; "end": end the run
+    estimate_healthy_for: float = 3.0  # wall s of a healthy estimate before resuming
+    estimate_step: float = 1.0        # m of LOCAL_POSITION_NED step its velocity does not explain
+    # the estimator's normalised test ratios (1 = its own gate); ArduPilot's EKF failsafe
+    # threshold FS_EKF_THRESH defaults to 0.8 too
+    estimate_variance: float = 0.8
+    retake_after_failsafe: bool = False   # re-engage once the autopilot's failsafe has cleared
 
 
 @dataclass(frozen=True)
@@ -59,4 +67,5 @@ class OriginConfig:
 
 LINK = LinkConfig(url="udpin:0.0.0.0:14550")    # the defaults, for the command line to show
 RUNNER = RunnerConfig()
+BAD_ESTIMATE_ACTIONS = ("pause", "end")
 ORIGIN = OriginConfig()

@@ -26,6 +26,7 @@ RESUMED = "resumed"
 MISSION_DONE = "mission_done"
 FAILSAFE = "failsafe"
 PILOT_OVERRIDE = "pilot_override"
+AUTOPILOT_FAILSAFE = "autopilot_failsafe"   # the autopilot's own failsafe took the vehicle
 STOPPED = "stopped"
 MISSION_LOADED = "mission_loaded"
 

@@ -17,6 +17,17 @@ measures silence (stale telemetry), latency and retry intervals.
              --> previous state
     READY / TRACKING / PAUSED --the vehicle leaves GUIDED / OFFBOARD (a pilot)--> DONE at once:
              no further setpoint, no mode request (never fight the pilot), PILOT_OVERRIDE event
+    TRACKING / ENGAGING --the estimate flagged or stepped (companion.live.health)--> FAILSAFE
+             (cause "estimate"); back once healthy for --estimate-healthy-for, or DONE
+    any state --the autopilot's own failsafe takes the vehicle--> DONE (AUTOPILOT_FAILSAFE: no
+             setpoint, no mode request), or FAILSAFE until it clears (--retake-after-failsafe)
+
+Who took the vehicle out of GUIDED / OFFBOARD is :meth:`companion.live.health.FailsafeWatch.
+who_left`'s answer (the autopilot's failsafe texts and system_status, the companion's own HOLD),
+and each end has its own exit code (:class:`companion.errors.ExitCode`). After a failsafe in
+which the companion's HOLD was not seen, a track-mode heartbeat counts only after the vehicle
+has answered a mode request (COMMAND_ACK): heartbeats queued during a link stall say GUIDED
+from before the stall, and the HOLD queued on our side arrives after them.
 
 It stops the rover itself (zero setpoint, then HOLD) at the mission's end, on a stop request
 (SIGTERM / Ctrl-C via :meth:`Runner.request_stop`), on ``abort``, and when it gives up. Every
@@ -42,6 +53,7 @@ from typing import Any, Callable, Sequence
 from . import events as ev
 from ..errors import ExitCode, UserError
 from .events import ControlChannel, ControlRequest, LoopRecord, Sink, StatusEvent
+from . import health
 from ..core.limits import Limits
 from .link import Link
 from ..core.signals import Command, Measurement
@@ -50,6 +62,8 @@ from .stats import TrackingStats
 from .telemetry import TelemetryCheck
 
 _finite = math.isfinite
+REBOOTED = ("vehicle_restarted: time_boot_ms went back (the autopilot rebooted); not resuming a "
+            "mission on a rebooted vehicle")
 TIMER_EVERY = 0.02     # wall s: timers run at least this often even while messages pour in
 MAX_WAIT = 0.05        # wall s: the longest sleep (so stop requests are seen promptly)
 
@@ -109,6 +123,7 @@ class Engagement:
     warm_t0: float | None = None          # vehicle s the offboard warm-up's stream began
     next_arm_try: float = 0.0             # wall s
     said_arm_wait: bool = False
+    need_ack: bool = False                # a heartbeat counts only after a mode ACK (see top)
 
 
 @dataclass(slots=True)
@@ -127,6 +142,9 @@ class Stopping:
     resume_to: State = State.WAITING      # the state the failsafe interrupted
     wants_hold: bool = False              # _finish asked for the hold mode
     hold_confirmed: bool = False          # by an ACK or a heartbeat
+    cause: str = "telemetry"              # the failsafe's: telemetry, heartbeat, estimate,
+    #                                       link (the autopilot's setpoint-loss), autopilot
+    autopilot: str | None = None          # the autopilot's failsafe holding the vehicle (why)
 
 
 @dataclass(slots=True)
@@ -171,6 +189,10 @@ class Runner:
         self.stopping = Stopping()
         self.timers = Timers()
         self.counters = Counters()
+        self.estimate = health.EstimateWatch(
+            self.profile.estimate, config.estimate_variance, config.estimate_step,
+            config.estimate_healthy_for, max_step_dt=self.clock.max_gap)
+        self.autopilot_fs = health.FailsafeWatch(self.profile.failsafe)
 
     @property
     def track_mode(self) -> str:
@@ -239,6 +261,7 @@ class Runner:
 
     def _loop(self, recv, on_position, attitude, clock) -> None:
         link = self.link
+        estimate_kind = self.profile.estimate.message
         while self.state is not State.DONE:
             if self.stopping.requested is not None:
                 self._finish(self.stopping.requested, ExitCode.OK)
@@ -262,9 +285,12 @@ class Runner:
                 self._on_heartbeat(msg)
             elif kind == "COMMAND_ACK":
                 self._on_ack(msg)
+            elif kind == estimate_kind:
+                self._on_estimate(msg, t_read)
             elif kind == "STATUSTEXT" and link.is_vehicle(msg):
-                self.log("vehicle says: " + "".join(c if c.isprintable() else "?"
-                                                     for c in msg.text))
+                text = "".join(c if c.isprintable() else "?" for c in msg.text)
+                self.log("vehicle says: " + text)
+                self.autopilot_fs.text(text, t_read)
             if t_read >= self.timers.next_timer:
                 self._timers(t_read)
 
@@ -280,13 +306,20 @@ class Runner:
         prev_vt, heard.vehicle_t = heard.vehicle_t, s.t
         heard.pose = (s.x, s.y, s.yaw)
         state = self.state
+        step = self.estimate.position(s.t, s.x, s.y, s.vx, s.vy, t_read)
+        if step is not None and state in (State.TRACKING, State.ENGAGING):
+            # The stepped sample never reaches the controller as an error to chase.
+            self._bad_estimate(step, t_read, s.time_boot_ms)
+            state = self.state
+            if state is State.DONE:
+                return
         if state is State.TRACKING:
             clock = self.clock
             if clock.segment_t0 is not None and s.t - prev_vt > clock.max_gap:
                 self._new_segment(s.t - prev_vt)
             self._track(s, t_read)
         else:
-            if state is State.FAILSAFE and self._heartbeat_fresh(t_read):
+            if state is State.FAILSAFE and self._may_recover(t_read):
                 self._recover()
             elif state is State.WAITING:
                 problem = self._start_problem(self.mission, s.x, s.y, s.yaw)
@@ -397,17 +430,23 @@ class Runner:
             self.heard.heartbeat_lost_said = False
             self.log("vehicle heartbeat back")
         mode, armed = self.link.mode, self.link.armed
-        state = self.state
-        if state in ACTIVE and mode == self.track_mode:
+        state, now = self.state, self.heard.heartbeat_wall
+        self.autopilot_fs.heartbeat(msg.system_status)
+        if state in ACTIVE and mode == self.track_mode and not self.engagement.need_ack:
             self.engagement.mode_seen = True
         if state in (State.READY, State.TRACKING, State.PAUSED) and self.engagement.mode_seen:
             if mode != self.track_mode:
-                self._override(f"mode changed to {mode} by someone else")
+                self._left(mode, now, stalled=False)
             elif not armed:
-                self._override("vehicle disarmed by someone else")
-        elif state is State.FAILSAFE and mode == self.hold_mode:
-            self.stopping.hold_confirmed = True
-        if state is State.ENGAGING:
+                active = self.autopilot_fs.active(now)
+                if active is not None and active[0] not in self.profile.failsafe.link_causes:
+                    self._autopilot_took(f"the autopilot's {active[0]} failsafe ({active[1]}) "
+                                         "disarmed the vehicle", now)
+                else:
+                    self._override("vehicle disarmed by someone else")
+        elif state is State.FAILSAFE and mode != self.track_mode:
+            self._left(mode, now, stalled=self.stopping.cause in ("telemetry", "heartbeat"))
+        if self.state is State.ENGAGING:
             self._engage(time.perf_counter())
 
     def _on_ack(self, msg: Any) -> None:
@@ -417,6 +456,9 @@ class Runner:
             if msg.result == 0:
                 if self.mode_request.name == self.hold_mode:
                     self.stopping.hold_confirmed = True
+                elif self.state is State.ENGAGING:
+                    # heartbeats from here on say what the vehicle did with our requests
+                    self.engagement.need_ack = False
             else:
                 self.log(f"vehicle refused mode {self.mode_request.name} (COMMAND_ACK result "
                          f"{msg.result})")
@@ -443,10 +485,11 @@ class Runner:
                 self.heard.heartbeat_lost_said = True
                 self.log(f"no vehicle heartbeat for {cfg.heartbeat_lost:g} s")
             if self.telemetry.backwards_streak >= 3:
-                self._finish("failsafe: the vehicle restarted (time_boot_ms went back); "
-                             "not resuming a mission on a rebooted vehicle", ExitCode.FAULT)
+                self._finish(REBOOTED, ExitCode.VEHICLE_RESTARTED)
             elif now - self.stopping.failsafe_since > cfg.lost_timeout:
-                self._finish(f"failsafe: telemetry lost for {cfg.lost_timeout:g} s", ExitCode.FAULT)
+                self._give_up(now)
+            elif self.stopping.cause == "autopilot":
+                pass   # the autopilot's failsafe has the vehicle: no mode request of ours
             elif now >= self.mode_request.next_try and not self.stopping.hold_confirmed:
                 self.link.send_stop()
                 self._request_mode(self.hold_mode, now)
@@ -460,30 +503,132 @@ class Runner:
             elif state is State.ENGAGING:
                 self._engage(now)
 
-    def _failsafe(self, now: float, reason: str | None = None) -> None:
+    def _failsafe(self, now: float, reason: str | None = None, cause: str = "telemetry",
+                  hold: bool = True) -> None:
         if reason is None:
             gap = now - self.heard.sample_wall
             reason = f"telemetry stale: no valid sample for {gap:.2f} s"
-        self.log(f"{reason}; stopping the rover (zero setpoint, {self.hold_mode})")
-        self.link.send_stop()
         stopping = self.stopping
-        stopping.hold_confirmed = False
-        self._request_mode(self.hold_mode, now)
+        stopping.cause = cause
+        if hold:
+            self.log(f"{reason}; stopping the rover (zero setpoint, {self.hold_mode})")
+            self.link.send_stop()
+            stopping.hold_confirmed = False
+            self._request_mode(self.hold_mode, now)
+        else:
+            self.log(f"{reason}; no setpoint, no mode request until it clears")
         stopping.resume_to = (self.state if self.state is not State.ENGAGING
                               else self.engagement.after)
         self.state = State.FAILSAFE
         stopping.failsafe_since = now
         self.counters.failsafes += 1
-        self._emit(ev.FAILSAFE, reason, {"rejected": dict(self.telemetry.rejected)})
+        self._emit(ev.FAILSAFE, reason, {"rejected": dict(self.telemetry.rejected),
+                                         "cause": cause})
 
     def _recover(self) -> None:
-        """Telemetry is back: forget the filter and integrators, re-engage, then carry on."""
+        """Telemetry is back (and the estimate healthy, the autopilot's failsafe cleared):
+        forget the filter and integrators, re-engage, then carry on."""
         self.tracker.reset()
-        out = time.perf_counter() - self.stopping.failsafe_since
-        self.log(f"telemetry back after {out:.2f} s; "
+        stopping = self.stopping
+        out = time.perf_counter() - stopping.failsafe_since
+        what = {"estimate": "estimate healthy again", "autopilot": "autopilot failsafe cleared",
+                "link": "link back"}.get(stopping.cause, "telemetry back")
+        self.log(f"{what} after {out:.2f} s; "
                  f"re-engaging {self.track_mode} with the filter and integrators reset")
-        self._enter_engaging(self.stopping.resume_to)
-        self._emit(ev.RESUMED, "telemetry back")
+        need_ack = not stopping.hold_confirmed and stopping.cause != "autopilot"
+        self._enter_engaging(stopping.resume_to)
+        self.engagement.need_ack = need_ack
+        stopping.autopilot = None
+        self.estimate.forget_position()
+        self._emit(ev.RESUMED, what, {"cause": stopping.cause})
+
+    def _may_recover(self, now: float) -> bool:
+        """In FAILSAFE: the vehicle may be taken back now (heartbeat fresh, estimate healthy,
+        no autopilot failsafe holding it unless --retake-after-failsafe and it cleared)."""
+        if not self._heartbeat_fresh(now) or not self.estimate.healthy(now):
+            return False
+        if self.stopping.autopilot is not None:
+            return self.config.retake_after_failsafe and self.autopilot_fs.cleared(now)
+        active = self.autopilot_fs.active(now)
+        return active is None or active[0] in self.profile.failsafe.link_causes
+
+    def _on_estimate(self, msg: Any, now: float) -> None:
+        """The estimator's report (EKF_STATUS_REPORT / ESTIMATOR_STATUS, the profile's)."""
+        if not self.link.is_vehicle(msg):
+            return
+        facts = self.profile.estimate
+        ratios = {name: getattr(msg, name, None) for name in facts.variances}
+        self.estimate.report(int(getattr(msg, facts.flags_field)), ratios, now)
+        problem = self.estimate.problem(now)
+        if problem is not None and self.state in (State.TRACKING, State.ENGAGING):
+            self._bad_estimate(problem, now)
+
+    def _bad_estimate(self, problem: str, now: float, time_boot_ms: int = 0) -> None:
+        """The position estimate is unfit to steer by: pause (or end, --on-bad-estimate)."""
+        if self.config.on_bad_estimate == "end":
+            self._emit(ev.FAILSAFE, f"estimate unhealthy: {problem}", {"cause": "estimate"})
+            self._finish(f"estimate_unhealthy: {problem}", ExitCode.ESTIMATE_UNHEALTHY,
+                         time_boot_ms)
+            return
+        self._failsafe(now, f"estimate unhealthy: {problem}", cause="estimate")
+
+    def _left(self, mode: str, now: float, stalled: bool) -> None:
+        """The vehicle is out of the track mode, in ``mode``: whose doing was it?"""
+        in_failsafe, stopping = self.state is State.FAILSAFE, self.stopping
+        who, why = self.autopilot_fs.who_left(mode, self.hold_mode, now, stalled,
+                                           hold_asked=in_failsafe)
+        if in_failsafe and stopping.cause == "autopilot":
+            if who != health.AUTOPILOT and mode != self.hold_mode:
+                # Cleared, and the vehicle stays in the mode its failsafe (or a pilot) chose.
+                self._finish(f"autopilot_failsafe: {stopping.autopilot}; the vehicle stays in "
+                             f"{mode}: not taking it back", ExitCode.AUTOPILOT_FAILSAFE,
+                             hold=False, stop=False)
+        elif who == health.AUTOPILOT and in_failsafe and mode == self.hold_mode \
+                and stopping.hold_confirmed:
+            # Our own HOLD was in place before the autopilot's failsafe began: it did not take
+            # the vehicle from GUIDED. Resume waits for it to clear (_may_recover).
+            pass
+        elif who == health.AUTOPILOT:
+            self._autopilot_took(why, now)
+        elif who == health.PILOT:
+            self._override(why)
+        elif in_failsafe:
+            if mode == self.hold_mode:
+                stopping.hold_confirmed = True
+        elif who == health.LINK:
+            # PX4 left OFFBOARD on its setpoint-loss timeout while telemetry still flowed (our
+            # setpoints did not arrive): stop as for our own silence, take it back once back.
+            self._failsafe(now, why, cause="link")
+
+    def _autopilot_took(self, why: str, now: float) -> None:
+        """The autopilot's own failsafe has the vehicle: never taken back on our own."""
+        if not self.config.retake_after_failsafe:
+            self.log(f"{why}: not taking the vehicle back; no more setpoints")
+            self._emit(ev.AUTOPILOT_FAILSAFE, why)
+            self._finish(f"autopilot_failsafe: {why}", ExitCode.AUTOPILOT_FAILSAFE, hold=False,
+                         stop=False)
+            return
+        if self.stopping.autopilot is None:
+            self._emit(ev.AUTOPILOT_FAILSAFE, why)
+        if self.state is not State.FAILSAFE:
+            self._failsafe(now, f"{why} (--retake-after-failsafe: back once it clears)",
+                           cause="autopilot", hold=False)
+        self.stopping.cause = "autopilot"
+        self.stopping.autopilot = why
+
+    def _give_up(self, now: float) -> None:
+        """FAILSAFE for --lost-timeout: end, naming what kept it there."""
+        cfg, stopping = self.config, self.stopping
+        if stopping.cause == "estimate":
+            problem = self.estimate.problem(now) or "not healthy long enough"
+            self._finish(f"estimate_unhealthy: for {cfg.lost_timeout:g} s ({problem})",
+                         ExitCode.ESTIMATE_UNHEALTHY)
+        elif stopping.cause == "autopilot":
+            self._finish(f"autopilot_failsafe: {stopping.autopilot} and not cleared within "
+                         f"{cfg.lost_timeout:g} s", ExitCode.AUTOPILOT_FAILSAFE, hold=False,
+                         stop=False)
+        else:
+            self._finish(f"failsafe: telemetry lost for {cfg.lost_timeout:g} s", ExitCode.FAULT)
 
     # --- engaging: mode, then arming ---------------------------------------------------------
     def _enter_engaging(self, resume_to: State) -> None:
@@ -552,15 +697,14 @@ class Runner:
     def _override(self, why: str) -> None:
         if self.telemetry.backwards_streak:
             # Its clock went back too: not a pilot but a reboot (back in its boot mode).
-            self._finish("failsafe: the vehicle restarted (time_boot_ms went back); not "
-                         "resuming a mission on a rebooted vehicle", ExitCode.FAULT)
+            self._finish(REBOOTED, ExitCode.VEHICLE_RESTARTED)
             return
         # The pilot has the vehicle: not one more setpoint (not even a zero one), no mode
         # request. Setpoints outside GUIDED / OFFBOARD are ignored anyway, but a companion
         # that keeps talking to a vehicle someone else drives is one bug away from fighting.
         self.log(f"pilot took over ({why}): no more setpoints")
         self._emit(ev.PILOT_OVERRIDE, why)
-        self._finish(f"pilot_override: {why}", ExitCode.FAULT, hold=False, stop=False)
+        self._finish(f"pilot_override: {why}", ExitCode.PILOT_OVERRIDE, hold=False, stop=False)
 
     def _wait_for_hold(self) -> None:
         """Until HOLD shows (ACK or heartbeat), answer telemetry with zero setpoints."""

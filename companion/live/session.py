@@ -71,6 +71,16 @@ class StopSwitch:
         self.runner.request_stop(reason)
 
 
+def watch_estimate(link: Any, facts: Any, log: Callable[[str], None]) -> None:
+    """Ask for the estimator's report (companion.live.health watches it); one try, so a
+    vehicle that does not answer costs one ACK timeout."""
+    result = link.command_wait(511, facts.message_id, 1e6 / facts.rate_hz, tries=1)
+    if result != 0:   # MAV_CMD_SET_MESSAGE_INTERVAL not accepted
+        log(f"{facts.message} at {facts.rate_hz:g} Hz not confirmed (COMMAND_ACK "
+            f"{result}): the estimate is watched through what arrives and through "
+            "LOCAL_POSITION_NED steps")
+
+
 def fly(s: RunSettings, sinks: Sequence[Sink] = (), control: ControlChannel | None = None,
         log: Callable[[str], None] = lambda text: None,
         switch: StopSwitch | None = None,
@@ -107,6 +117,7 @@ def fly(s: RunSettings, sinks: Sequence[Sink] = (), control: ControlChannel | No
         for note in notes:
             log(note)
         log(f"telemetry at {accepted:g} Hz" if accepted else "telemetry rate not confirmed")
+        watch_estimate(link, vehicle.profile.estimate, log)
         limits_text = (f"limits: speed {limits.max_speed:g} m/s, "
                        f"yaw rate {limits.max_yaw_rate:g} rad/s")
         choice = policy.choose_gains(mission, s.gains, s.vehicle, accepted or rate)

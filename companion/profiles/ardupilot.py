@@ -12,6 +12,12 @@
   (FS_GCS_ENABLE, FS_ACTION, FS_GCS_TIMEOUT, MAV_GCS_SYSID; SYSID_MYGCS before 2025), the rate
   cap 0.8 x SCHED_LOOP_RATE, the inner-loop limits ATC_* and the top speed.
 * Identification priors from ATC_* and the cruise / waypoint speeds (:func:`priors`).
+* Failsafes (:data:`FAILSAFE`): Rover's STATUSTEXTs (Rover/ekf_check.cpp "EKF failsafe",
+  Rover/failsafe.cpp "<kind> Failsafe", the battery monitor's "Battery 1 is low", the fence's
+  breach, mode_guided.cpp's "target not received last 3secs, stopping") and the heartbeat's
+  system_status CRITICAL while ``failsafe.triggered`` or the EKF failsafe holds
+  (GCS_MAVLink_Rover::vehicle_system_status). The estimate: EKF_STATUS_REPORT (ardupilotmega,
+  id 193), healthy 0x33f on SITL (docs/field-faults.md).
 """
 
 from __future__ import annotations
@@ -25,7 +31,7 @@ from .autopilot import (FLAG_CUSTOM_MODE_ENABLED, FLAG_GUIDED_ENABLED, FLAG_MANU
                         MAV_TYPE_GROUND_ROVER, MAV_TYPE_SURFACE_BOAT, PARAM_INT8, PARAM_INT16,
                         PARAM_REAL32, AutopilotProfile, GcsFailsafe, IdentFacts, LimitParam, Mode,
                         ModeTable, PlantFacts, PreflightFacts, ServoFrame, SetpointEncoding,
-                        TopSpeedParams)
+                        TopSpeedParams, FailsafeFacts, EstimateFacts)
 from .priors import Priors, defaults, finite
 
 if TYPE_CHECKING:
@@ -175,6 +181,26 @@ def plant_params(vehicle: RoverParams, loop_rate: float, sysid: int,
     ]
 
 
+# --------------------------------------------------------------------------- failsafes, estimate
+
+# Rover's own texts, lower-cased; first match wins ("ekf variance" comes before the EKF
+# failsafe itself, and says the same).
+FAILSAFE = FailsafeFacts(
+    texts=(("ekf failsafe", "ekf"), ("ekf variance", "ekf"), ("gcs failsafe", "gcs"),
+           ("radio failsafe", "radio"), ("throttle failsafe", "radio"),
+           ("battery", "battery"), ("fence", "fence"), ("crash", "crash"),
+           ("target not received", "guided_timeout"), ("failsafe", "failsafe")),
+    cleared=("cleared", "resolved", "recovered"),
+    link_causes=frozenset({"guided_timeout"}))
+
+# EKF_STATUS_FLAGS (common.xml / ardupilotmega.xml)
+ESTIMATE = EstimateFacts(
+    message="EKF_STATUS_REPORT", message_id=193, flags_field="flags",
+    need=((0x08, "no relative horizontal position"), (0x10, "no absolute horizontal position")),
+    bad=((0x80, "constant-position mode"), (0x8000, "GPS glitching")),
+    variances=("pos_horiz_variance", "velocity_variance"))
+
+
 # --------------------------------------------------------------------------- the profile
 
 PROFILE = AutopilotProfile(
@@ -225,4 +251,6 @@ PROFILE = AutopilotProfile(
         arm_texts=("Throttle armed", "Throttle disarmed"),
         tick_aligned=True,              # 40 Hz on a 50 Hz scheduler: 20 / 20 / 20 / 40 ms
         params=plant_params),
+    failsafe=FAILSAFE,
+    estimate=ESTIMATE,
 )

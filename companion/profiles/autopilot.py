@@ -16,7 +16,9 @@ the code for any test of an autopilot's name). The profile holds facts, not I/O:
 * the preflight facts (:class:`PreflightFacts`: parameter names and the values the checks want);
 * the identification facts (:class:`IdentFacts`: the parameters read, the priors made of them,
   the manoeuvre's headroom);
-* what ``sitl_plant`` emulates differently (:class:`PlantFacts`).
+* what ``sitl_plant`` emulates differently (:class:`PlantFacts`);
+* how its own failsafes show and how its estimator reports its health (:class:`FailsafeFacts`,
+  :class:`EstimateFacts`): what the companion reads to tell the autopilot's failsafe from a pilot.
 
 Pure: no pymavlink (the MAVLink numbers it needs are spelled out below, checked against
 pymavlink's by ``tests/test_profiles.py``).
@@ -197,6 +199,50 @@ class PlantFacts:
     params: Callable[..., list[tuple[str, float, int]]]
 
 
+# --------------------------------------------------------------------------- failsafes, estimate
+
+MAV_STATE_CRITICAL, MAV_STATE_EMERGENCY = 5, 6
+
+
+@dataclass(frozen=True)
+class FailsafeFacts:
+    """How the autopilot's own failsafes show on the link.
+
+    ``texts``: (lower-case piece of a STATUSTEXT, cause) pairs, first match wins; a cause is one
+    of ``ekf``, ``gcs``, ``battery``, ``fence``, ``radio``, ``crash``, ``guided_timeout``,
+    ``failsafe`` (unnamed). ``cleared``: pieces of the texts that say a failsafe has ended (they
+    are tested first, so "EKF failsafe cleared" never reads as a new one). ``states``: the
+    HEARTBEAT ``system_status`` values the autopilot reports while a failsafe holds the vehicle.
+    ``link_causes``: the autopilot's answers to the companion's own silence (ArduPilot's
+    guided timeout, PX4's offboard loss): once the link is back the companion takes the
+    vehicle back, as from its own HOLD. ``leaves_on_silence``: that answer leaves the track
+    mode (PX4), so a mode change while the companion's link is stalled is that answer unless a
+    text names another failsafe."""
+
+    texts: tuple[tuple[str, str], ...]
+    cleared: tuple[str, ...]
+    states: frozenset[int] = frozenset({MAV_STATE_CRITICAL, MAV_STATE_EMERGENCY})
+    link_causes: frozenset[str] = frozenset()
+    leaves_on_silence: bool = False
+
+
+@dataclass(frozen=True)
+class EstimateFacts:
+    """How the estimator says its position estimate is usable: one message (asked for at
+    ``rate_hz``), its ``flags`` field, the bits that must all be set (``need``) and the bits
+    none of which may be (``bad``), each with the words the companion says; ``variances``: the
+    message's fields of normalised test ratios (1.0 = the estimator's own rejection gate) that
+    the companion compares with its limit."""
+
+    message: str
+    message_id: int
+    flags_field: str
+    need: tuple[tuple[int, str], ...]
+    bad: tuple[tuple[int, str], ...]
+    variances: tuple[str, ...]
+    rate_hz: float = 5.0
+
+
 # --------------------------------------------------------------------------- the profile
 
 @dataclass(frozen=True)
@@ -222,6 +268,8 @@ class AutopilotProfile:
     preflight: PreflightFacts
     ident: IdentFacts
     plant: PlantFacts
+    failsafe: FailsafeFacts
+    estimate: EstimateFacts
 
     def modes_for(self, mav_type: int) -> ModeTable:
         """The mode table for a vehicle of this MAV_TYPE (empty for a type it does not cover)."""

@@ -15,6 +15,11 @@
   (their names differ between releases).
 * Identification priors from RO_* and RA_* (:func:`priors`): a velocity-vector model with PX4's
   course loop and the turning radius.
+* Failsafes (:data:`FAILSAFE`): commander's texts ("Failsafe activated", "offboard ... lost",
+  "low battery", "geofence") and the heartbeat's system_status CRITICAL while a failsafe holds;
+  the offboard-loss failsafe is PX4's answer to the companion's own silence and leaves
+  OFFBOARD. The estimate: ESTIMATOR_STATUS (id 230; PX4 sends no EKF_STATUS_REPORT), whose
+  GPS-glitch bit is 0x400, not EKF_STATUS_REPORT's 0x8000.
 """
 
 from __future__ import annotations
@@ -26,8 +31,9 @@ from . import skid
 from .autopilot import (FLAG_AUTO_ENABLED, FLAG_CUSTOM_MODE_ENABLED, FLAG_GUIDED_ENABLED,
                         FLAG_MANUAL_INPUT_ENABLED, FLAG_STABILIZE_ENABLED, MAV_AUTOPILOT_PX4,
                         MAV_FRAME_LOCAL_NED, MAV_RESULT_DENIED, PARAM_INT32, PARAM_REAL32,
-                        AirframeFrame, AutopilotProfile, IdentFacts, Mode, ModeTable,
-                        OffboardFailsafe, PlantFacts, PreflightFacts, SetpointEncoding)
+                        AirframeFrame, AutopilotProfile, EstimateFacts, FailsafeFacts,
+                        IdentFacts, Mode, ModeTable, OffboardFailsafe, PlantFacts,
+                        PreflightFacts, SetpointEncoding)
 from .priors import Priors, defaults, finite
 
 if TYPE_CHECKING:
@@ -162,6 +168,25 @@ def plant_params(vehicle: RoverParams, loop_rate: float, sysid: int,
             ("MAV_SYS_ID", sysid, PARAM_INT32)]
 
 
+# --------------------------------------------------------------------------- failsafes, estimate
+
+FAILSAFE = FailsafeFacts(
+    texts=(("offboard", "offboard_loss"), ("battery", "battery"), ("fence", "fence"),
+           ("data link lost", "gcs"), ("gcs", "gcs"), ("manual control lost", "radio"),
+           ("rc ", "radio"), ("position estimate", "ekf"), ("local position", "ekf"),
+           ("navigation", "ekf"), ("failsafe", "failsafe")),
+    cleared=("regained", "cleared", "recovered"),
+    link_causes=frozenset({"offboard_loss"}),
+    leaves_on_silence=True)
+
+# ESTIMATOR_STATUS_FLAGS (common.xml)
+ESTIMATE = EstimateFacts(
+    message="ESTIMATOR_STATUS", message_id=230, flags_field="flags",
+    need=((0x08, "no relative horizontal position"), (0x10, "no absolute horizontal position")),
+    bad=((0x80, "constant-position mode"), (0x400, "GPS glitching")),
+    variances=("pos_horiz_ratio", "vel_ratio"))
+
+
 # --------------------------------------------------------------------------- the profile
 
 PROFILE = AutopilotProfile(
@@ -196,4 +221,6 @@ PROFILE = AutopilotProfile(
         arm_texts=("Armed by external command", "Disarmed by external command"),
         tick_aligned=False,
         params=plant_params),
+    failsafe=FAILSAFE,
+    estimate=ESTIMATE,
 )
