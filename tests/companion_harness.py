@@ -167,7 +167,10 @@ class FakeVehicle:
     LOCAL_POSITION_NED one tick at a time, going on when a setpoint answered the tick or after
     ``tick_timeout`` wall seconds. ``script(k, ms) -> dict`` can change tick k: keys ``x, vx``
     (LOCAL_POSITION_NED), ``yaw`` (ATTITUDE), ``ms`` (time_boot_ms), ``sysid`` (sender), or
-    ``restart`` (reboot: back to MANUAL, disarmed). Records every setpoint and command.
+    ``restart`` (reboot: back to MANUAL, disarmed); the autopilot's own doings: ``ekf`` (an
+    EKF_STATUS_REPORT with these flags), ``text`` (a STATUSTEXT), ``status`` (the heartbeat's
+    system_status from now on), ``mode`` (it switches mode itself), ``silent`` (no pose this
+    tick). Records every setpoint and command.
     """
 
     port: int
@@ -183,6 +186,7 @@ class FakeVehicle:
         self.conn = mavutil.mavlink_connection(f"udpout:127.0.0.1:{self.port}", source_system=1,
                                                source_component=1, dialect="ardupilotmega")
         self.mode, self.armed, self.streaming = 0, False, False
+        self.system_status = 4                   # MAV_STATE_ACTIVE
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, daemon=True)
 
@@ -197,7 +201,7 @@ class FakeVehicle:
 
     def _heartbeat(self) -> None:
         base = 1 | (128 if self.armed else 0) | (8 if self.mode == 15 else 0)
-        self.conn.mav.heartbeat_send(10, 3, base, self.mode, 4)
+        self.conn.mav.heartbeat_send(10, 3, base, self.mode, self.system_status)
 
     def _handle(self, msg: Any) -> bool:
         """True when the message is a setpoint (it answers the tick)."""
@@ -242,6 +246,20 @@ class FakeVehicle:
                 tick["ms"] = ms
                 self.mode, self.armed = 0, False
             mav = self.conn.mav
+            if "status" in tick:
+                self.system_status = tick["status"]
+            if "text" in tick:                  # an autopilot says why before it acts
+                mav.statustext_send(2, tick["text"].encode())
+            if "mode" in tick:
+                self.mode = tick["mode"]
+                self._heartbeat()
+            if "ekf" in tick:
+                mav.ekf_status_report_send(tick["ekf"], 0.1, 0.1, 0.1, 0.1, 0.0)
+            if tick.get("silent"):
+                self._pump(self.tick_timeout)
+                ms += self.step_ms
+                k += 1
+                continue
             mav.srcSystem = tick["sysid"]
             mav.attitude_send(tick["ms"], 0.0, 0.0, tick["yaw"], 0.0, 0.0, 0.0)
             mav.local_position_ned_send(tick["ms"], tick["x"], tick["y"], 0.0, tick["vx"],

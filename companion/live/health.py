@@ -59,9 +59,11 @@ class EstimateWatch:
             value = ratios.get(name)
             if value is not None and not (math.isfinite(value) and value <= self.variance_limit):
                 problems.append(f"{name} {value:.2f} over {self.variance_limit:g}")
+        was_bad = self._flag_problem is not None
         self._flag_problem = (f"{self.facts.message} flags 0x{flags:x}: " + ", ".join(problems)
                               if problems else None)
-        if problems:
+        if problems or was_bad:
+            # healthy_for counts from the first healthy report
             self._bad_until = now + self.healthy_for
 
     def position(self, t: float, x: float, y: float, vx: float, vy: float,
@@ -168,7 +170,8 @@ class FailsafeWatch:
                           "was silent (its setpoint-loss failsafe)")
         if active is not None and active[0] not in link:
             cause, why = active
-            return AUTOPILOT, f"the autopilot's {cause} failsafe ({why}) switched to {mode}"
+            name = "own" if cause == "failsafe" else cause
+            return AUTOPILOT, f"the autopilot's {name} failsafe ({why}) switched to {mode}"
         if mode == hold_mode and hold_asked:
             return OURS, f"the companion's own {hold_mode} request arrived"
         # A guided-timeout text does not make a later mode change the autopilot's: that

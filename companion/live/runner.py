@@ -253,6 +253,7 @@ class Runner:
         self._wait_for_hold()
         self._emit(ev.STOPPED, self.outcome.reason,
                    {"exit_code": self.outcome.exit_code,
+                    "stop_cause": stop_cause(self.outcome.exit_code),
                     "hold_confirmed": self.stopping.hold_confirmed})
         self.outcome.hold_confirmed = self.stopping.hold_confirmed
         for sink in self.sinks:
@@ -837,6 +838,12 @@ class Runner:
             self.counters.sink_errors += 1
             if self.counters.sink_errors == 1:
                 self.log(f"a sink failed ({type(exc).__name__}: {exc}); carrying on")
+
+
+def stop_cause(code: int) -> str:
+    """The exit code's name, lower case ("ok", "pilot_override", "autopilot_failsafe"...): the
+    JSON's and the Zenoh status's ``stop_cause``."""
+    return ExitCode(code).name.lower()
 
 
 def _nonzero(counts: dict[str, int]) -> dict[str, int]:

@@ -23,7 +23,7 @@ from . import policy
 from .config import LinkConfig, OriginConfig, RunnerConfig
 from .events import ControlChannel, Sink
 from .policy import GainOptions, KnownVehicle
-from .runner import Runner
+from .runner import Runner, stop_cause
 from .stats import RunResult
 
 
@@ -159,7 +159,7 @@ def fly(s: RunSettings, sinks: Sequence[Sink] = (), control: ControlChannel | No
         limits=policy.limits_dict(limits),
         failsafes=outcome.failsafes, hold_confirmed=outcome.hold_confirmed,
         mission=runner.mission.name,
-        extra={"controller": tracker.name,
+        extra={"controller": tracker.name, "stop_cause": stop_cause(outcome.exit_code),
                **({"ekf_origin": origin.as_dict()} if origin is not None else {}),
                "missed_gaps": st.gaps, "backlog": st.backlog,
                "sink_errors": runner.sink_errors, "signing_rejected": link.signing_rejected,

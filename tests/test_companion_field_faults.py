@@ -1,0 +1,139 @@
+"""``companion run`` against a scripted vehicle whose own health fails (issue 21): the estimate
+flagged or stepped pauses the run and it resumes once healthy; the autopilot's own failsafe is
+never taken back; a pilot during the companion's failsafe is a pilot. Real processes, real UDP.
+
+The vehicle is :class:`companion_harness.FakeVehicle` (ArduPilot-like: heartbeats, ACKs,
+EKF_STATUS_REPORT, STATUSTEXT on its script). Each test checks what went on the wire.
+"""
+
+from __future__ import annotations
+
+from companion_harness import Companion, FakeVehicle, ellipse_mission, is_mode_command, is_zero
+
+from sitl_plant.testing import free_udp_port
+
+HEALTHY, GLITCHING, NO_GPS = 0x33F, 0x833F, 0x27     # ArduPilot SITL's flags (field-faults.md)
+GUIDED, HOLD, MANUAL = 15, 4, 0
+CRITICAL, ACTIVE = 5, 4
+
+
+CELL: dict = {}      # the running FakeVehicle, for scripts that note what was sent so far
+
+
+def run(tmp_path, script, *flags, duration=8.0):
+    mission = ellipse_mission(tmp_path / "m.toml", duration, f_r=0.05)
+    port = free_udp_port()
+    CELL.clear()
+    with Companion(port, "--arm", "--json", "--no-zenoh", "--no-log", "--mission", str(mission),
+                   "--estimate-healthy-for", "0.5", *flags) as comp, \
+            FakeVehicle(port, script=script) as fake:
+        CELL["fake"] = fake
+        code = comp.wait(60.0)
+        return code, comp.result(), comp, fake
+
+
+def note_commands(key):
+    """In a script: remember how many commands the companion had sent by this tick."""
+    fake = CELL.get("fake")
+    CELL[key] = len(fake.commands) if fake is not None else 0
+
+
+def test_a_gps_glitch_pauses_at_once_and_the_run_resumes_once_healthy(tmp_path):
+    def script(k, ms):
+        if k % 8 == 0:                                        # 5 Hz reports
+            return {"ekf": GLITCHING if 120 <= k < 200 else HEALTHY}
+        return None
+
+    code, r, comp, fake = run(tmp_path, script)
+    assert code == 0 and r["reason"] == "mission_done", comp.stderr
+    assert "estimate unhealthy: EKF_STATUS_REPORT flags 0x833f: GPS glitching" in comp.stderr
+    assert "estimate healthy again" in comp.stderr and r["failsafes"] == 1
+    # from the report on: zero setpoints only, until 0.5 s after the last bad one
+    t_bad = fake.sent_ms[120][0]
+    t_good = fake.sent_ms[200][0]
+    during = [sp for sp in fake.setpoints if t_bad < sp.time_boot_ms < t_good + 400]
+    assert during and all(is_zero(sp) for sp in during)
+    assert any(is_mode_command(c, HOLD) for c in fake.commands)
+    assert any(not is_zero(sp) for sp in fake.setpoints if sp.time_boot_ms > t_good + 600)
+
+
+def test_a_position_step_never_reaches_the_controller(tmp_path):
+    def script(k, ms):
+        out = {"ekf": HEALTHY} if k % 8 == 0 else {}
+        if k >= 150:
+            out["x"] = 14.0                                  # the fall-back to DCM: 14 m at once
+        return out
+
+    code, r, comp, fake = run(tmp_path, script, "--on-bad-estimate", "end")
+    assert code == 6, comp.stderr
+    assert r["reason"].startswith("estimate_unhealthy: LOCAL_POSITION_NED stepped 14.00 m")
+    t_step = fake.sent_ms[150][0]
+    answered = [sp for sp in fake.setpoints if sp.time_boot_ms >= t_step]
+    assert answered and all(is_zero(sp) for sp in answered)
+
+
+def test_the_autopilots_ekf_failsafe_is_never_taken_back(tmp_path):
+    """It switches to HOLD itself, says so and turns critical: exit 5, nothing more sent."""
+    def script(k, ms):
+        if k == 150:
+            note_commands("at_failsafe")
+            return {"text": "EKF failsafe", "status": CRITICAL, "mode": HOLD}
+        if k == 400:
+            return {"text": "EKF failsafe cleared", "status": ACTIVE}
+        return None
+
+    code, r, comp, fake = run(tmp_path, script, duration=15.0)
+    assert code == 5 and r["stop_cause"] == "autopilot_failsafe", comp.stderr
+    assert r["reason"].startswith("autopilot_failsafe: the autopilot's ekf failsafe"), r
+    assert "pilot_override" not in r["reason"] and "someone else" not in r["reason"]
+    t_fs = fake.sent_ms[150][0]
+    after = fake.commands[CELL["at_failsafe"]:]
+    assert not [c for c in after if c.command in (176, 400)], after    # no mode, no arming
+    assert not [sp for sp in fake.setpoints if sp.time_boot_ms > t_fs + 100]
+
+
+def test_gps_lost_pauses_and_the_autopilots_failsafe_in_our_hold_is_waited_out(tmp_path):
+    """The flags lose absolute position: the companion's HOLD is in place when the
+    autopilot's EKF failsafe begins, so it resumes only after that failsafe has cleared."""
+    def script(k, ms):
+        out = {"ekf": NO_GPS if 120 <= k < 300 else HEALTHY} if k % 8 == 0 else {}
+        if k == 200:
+            out.update(text="EKF failsafe", status=CRITICAL)
+        if k == 330:
+            out.update(text="EKF failsafe cleared", status=ACTIVE)
+        return out
+
+    code, r, comp, fake = run(tmp_path, script, duration=10.0)
+    assert code == 0 and r["reason"] == "mission_done", comp.stderr
+    assert "no absolute horizontal position" in comp.stderr
+    t_clear = fake.sent_ms[330][0]
+    guided = [c for c in fake.commands if is_mode_command(c, GUIDED)]
+    resumed = [sp for sp in fake.setpoints if sp.time_boot_ms > fake.sent_ms[120][0]
+               and not is_zero(sp)]
+    assert resumed and resumed[0].time_boot_ms > t_clear, "resumed before the failsafe cleared"
+    assert len(guided) >= 2
+
+
+def test_without_the_flag_gps_lost_can_end_the_run_with_its_reason(tmp_path):
+    def script(k, ms):
+        return {"ekf": NO_GPS if k >= 120 else HEALTHY} if k % 8 == 0 else None
+
+    code, r, comp, fake = run(tmp_path, script, "--on-bad-estimate", "end")
+    assert code == 6 and "no absolute horizontal position" in r["reason"], comp.stderr
+
+
+def test_a_pilot_during_the_companions_own_failsafe_is_a_pilot(tmp_path):
+    """Telemetry goes silent (the companion asks HOLD); a pilot picks MANUAL meanwhile: when
+    telemetry returns the companion does not take the vehicle back."""
+    def script(k, ms):
+        if k == 185:
+            note_commands("at_pilot")
+        if 150 <= k < 190:
+            return {"silent": True, **({"mode": MANUAL} if k == 185 else {})}
+        return None
+
+    code, r, comp, fake = run(tmp_path, script)
+    assert code == 4, comp.stderr
+    assert r["reason"] == "pilot_override: mode changed to MANUAL by someone else", r
+    after = fake.commands[CELL["at_pilot"]:]
+    assert not [c for c in after if is_mode_command(c, GUIDED)], "GUIDED after the pilot's MANUAL"
