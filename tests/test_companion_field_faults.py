@@ -92,26 +92,35 @@ def test_the_autopilots_ekf_failsafe_is_never_taken_back(tmp_path):
     assert not [sp for sp in fake.setpoints if sp.time_boot_ms > t_fs + 100]
 
 
-def test_gps_lost_pauses_and_the_autopilots_failsafe_in_our_hold_is_waited_out(tmp_path):
-    """The flags lose absolute position: the companion's HOLD is in place when the
-    autopilot's EKF failsafe begins, so it resumes only after that failsafe has cleared."""
-    def script(k, ms):
-        out = {"ekf": NO_GPS if 120 <= k < 300 else HEALTHY} if k % 8 == 0 else {}
-        if k == 200:
-            out.update(text="EKF failsafe", status=CRITICAL)
-        if k == 330:
-            out.update(text="EKF failsafe cleared", status=ACTIVE)
-        return out
+def gps_lost(k, ms):
+    """The flags lose absolute position; 2 s later the autopilot's EKF failsafe begins (the
+    companion's HOLD is in place by then); it clears 3 s later, with the flags."""
+    out = {"ekf": NO_GPS if 120 <= k < 300 else HEALTHY} if k % 8 == 0 else {}
+    if k == 200:
+        out.update(text="EKF failsafe", status=CRITICAL)
+    if k == 330:
+        out.update(text="EKF failsafe cleared", status=ACTIVE)
+    return out
 
-    code, r, comp, fake = run(tmp_path, script, duration=10.0)
-    assert code == 0 and r["reason"] == "mission_done", comp.stderr
+
+def test_gps_lost_pauses_and_the_autopilots_failsafe_then_ends_it(tmp_path):
+    code, r, comp, fake = run(tmp_path, gps_lost, duration=10.0)
+    assert code == 5, comp.stderr
     assert "no absolute horizontal position" in comp.stderr
+    assert r["reason"].startswith("autopilot_failsafe: the autopilot's ekf failsafe"), r
+    assert "estimate failsafe" in r["reason"]
+    assert len([c for c in fake.commands if is_mode_command(c, GUIDED)]) == 1   # never again
+    assert all(is_zero(sp) for sp in fake.setpoints if sp.time_boot_ms > fake.sent_ms[120][0])
+
+
+def test_gps_lost_with_retake_resumes_once_the_autopilots_failsafe_has_cleared(tmp_path):
+    code, r, comp, fake = run(tmp_path, gps_lost, "--retake-after-failsafe", duration=10.0)
+    assert code == 0 and r["reason"] == "mission_done", comp.stderr
     t_clear = fake.sent_ms[330][0]
-    guided = [c for c in fake.commands if is_mode_command(c, GUIDED)]
     resumed = [sp for sp in fake.setpoints if sp.time_boot_ms > fake.sent_ms[120][0]
                and not is_zero(sp)]
     assert resumed and resumed[0].time_boot_ms > t_clear, "resumed before the failsafe cleared"
-    assert len(guided) >= 2
+    assert len([c for c in fake.commands if is_mode_command(c, GUIDED)]) >= 2
 
 
 def test_without_the_flag_gps_lost_can_end_the_run_with_its_reason(tmp_path):

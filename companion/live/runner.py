@@ -586,9 +586,12 @@ class Runner:
                              hold=False, stop=False)
         elif who == health.AUTOPILOT and in_failsafe and mode == self.hold_mode \
                 and stopping.hold_confirmed:
-            # Our own HOLD was in place before the autopilot's failsafe began: it did not take
-            # the vehicle from GUIDED. Resume waits for it to clear (_may_recover).
-            pass
+            # Our own HOLD was in place before the autopilot's failsafe began; still its
+            # failsafe: not resumed on our own (--retake-after-failsafe: once it clears).
+            cause, evidence = self.autopilot_fs.active(now) or ("own", "")
+            self._autopilot_took(f"the autopilot's {cause} failsafe ({evidence}) began while "
+                                 f"the rover stood in the companion's {mode} "
+                                 f"({stopping.cause} failsafe)", now)
         elif who == health.AUTOPILOT:
             self._autopilot_took(why, now)
         elif who == health.PILOT:
