@@ -20,6 +20,7 @@ from companion.sim.vehicle_file import load as load_vehicle
 
 from .config import DEFAULT_URL, PlantConfig
 from .earth import CMAC, OriginConfig
+from .status import GpsFault
 from .telemetry import TelemetryConfig
 from .vehicle import VehicleConfig
 
@@ -192,6 +193,14 @@ def build_parser() -> argparse.ArgumentParser:
     flt.add_argument("--ekf-delay", type=_non_negative, default=0.0, metavar="S",
                      help="no EKF origin, no position estimate and no arming for the first S s "
                           "of vehicle time (ArduPilot SITL: about 20 s to an origin)")
+    flt.add_argument("--gps-glitch", type=_gps_fault("glitch"), action="append", default=[],
+                     metavar="AT,DURATION[,METRES]", dest="gps_faults",
+                     help="from AT s of vehicle time for DURATION s the EKF reports GPS "
+                          "glitching (0x833f) and LOCAL_POSITION_NED is METRES (default 14) north "
+                          "of the truth (repeatable)")
+    flt.add_argument("--gps-loss", type=_gps_fault("loss"), action="append", dest="gps_faults",
+                     metavar="AT,DURATION",
+                     help="from AT s for DURATION s the EKF has no absolute position (0x27)")
     flt.add_argument("--mav-type", type=_mav_type, metavar="N",
                      help="the heartbeat's MAV_TYPE (default 10 rover, 11 with FRAME_CLASS 2); "
                           "another imitates a vehicle that is not a rover")
@@ -201,6 +210,23 @@ def build_parser() -> argparse.ArgumentParser:
                      help="MAVLink 2 signing: 32-byte secret (raw or 64 hex digits, mode 600); "
                           "unsigned commands and setpoints are ignored")
     return p
+
+
+def _gps_fault(kind: str):
+    def parse(text: str) -> GpsFault:
+        parts = text.split(",")
+        try:
+            values = [float(v) for v in parts]
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"not numbers: {text!r}") from None
+        wanted = (2, 3) if kind == "glitch" else (2,)
+        if len(values) not in wanted or not all(math.isfinite(v) for v in values) \
+                or values[0] < 0 or values[1] <= 0:
+            raise argparse.ArgumentTypeError(
+                f"{text!r}: want AT,DURATION{'[,METRES]' if kind == 'glitch' else ''} "
+                "(AT >= 0, DURATION > 0, finite)")
+        return GpsFault(kind, *values)
+    return parse
 
 
 def config_from_args(args: argparse.Namespace) -> PlantConfig:
@@ -233,7 +259,8 @@ def config_from_args(args: argparse.Namespace) -> PlantConfig:
                                            delay=max(args.origin_delay, args.ekf_delay)),
                        global_position_rate=args.global_position_rate,
                        params=tuple(args.param), param_loss=args.param_loss,
-                       ekf_delay=args.ekf_delay, mav_type=args.mav_type, mavlink1=args.mavlink1)
+                       ekf_delay=args.ekf_delay, mav_type=args.mav_type, mavlink1=args.mavlink1,
+                       gps_faults=tuple(args.gps_faults))
 
 
 def _install_signals(server) -> tuple[socket.socket, socket.socket]:

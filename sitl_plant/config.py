@@ -5,6 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 from .earth import OriginConfig
+from .status import GpsFault
 from .telemetry import TelemetryConfig
 from .vehicle import VehicleConfig
 
@@ -38,3 +39,4 @@ class PlantConfig:
     ekf_delay: float = 0.0
     mav_type: int | None = None
     mavlink1: bool = False
+    gps_faults: tuple[GpsFault, ...] = ()   # --gps-glitch / --gps-loss (sitl_plant.status)

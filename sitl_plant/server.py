@@ -51,7 +51,8 @@ class PlantServer:
         gpi = config.global_position_rate
         self.streams = streams.StreamSchedule(
             config.loop_rate, tick_aligned=config.tick_aligned,
-            initial={streams.GLOBAL_POSITION_INT: int(round(1e6 / gpi)) if gpi > 0 else None})
+            initial={streams.GLOBAL_POSITION_INT: int(round(1e6 / gpi)) if gpi > 0 else None,
+                     streams.EKF_STATUS_REPORT: None})
         self.earth = Earth(config.origin, config.vehicle.start[:2])
         self._after_ack: list[Callable[[], None]] = []
         self.telemetry = TelemetryPipe(config.telemetry)
@@ -191,6 +192,8 @@ class PlantServer:
                                 self._status_sensors())
             elif mid == streams.GLOBAL_POSITION_INT:
                 self._global_position()
+            elif mid == streams.EKF_STATUS_REPORT:
+                link.ekf_status(self._ekf_report())
             else:
                 if sample is None:
                     sample = self._sample()
@@ -205,7 +208,13 @@ class PlantServer:
     def _sample(self):
         s = self.vehicle.state
         vx, vy = self.vehicle.velocity()
-        return self.telemetry.sample(self.t_us, s.x, s.y, s.yaw, vx, vy, s.omega)
+        north = status.position_offset(self.vehicle.t, self.config.gps_faults)
+        return self.telemetry.sample(self.t_us, s.x + north, s.y, s.yaw, vx, vy, s.omega)
+
+    def _ekf_report(self) -> status.EkfReport:
+        return status.ekf_report(self.vehicle.t,
+                                 max(self.config.ekf_delay, self.config.origin.delay),
+                                 self.config.gps_faults)
 
     def _global_position(self) -> None:
         """GLOBAL_POSITION_INT of the true position (GPS-like: no telemetry faults), once the
@@ -337,7 +346,7 @@ class PlantServer:
         elif msg_id in (streams.ATTITUDE, streams.LOCAL_POSITION_NED):
             self.telemetry.push(self.t_us, int(msg_id), self._sample())
         elif msg_id == status.MSG_EKF_STATUS_REPORT:
-            report = status.ekf_report(v.t, max(self.config.ekf_delay, self.config.origin.delay))
+            report = self._ekf_report()
             self._after_ack.append(lambda: link.ekf_status(report))
         elif msg_id == streams.GLOBAL_POSITION_INT:
             self._global_position()

@@ -5,6 +5,13 @@ The plant's pose is exact, so its EKF is healthy from ``--ekf-delay`` seconds of
 (and not before its origin is set, ``--origin-delay``; ArduPilot SITL: about 20 s to an origin,
 40 s to arming). Before that it has an attitude and nothing else, and the pre-arm checks fail,
 as SITL's do until its EKF runs. Pure: the server sends.
+
+GPS faults (``--gps-glitch``, ``--gps-loss``; :class:`GpsFault`) imitate what ArduPilot SITL's
+EKF reports for SIM_GPS1_GLTCH_X / _Y and SIM_GPS1_ENABLE 0 (docs/field-faults.md): a glitch
+sets EKF_GPS_GLITCHING (0x833f) and moves LOCAL_POSITION_NED by its size (north) for its
+duration, as the fall-back to a glitched fix does; a loss drops the absolute position (0x27)
+while the pose stays true (dead reckoning on an exact plant). The plant has no EKF failsafe of
+its own: the companion's reaction is what these test.
 """
 
 from __future__ import annotations
@@ -21,6 +28,26 @@ EKF_ATTITUDE_ONLY = 0x1
 PREARM_TEXT = "PreArm: AHRS: not using configured AHRS type"   # as the plant's arming refusal
 
 
+EKF_GLITCHING = 0x833F                 # EKF_GOOD | EKF_GPS_GLITCHING (0x8000)
+EKF_NO_GPS = 0x27                      # attitude, velocities, relative position, vertical
+
+
+@dataclass(frozen=True)
+class GpsFault:
+    kind: str            # "glitch" or "loss"
+    at: float            # vehicle s
+    duration: float      # s
+    size: float = 14.0   # m north (a glitch's step in LOCAL_POSITION_NED)
+
+    def active(self, t: float) -> bool:
+        return self.at <= t < self.at + self.duration
+
+
+def position_offset(t: float, faults: tuple[GpsFault, ...]) -> float:
+    """Metres north the estimate is off the truth at vehicle time ``t``."""
+    return sum(f.size for f in faults if f.kind == "glitch" and f.active(t))
+
+
 @dataclass(frozen=True)
 class EkfReport:
     flags: int
@@ -34,8 +61,13 @@ def ekf_ready(t: float, ekf_delay: float) -> bool:
     return t >= ekf_delay
 
 
-def ekf_report(t: float, ekf_delay: float) -> EkfReport:
+def ekf_report(t: float, ekf_delay: float, faults: tuple[GpsFault, ...] = ()) -> EkfReport:
     if ekf_ready(t, ekf_delay):
+        active = {f.kind for f in faults if f.active(t)}
+        if "loss" in active:
+            return EkfReport(EKF_NO_GPS, 0.2, 0.5, 0.1, 0.02)
+        if "glitch" in active:
+            return EkfReport(EKF_GLITCHING, 0.3, 1.2, 0.1, 0.02)
         return EkfReport(EKF_GOOD, 0.01, 0.01, 0.01, 0.02)
     return EkfReport(EKF_ATTITUDE_ONLY, 0.0, 0.0, 0.0, 0.0)
 

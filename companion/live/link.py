@@ -15,13 +15,16 @@ ignore the field), so a log or a test can pair every setpoint with its sample.
 ``LinkConfig.signing_key`` turns on MAVLink 2 signing (:mod:`companion.mav.signing`: outgoing
 signed, unsigned / wrong-key / replayed input refused and counted) and ``LinkConfig.tlog``
 records a .tlog of both directions (:mod:`companion.live.flightlog`), both through pymavlink's own
-support. A UDP socket gets a large receive buffer (:mod:`companion.mav.sockets`: the kernel's default holds
+support. A TCP connection the vehicle closes (a reboot, a serial-to-TCP bridge restarting) is
+reopened, at most one try a second (:meth:`Link.recv`; pymavlink's own reconnect would block the
+loop and print to stdout). A UDP socket gets a large receive buffer (:mod:`companion.mav.sockets`: the kernel's default holds
 about 256 small datagrams, and a burst beyond it is dropped silently).
 """
 
 from __future__ import annotations
 
 import os
+import socket
 import time
 from dataclasses import dataclass
 from typing import Any, Callable
@@ -95,6 +98,13 @@ class Link:
         self.setpoints_sent = 0
         self._recv_failed = False                 # the last read raised (see wait)
         self.last_ack: dict[int, int] = {}        # command id -> last result
+        self.log: Callable[[str], None] = lambda text: None   # the session's, once it runs
+        self.reconnects = 0                       # TCP connections reopened
+        self._dropped = False                     # the TCP peer closed the connection
+        self._next_reopen = 0.0                   # monotonic s
+        if isinstance(self.master, mavutil.mavtcp):
+            # pymavlink calls these on EOF / reset (and would print, then reconnect blocking)
+            self.master.handle_eof = self.master.handle_disconnect = self._tcp_dropped
 
     def close(self) -> None:
         try:
@@ -110,8 +120,37 @@ class Link:
         return signing.rejected(self.master) if self.config.signing_key is not None else 0
 
     # --- receiving ----------------------------------------------------------------------------
+    def _tcp_dropped(self) -> None:
+        if not self._dropped:
+            self.log(f"the vehicle closed the TCP connection {self.config.url}; reopening it")
+        self._dropped = True
+
+    def _reopen(self) -> None:
+        """One try at reopening a dropped TCP connection (blocks at most 0.2 s)."""
+        self._next_reopen = time.monotonic() + 1.0
+        m = self.master
+        try:
+            sock = socket.create_connection(m.destination_addr, timeout=0.2)
+        except OSError:
+            return
+        sock.setblocking(False)
+        sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+        try:
+            m.port.close()
+        except OSError:
+            pass
+        m.port, m.fd = sock, sock.fileno()
+        self._dropped = False
+        self.reconnects += 1
+        self.log(f"TCP connection {self.config.url} reopened")
+
     def recv(self) -> Any | None:
         """One parsed message, or None when nothing is waiting. Never blocks, never raises."""
+        if self._dropped:
+            if time.monotonic() >= self._next_reopen:
+                self._reopen()
+            if self._dropped:
+                return None
         try:
             msg = self.master.recv_msg()
         except OSError:   # a serial device unplugged or hung up; a UDP peer's ICMP error
@@ -131,7 +170,7 @@ class Link:
         """Sleep until data arrives or ``timeout`` seconds pass (pymavlink's select)."""
         for hook in self.on_idle:
             hook()
-        if timeout > 0 and self._recv_failed:
+        if timeout > 0 and (self._recv_failed or self._dropped):
             time.sleep(timeout)   # a hung-up device polls readable at once: do not spin on it
         elif timeout > 0:
             self.master.select(timeout)

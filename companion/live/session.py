@@ -99,6 +99,7 @@ def fly(s: RunSettings, sinks: Sequence[Sink] = (), control: ControlChannel | No
     asked = policy.resolve(s.mission, s.gains, s.vehicle)
     rate, limits = asked.rate, asked.limits
     link = Link(s.link)
+    link.log = log
     try:
         stop = (lambda: False) if switch is None else (lambda: switch.reason is not None)
         vehicle = link.wait_vehicle(stop)
@@ -163,4 +164,5 @@ def fly(s: RunSettings, sinks: Sequence[Sink] = (), control: ControlChannel | No
                **({"ekf_origin": origin.as_dict()} if origin is not None else {}),
                "missed_gaps": st.gaps, "backlog": st.backlog,
                "sink_errors": runner.sink_errors, "signing_rejected": link.signing_rejected,
-               "tracker_resets": runner.tracker_resets, "udp_recv_buffer": link.recv_buffer})
+               "tracker_resets": runner.tracker_resets, "udp_recv_buffer": link.recv_buffer,
+               "tcp_reconnects": link.reconnects})

@@ -1,0 +1,114 @@
+"""Faults for the field tests (issue 21): a TCP proxy that stalls or drops the companion's link,
+the simulator's truth (SIMSTATE) in metres, and the figures read from a companion's tlog.
+
+The proxy listens on a free loopback port and keeps one upstream connection to the autopilot
+(opened with the first client, reused by the next: ArduPilot SITL's SERIAL0 serves one client).
+``stall()`` stops reading both ways (a radio fade under TCP: what each side writes queues in the
+kernel and arrives in a burst on ``resume()``); ``drop()`` closes the companion's connection as
+an autopilot that dropped it would, and accepts the next one.
+"""
+
+from __future__ import annotations
+
+import math
+import select
+import socket
+import threading
+import time
+from typing import Any
+
+EARTH = 6378100.0      # m: ArduPilot's flat-earth radius (AP_Common/Location.cpp)
+
+
+class StallProxy:
+    def __init__(self, upstream: tuple[str, int]):
+        self.upstream_addr = upstream
+        self.listener = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+        self.listener.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        self.listener.bind(("127.0.0.1", 0))
+        self.listener.listen(2)
+        self.port = self.listener.getsockname()[1]
+        self.client: socket.socket | None = None
+        self.upstream: socket.socket | None = None
+        self.stalled = threading.Event()
+        self.clients = 0                      # connections accepted
+        self._stop = threading.Event()
+        self._lock = threading.Lock()
+        self._thread = threading.Thread(target=self._run, daemon=True)
+
+    @property
+    def url(self) -> str:
+        return f"tcp:127.0.0.1:{self.port}"
+
+    def __enter__(self) -> StallProxy:
+        self._thread.start()
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self._stop.set()
+        self._thread.join(2.0)
+        for s in (self.client, self.upstream, self.listener):
+            if s is not None:
+                s.close()
+
+    def stall(self) -> None:
+        self.stalled.set()
+
+    def resume(self) -> None:
+        self.stalled.clear()
+
+    def drop(self) -> None:
+        """Close the companion's connection (the autopilot dropped it); the upstream stays."""
+        with self._lock:
+            if self.client is not None:
+                self.client.close()
+                self.client = None
+
+    def _run(self) -> None:
+        while not self._stop.is_set():
+            with self._lock:
+                socks = [self.listener] + [s for s in (self.client, self.upstream) if s]
+            if self.stalled.is_set():
+                socks = [self.listener]
+            ready, _, _ = select.select(socks, [], [], 0.02)
+            for s in ready:
+                if s is self.listener:
+                    conn, _ = s.accept()
+                    conn.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+                    with self._lock:
+                        if self.client is not None:
+                            self.client.close()
+                        self.client = conn
+                        self.clients += 1
+                        if self.upstream is None:
+                            self.upstream = socket.create_connection(self.upstream_addr, 5.0)
+                            self.upstream.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+                    continue
+                self._forward(s)
+
+    def _forward(self, s: socket.socket) -> None:
+        with self._lock:
+            other = self.upstream if s is self.client else self.client
+        try:
+            data = s.recv(65536)
+        except OSError:
+            data = b""
+        if not data:
+            if s is self.client:
+                with self._lock:
+                    self.client = None
+                s.close()
+            return
+        if other is not None:
+            try:
+                other.sendall(data)
+            except OSError:
+                pass
+
+
+def simstate_xy(msg: Any, origin: Any) -> tuple[float, float]:
+    """SIMSTATE's true position (1e-7 degrees) in metres north / east of ``origin``'s."""
+    dn = (msg.lat - origin.lat) * 1e-7 * math.pi / 180 * EARTH
+    de = ((msg.lng - origin.lng) * 1e-7 * math.pi / 180 * EARTH
+          * math.cos(origin.lat * 1e-7 * math.pi / 180))
+    return dn, de
