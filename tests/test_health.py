@@ -40,6 +40,8 @@ def test_the_glitch_bit_is_each_autopilots_own():
     p.report(0x33F | 0x400, {}, 0.0)
     assert a.problem(0.0) is None and "GPS glitching" in p.problem(0.0)
     assert PX.estimate.message == "ESTIMATOR_STATUS" and AP.estimate.message == "EKF_STATUS_REPORT"
+    p.report(0x3FF, {"pos_horiz_ratio": 0.03, "vel_ratio": 0.03}, 1.0)   # PX4 SIH, healthy
+    assert p.problem(1.0) is None
 
 
 def test_a_variance_over_the_limit_and_a_nan_one_are_unhealthy():

@@ -179,11 +179,13 @@ FAILSAFE = FailsafeFacts(
     link_causes=frozenset({"offboard_loss"}),
     leaves_on_silence=True)
 
-# ESTIMATOR_STATUS_FLAGS (common.xml)
+# ESTIMATOR_STATUS_FLAGS (common.xml). Seen on PX4 SIH (main 2026-03): EKF_STATUS_REPORT is
+# refused (MAV_RESULT_FAILED), ESTIMATOR_STATUS streams, and a healthy vehicle reports 0x3ff:
+# the constant-position bit (0x80) is set with a GPS fix, so it is no sign of trouble here.
 ESTIMATE = EstimateFacts(
     message="ESTIMATOR_STATUS", message_id=230, flags_field="flags",
     need=((0x08, "no relative horizontal position"), (0x10, "no absolute horizontal position")),
-    bad=((0x80, "constant-position mode"), (0x400, "GPS glitching")),
+    bad=((0x400, "GPS glitching"),),
     variances=("pos_horiz_ratio", "vel_ratio"))
 
 
