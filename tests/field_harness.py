@@ -112,3 +112,57 @@ def simstate_xy(msg: Any, origin: Any) -> tuple[float, float]:
     de = ((msg.lng - origin.lng) * 1e-7 * math.pi / 180 * EARTH
           * math.cos(origin.lat * 1e-7 * math.pi / 180))
     return dn, de
+
+
+class UdpStallProxy:
+    """A UDP relay that takes the autopilot's datagrams on ``listen_port`` (where it sends:
+    PX4's offboard link 14540 + N) and passes them to the companion on ``companion_port``, and
+    the companion's back to the autopilot's address. ``stall()`` drops everything both ways (a
+    radio fade on UDP loses what is sent meanwhile); ``resume()`` passes again."""
+
+    def __init__(self, listen_port: int, companion_port: int):
+        self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self.sock.bind(("127.0.0.1", listen_port))
+        self.companion_addr = ("127.0.0.1", companion_port)
+        self.autopilot_addr: tuple[str, int] | None = None
+        self.stalled = threading.Event()
+        self.dropped = 0
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, daemon=True)
+
+    def __enter__(self) -> UdpStallProxy:
+        self._thread.start()
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self._stop.set()
+        self._thread.join(2.0)
+        self.sock.close()
+
+    def stall(self) -> None:
+        self.stalled.set()
+
+    def resume(self) -> None:
+        self.stalled.clear()
+
+    def _run(self) -> None:
+        while not self._stop.is_set():
+            ready, _, _ = select.select([self.sock], [], [], 0.05)
+            if not ready:
+                continue
+            try:
+                data, addr = self.sock.recvfrom(65536)
+            except OSError:
+                continue
+            if self.stalled.is_set():
+                self.dropped += 1
+                continue
+            try:
+                if addr == self.companion_addr:
+                    if self.autopilot_addr is not None:
+                        self.sock.sendto(data, self.autopilot_addr)
+                else:
+                    self.autopilot_addr = addr
+                    self.sock.sendto(data, self.companion_addr)
+            except OSError:
+                pass

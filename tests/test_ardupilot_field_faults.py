@@ -35,9 +35,19 @@ def _companion(url: str, tmp_path: Path, mission: Path, *extra: str) -> Companio
                             "--log-dir", str(tmp_path / "logs"), *extra)
 
 
-def _watch(gs: GroundStation) -> None:
+def _watch(gs: GroundStation, timeout: float = 60.0) -> None:
+    """10 Hz of what the tests read, on the ground station's link. SITL boots only once the
+    companion is on SERIAL0 and may not answer for a while on a loaded machine: asked again
+    until it does (set-up, not what is tested)."""
+    deadline = time.monotonic() + timeout
     for msg_id in (LOCAL_POSITION_NED, ATTITUDE, SIMSTATE, EKF_STATUS_REPORT):
-        assert gs.set_rate(msg_id, 10.0) == 0
+        while True:
+            try:
+                assert gs.set_rate(msg_id, 10.0) == 0
+                break
+            except AssertionError:
+                if time.monotonic() > deadline:
+                    raise
 
 
 def _tracking_for(gs: GroundStation, seconds: float) -> int:
