@@ -23,6 +23,7 @@ BOOT_WALL = 60.0
 
 @pytest.mark.px4
 @pytest.mark.slow
+@pytest.mark.timeout(420)
 @pytest.mark.parametrize("stall_s", [3.0, 10.0])
 def test_a_udp_link_stall_stops_the_rover_and_the_mission_completes(px4, tmp_path, stall_s):
     sitl = px4()
@@ -44,8 +45,9 @@ def test_a_udp_link_stall_stops_the_rover_and_the_mission_completes(px4, tmp_pat
         t_back = time.monotonic()
         code = comp.wait(120.0)
         r = comp.result()
+        back_ms = gs.messages("LOCAL_POSITION_NED", t_back)[0].time_boot_ms
         poses = [m for m in gs.messages("LOCAL_POSITION_NED", t_stall)
-                 if m.time_boot_ms <= gs.messages("LOCAL_POSITION_NED", t_back)[0].time_boot_ms]
+                 if m.time_boot_ms <= back_ms]
         modes = [m.custom_mode for m in gs.messages("HEARTBEAT", t_stall)]
     t0 = poses[0].time_boot_ms
     late = [ground_speed(m) for m in poses if m.time_boot_ms >= t0 + 4000]

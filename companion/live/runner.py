@@ -551,7 +551,10 @@ class Runner:
         if self.stopping.autopilot is not None:
             return self.config.retake_after_failsafe and self.autopilot_fs.cleared(now)
         active = self.autopilot_fs.active(now)
-        return active is None or active[0] in self.profile.failsafe.link_causes
+        if active is None or active[0] in self.profile.failsafe.link_causes:
+            return True
+        # the critical status that comes with the autopilot's answer to our silence
+        return self.stopping.cause == "link" and active[1] == "system_status critical"
 
     def _on_estimate(self, msg: Any, now: float) -> None:
         """The estimator's report (EKF_STATUS_REPORT / ESTIMATOR_STATUS, the profile's)."""
@@ -599,6 +602,8 @@ class Runner:
         elif in_failsafe:
             if mode == self.hold_mode:
                 stopping.hold_confirmed = True
+            if who == health.LINK:
+                stopping.cause = "link"    # PX4's offboard loss: its status turns critical
         elif who == health.LINK:
             # PX4 left OFFBOARD on its setpoint-loss timeout while telemetry still flowed (our
             # setpoints did not arrive): stop as for our own silence, take it back once back.
