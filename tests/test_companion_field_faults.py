@@ -146,3 +146,22 @@ def test_a_pilot_during_the_companions_own_failsafe_is_a_pilot(tmp_path):
     assert r["reason"] == "pilot_override: mode changed to MANUAL by someone else", r
     after = fake.commands[CELL["at_pilot"]:]
     assert not [c for c in after if is_mode_command(c, GUIDED)], "GUIDED after the pilot's MANUAL"
+
+
+def test_a_mode_the_autopilot_chose_during_a_stall_is_not_taken_back(tmp_path):
+    """Telemetry and heartbeats go silent; when they return the vehicle is in RTL, critical
+    (an offboard-loss RTL, a GCS failsafe): the companion, re-engaging, does not ask GUIDED."""
+    def script(k, ms):
+        if k == 150:
+            note_commands("at_stall")
+        if 150 <= k < 200:
+            return {"silent": True}
+        if k == 200:
+            return {"mode": 11, "status": CRITICAL}          # RTL
+        return None
+
+    code, r, comp, fake = run(tmp_path, script)
+    assert code == 5 and r["stop_cause"] == "autopilot_failsafe", comp.stderr
+    assert "switched to RTL" in r["reason"], r
+    guided = [c for c in fake.commands[CELL["at_stall"]:] if is_mode_command(c, GUIDED)]
+    assert len(guided) <= 1, guided    # at most one asked before the RTL heartbeat came

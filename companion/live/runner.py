@@ -124,6 +124,7 @@ class Engagement:
     next_arm_try: float = 0.0             # wall s
     said_arm_wait: bool = False
     need_ack: bool = False                # a heartbeat counts only after a mode ACK (see top)
+    after_failsafe: bool = False          # re-engaging after a failsafe (not the first time)
 
 
 @dataclass(slots=True)
@@ -447,6 +448,17 @@ class Runner:
                     self._override("vehicle disarmed by someone else")
         elif state is State.FAILSAFE and mode != self.track_mode:
             self._left(mode, now, stalled=self.stopping.cause in ("telemetry", "heartbeat"))
+        elif (state is State.ENGAGING and self.engagement.after_failsafe
+              and mode not in (self.track_mode, self.hold_mode)):
+            # Back from a failsafe, the vehicle shows a mode neither we nor our HOLD chose (the
+            # heartbeat that says so often comes only after the link): judged as in the
+            # failsafe (against our own HOLD request); an autopilot's failsafe or a pilot ends
+            # the run, or (--retake-after-failsafe) the failsafe waits for it to clear.
+            self.state = State.FAILSAFE
+            self._left(mode, now, stalled=self.stopping.cause in ("telemetry", "heartbeat",
+                                                                  "link"))
+            if self.state is State.FAILSAFE and self.stopping.cause != "autopilot":
+                self.state = State.ENGAGING
         if self.state is State.ENGAGING:
             self._engage(time.perf_counter())
 
@@ -539,6 +551,7 @@ class Runner:
         need_ack = not stopping.hold_confirmed and stopping.cause != "autopilot"
         self._enter_engaging(stopping.resume_to)
         self.engagement.need_ack = need_ack
+        self.engagement.after_failsafe = True
         stopping.autopilot = None
         self.estimate.forget_position()
         self._emit(ev.RESUMED, what, {"cause": stopping.cause})
