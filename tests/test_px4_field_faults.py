@@ -7,10 +7,14 @@ reference once the link is back. PX4 runs with COM_OBL_RC_ACT 5 (Hold), what `co
 preflight` asks for: with this build's default its offboard loss switched to RTL (seen), which
 the companion does not take back (exit 5, tests/test_companion_field_faults.py). Skipped unless
 PX4_SITL or PX4_DIR is set.
+
+Not yet in `make sitl-test` (CI): a SITL test enters it after ten runs in a row beside another
+SITL, and these have had fewer (docs/field-faults.md). ``PZC_CANDIDATE_SITL=1`` runs them.
 """
 
 from __future__ import annotations
 
+import os
 import time
 from pathlib import Path
 
@@ -22,15 +26,18 @@ from px4_harness import HOLD, OFFBOARD, GroundStation, ground_speed
 from sitl_plant.testing import free_udp_port
 
 BOOT_WALL = 60.0
+pytestmark = pytest.mark.skipif(not os.environ.get("PZC_CANDIDATE_SITL"),
+                                reason="candidate SITL test (not yet ten runs in a row): "
+                                       "PZC_CANDIDATE_SITL=1 runs it")
 
 
 @pytest.mark.px4
 @pytest.mark.slow
-@pytest.mark.timeout(420)
+@pytest.mark.timeout(480)
 @pytest.mark.parametrize("stall_s", [3.0, 10.0])
 def test_a_udp_link_stall_stops_the_rover_and_the_mission_completes(px4, tmp_path, stall_s):
     sitl = px4(params={"COM_OBL_RC_ACT": 5})
-    mission = ellipse_mission(tmp_path / "ellipse.toml", duration=40.0, f_r=0.04)
+    mission = ellipse_mission(tmp_path / "ellipse.toml", duration=60.0, f_r=0.04)
     port = free_udp_port()
     with UdpStallProxy(sitl.ports["offboard_out"], port) as proxy, \
             Companion(None, "--mission", str(mission), "--arm", "--no-zenoh", "--json",
@@ -41,12 +48,13 @@ def test_a_udp_link_stall_stops_the_rover_and_the_mission_completes(px4, tmp_pat
         moving = gs.wait_for("LOCAL_POSITION_NED", lambda m: ground_speed(m) > 0.5, 20.0)
         gs.wait_for("LOCAL_POSITION_NED",
                     lambda m: m.time_boot_ms >= moving.time_boot_ms + 10_000, 30.0)
+        assert comp.proc.poll() is None, "the mission ended before the stall"
         t_stall = time.monotonic()
         proxy.stall()
         time.sleep(stall_s)
         proxy.resume()
         t_back = time.monotonic()
-        code = comp.wait(120.0)
+        code = comp.wait(150.0)
         r = comp.result()
         back_ms = gs.messages("LOCAL_POSITION_NED", t_back)[0].time_boot_ms
         poses = [m for m in gs.messages("LOCAL_POSITION_NED", t_stall)
@@ -60,7 +68,7 @@ def test_a_udp_link_stall_stops_the_rover_and_the_mission_completes(px4, tmp_pat
           f"{r['failsafes']}, {r['duration_s']:.1f} s tracked, {proxy.dropped} datagrams dropped")
     assert code == 0 and r["reason"] == "mission_done", comp.stderr
     assert r["failsafes"] >= 1 and "pilot took over" not in comp.stderr
-    assert r["duration_s"] >= 40.0 - 1e-6
+    assert r["duration_s"] >= 60.0 - 1e-6
     assert HOLD in modes and OFFBOARD in modes[modes.index(HOLD):], "not back in OFFBOARD"
     if late:
         # PX4 brakes in Hold; the SIH rover creeps there by itself (up to ~0.5 m/s seen)
