@@ -9,7 +9,8 @@ the model the simulations and the bundled plant run; the search steps one channe
 (:mod:`companion.ident.channels`, respond's model step for step, at half the cost) and the
 figures reported come from ``respond`` itself. The turn-rate channel is fitted first
 (delay, lag, clamp, accel, decel, and ``speed_turn_coupling``: the clamp it loses with speed,
-driven by the *measured* speed, so it needs no speed model yet), then the speed channel (delay,
+driven by the *measured* speed, so it needs no speed model yet; for a car, a prior with a
+turning radius, the radius too, and the lateral-acceleration limit as the prior has it), then the speed channel (delay,
 lag, clamp, accel, decel, ``turn_speed_coupling``) with the turn rate the fitted turn-rate model
 produces. The turn-rate coupling is a share of the clamp at top speed, and top speed is fitted
 after it: the turn-rate search measures the speed against a fixed scale (the prior's top speed,
@@ -56,6 +57,7 @@ DELAYS = {"speed_delay", "yaw_delay"}
 COUPLING = "turn_speed_coupling"
 TURN_COUPLING = "speed_turn_coupling"
 COUPLINGS = {COUPLING, TURN_COUPLING}
+TURN_RADIUS = "min_turn_radius"   # a car's (speed / turn-rate setpoints): fitted in its channel
 MIN_COMMAND = 1e-3        # a channel whose setpoints never exceed this was not driven at all
 
 
@@ -218,6 +220,7 @@ def _dims(fields: tuple[str, ...], series: Series) -> list[_Dim]:
         "max_yaw_accel": (0.1, 50.0, True), "max_yaw_decel": (0.1, 50.0, True),
         "max_accel": (0.05, 20.0, True), "max_decel": (0.05, 20.0, True),
         COUPLING: (0.0, 1.0, False), TURN_COUPLING: (0.0, 1.0, False),
+        TURN_RADIUS: (0.05, 20.0, True),
     }
     return [_Dim(name, *ranges[name]) for name in fields]
 
@@ -250,7 +253,8 @@ class _Channel:
         return channels.turn_rate(s.t, s.yaw_rate_cmd, n, dt, float(s.yaw_rate[0]),
                                   p.yaw_delay, p.yaw_bandwidth, p.max_yaw_rate,
                                   p.max_yaw_accel, p.yaw_decel, p.speed_turn_coupling,
-                                  self._speed_grid(dt), self.speed_scale)
+                                  self._speed_grid(dt), self.speed_scale, p.min_turn_radius,
+                                  p.max_lat_accel)
 
     def _omega_grid(self, dt: float) -> np.ndarray:
         if dt not in self._omega:
@@ -530,7 +534,12 @@ def _fit_channels(series: Series, prior: RoverParams, search: Search,
                   progress: Callable[[str], None]) -> Fit:
     rng = np.random.default_rng(search.seed)
     progress("turn-rate channel")
-    yaw, yaw_status, n_yaw = _fit_channel(series, prior, prior, YAW_FIELDS, 1, search, rng)
+    yaw_fields = YAW_FIELDS
+    if not series.vector and float(np.max(prior.min_turn_radius)) > 0:
+        # A car driven by turn-rate setpoints (ArduPilot's Ackermann rover): its turning radius
+        # clamps the turn rate by the measured speed, so the turn-rate channel fits it.
+        yaw_fields = YAW_FIELDS + (TURN_RADIUS,)
+    yaw, yaw_status, n_yaw = _fit_channel(series, prior, prior, yaw_fields, 1, search, rng)
     progress("speed channel")
     base = prior.with_(**yaw)
     speed, speed_status, n_speed = _fit_channel(series, base, prior, SPEED_FIELDS, 0, search, rng)

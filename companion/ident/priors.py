@@ -25,5 +25,6 @@ FILE_NAMES = {"speed_delay": "speed.delay_s", "w_c": "speed.lag_s", "max_speed":
               "max_yaw_decel": "turn_rate.decel_max_rad_s2",
               "turn_speed_coupling": "coupling.turn_speed",
               "speed_turn_coupling": "coupling.speed_turn",
-              "course_gain": "course.gain_1_s", "min_turn_radius": "course.min_turn_radius_m"}
+              "course_gain": "course.gain_1_s", "min_turn_radius": "course.min_turn_radius_m",
+              "max_lat_accel": "turn_rate.lat_accel_max_m_s2"}
 COURSE_FIELDS = ("course_gain", "min_turn_radius")     # PX4's velocity-vector interface

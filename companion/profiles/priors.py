@@ -19,6 +19,7 @@ from typing import TYPE_CHECKING, Mapping
 
 if TYPE_CHECKING:
     from ..sim.plant import RoverParams
+    from .steering import SteeringProfile
 
 
 @functools.cache
@@ -42,6 +43,16 @@ def defaults() -> RoverParams:
 class Priors:
     params: RoverParams
     source: dict[str, str] = field(default_factory=dict)   # RoverParams field -> where from
+    steering: SteeringProfile | None = None    # the kind the parameters show (None: not known)
+
+    def with_steering(self, kind: SteeringProfile | None) -> Priors:
+        """These priors with the steering kind's own (:attr:`SteeringProfile.priors`) over
+        them: what no autopilot parameter states about how the rover steers."""
+        if kind is None:
+            return self
+        changes = kind.prior_changes()
+        source = {**self.source, **{name: kind.priors_why for name in changes}}
+        return Priors(self.params.with_(**changes), source, kind)
 
     def describe(self, name: str) -> str:
         return self.source.get(name, "default")

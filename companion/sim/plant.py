@@ -34,6 +34,12 @@ An Ackermann rover cannot turn tighter than its steering allows: with ``min_turn
 (wheel base / tan(max steering angle)) the turn-rate command is also clamped to
 ``|u_omega| <= |v| / R`` (v at the step's start; a rover at rest cannot turn at all). The
 speed and the course loop's turn rate then take their channels' delays.
+
+Lateral acceleration (``max_lat_accel`` a, ArduPilot's ``ATC_TURN_MAX_G`` x g): ArduPilot
+Rover's turn-rate controller (``AR_AttitudeControl::get_steering_out_rate``, every steering
+kind) clamps its target to ``a / max(|v|, 1 m/s)`` (``get_turn_rate_from_lat_accel``; below
+``LAT_ACCEL_MIN_SPEED`` the limit is taken at that speed), so
+``|u_omega| <= a / max(|v|, LAT_ACCEL_MIN_SPEED)`` with v at the step's start.
 :meth:`RoverModel.step_vector` is that step.
 
 Integration. Without rate limits the actuators are linear first-order systems with a
@@ -59,6 +65,10 @@ import numpy as np
 from ..core import ops as _ops
 from ..core.signals import Measurement, Num
 
+# m/s: ArduPilot takes the lateral-acceleration limit at no less than this speed
+# (AR_AttitudeControl.cpp, AR_ATTCONTROL_STEER_SPEED_MIN), so a rover starting off may turn.
+LAT_ACCEL_MIN_SPEED = 1.0
+
 
 @dataclass(frozen=True)
 class RoverParams:
@@ -79,6 +89,7 @@ class RoverParams:
     speed_turn_coupling: Num = 0.0        # c_w: share of the turn-rate clamp lost at full speed
     course_gain: Num = 0.0                # 1/s: PX4's course loop (> 0: velocity-vector input)
     min_turn_radius: Num = 0.0            # m: Ackermann steering, |omega| <= |v| / R (0: none)
+    max_lat_accel: Num = math.inf         # m/s^2: |omega| <= a / max(|v|, 1 m/s) (ATC_TURN_MAX_G g)
 
     @property
     def yaw_bandwidth(self) -> Num:
@@ -157,6 +168,7 @@ class RoverModel:
         self._coupled = _any_positive(params.turn_speed_coupling)
         self._turn_coupled = _any_positive(params.speed_turn_coupling)
         self._curvature = _any_positive(params.min_turn_radius)
+        self._lateral = _any_finite(params.max_lat_accel)
         self.delay = CommandDelay(params.speed_delay, params.yaw_delay, n) if params.has_delay else None
         self._trig_yaw = None
         self._trig_cs = None
@@ -195,7 +207,8 @@ class RoverModel:
                       v: Num = 0.0) -> tuple[Num, Num]:
         """Top speed and turn rate; with coupling, the speed range the turn rate ``omega`` leaves
         and the turn-rate range the speed ``v`` leaves (both the state at the step's start, so
-        neither clamp depends on the other's result: the motors share one range)."""
+        neither clamp depends on the other's result: the motors share one range); the turning
+        radius and the lateral-acceleration limit take turn rate away with speed as well."""
         m, p = self._m, self.params
         top = p.max_speed
         if self._coupled:
@@ -212,6 +225,8 @@ class RoverModel:
                 top_w = min(top_w, abs(v) / r) if r > 0 else top_w
             else:
                 top_w = np.minimum(top_w, abs(v) / np.where(np.asarray(r) > 0, r, 1e-12))
+        if self._lateral:
+            top_w = m.minimum(top_w, p.max_lat_accel / m.maximum(abs(v), LAT_ACCEL_MIN_SPEED))
         return m.clip(speed, -top, top), m.clip(yaw_rate, -top_w, top_w)
 
     def step_vector(self, s: RoverState, ux: Num, uy: Num, dt: float) -> RoverState:
