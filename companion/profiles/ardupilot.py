@@ -19,7 +19,6 @@ from __future__ import annotations
 import math
 from typing import TYPE_CHECKING, Mapping
 
-from . import skid
 from .autopilot import (FLAG_CUSTOM_MODE_ENABLED, FLAG_GUIDED_ENABLED, FLAG_MANUAL_INPUT_ENABLED,
                         MAV_AUTOPILOT_ARDUPILOTMEGA, MAV_FRAME_BODY_NED, MAV_RESULT_FAILED,
                         MAV_TYPE_GROUND_ROVER, MAV_TYPE_SURFACE_BOAT, PARAM_INT8, PARAM_INT16,
@@ -167,17 +166,21 @@ def _limit(value: float | None, scale: float = 1.0) -> float:
 def plant_params(vehicle: RoverParams, loop_rate: float, sysid: int,
                  offboard_loss_timeout: float) -> list[tuple[str, float, int]]:
     """What ``sitl_plant`` serves as this autopilot: the limits from the rover it models in
-    ArduPilot's units (0 for none), a skid-steer frame, the failsafes at the firmware's
+    ArduPilot's units (0 for none), the frame of its steering kind (a turning radius: a car,
+    SERVO1 26 / SERVO3 70; else skid-steer, 73 / 74), the failsafes at the firmware's
     defaults, SCHED_LOOP_RATE its loop rate."""
+    from . import steering_of_model       # the registry imports this module
     deg = 180.0 / math.pi
     top = _limit(vehicle.max_speed)
-    left, right = skid.PROFILE.servo_functions
+    left, right = steering_of_model(vehicle).servo_functions
     return [
         ("ATC_ACCEL_MAX", _limit(vehicle.max_accel), PARAM_REAL32),
         ("ATC_DECEL_MAX", _limit(vehicle.max_decel), PARAM_REAL32),
         ("ATC_STR_ACC_MAX", _limit(vehicle.max_yaw_accel, deg), PARAM_REAL32),
         ("ATC_STR_DEC_MAX", _limit(vehicle.max_yaw_decel, deg), PARAM_REAL32),
         ("ATC_STR_RAT_MAX", _limit(vehicle.max_yaw_rate, deg), PARAM_REAL32),
+        # 0 is no limit in the plant's own units; ArduPilot itself has no "none" (0.6 g default)
+        ("ATC_TURN_MAX_G", _limit(vehicle.max_lat_accel, 1.0 / GRAVITY), PARAM_REAL32),
         ("CRUISE_SPEED", top * PLANT_CRUISE_THROTTLE / 100.0, PARAM_REAL32),
         ("CRUISE_THROTTLE", PLANT_CRUISE_THROTTLE, PARAM_INT8),
         ("FRAME_CLASS", 1, PARAM_INT8), ("FRAME_TYPE", 0, PARAM_INT8),
