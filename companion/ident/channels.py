@@ -24,7 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..core import ops
-from ..sim.plant import LAT_ACCEL_MIN_SPEED, _channel
+from ..sim.plant import LAT_ACCEL_MIN_SPEED, _channel, overshoot_step
 
 
 @dataclass(frozen=True)
@@ -100,16 +100,20 @@ def turn_rate(t: np.ndarray, yaw_rate_cmd: np.ndarray, n: int, dt: float, omega0
 
 def speed(t: np.ndarray, speed_cmd: np.ndarray, omega_grid: np.ndarray, n: int, dt: float,
           v0: float, delay, bandwidth, max_speed, accel, decel, coupling,
-          max_yaw_rate) -> np.ndarray:
+          max_yaw_rate, overshoot=0.0, overshoot_s=1.0) -> np.ndarray:
     """The speed of ``n`` models at the samples ``t``, given the turn rate on the grid (one
     column, the fitted turn-rate model's, or one per model), which the coupling (the speed
-    clamp lost while turning) reads."""
+    clamp lost while turning) reads; with ``overshoot`` the channel's output passes
+    :func:`companion.sim.plant.overshoot_step` (the coupling reads the speed itself)."""
     g = Grid.of(t, dt)
     m = ops.for_size(n)
     command = _delayed(np.asarray(speed_cmd, dtype=float)[g.held], delay, n, dt)
     coupled = bool(np.any(np.asarray(coupling) > 0))
+    over = bool(np.any(np.asarray(overshoot) > 0))
     omega = omega_grid if omega_grid.ndim == 2 else omega_grid[:, None]
-    v = np.full(n, float(v0))
+    x = np.full(n, float(v0))          # the channel's output (the speed without overshoot)
+    z = np.full(n, float(v0))
+    v = x
     out = np.empty((g.steps, n))
     for k in range(g.steps):
         out[k] = v
@@ -117,5 +121,10 @@ def speed(t: np.ndarray, speed_cmd: np.ndarray, omega_grid: np.ndarray, n: int, 
         if coupled:
             top = top * (1.0 - coupling * m.minimum(abs(omega[k]) / max_yaw_rate, 1.0))
         u = m.clip(command(k), -top, top)
-        _, v, _, _ = _channel(m, v, u, bandwidth, accel, decel, dt, both=False)
+        _, x1, _, _ = _channel(m, x, u, bandwidth, accel, decel, dt, both=False)
+        if over:
+            v, z = overshoot_step(m, x, x1, z, overshoot, overshoot_s, dt)
+        else:
+            v = x1
+        x = x1
     return out[g.sample_step]

@@ -57,6 +57,7 @@ DELAYS = {"speed_delay", "yaw_delay"}
 COUPLING = "turn_speed_coupling"
 TURN_COUPLING = "speed_turn_coupling"
 COUPLINGS = {COUPLING, TURN_COUPLING}
+OVERSHOOT = "speed_overshoot"     # a share, stepped as the couplings are
 TURN_RADIUS = "min_turn_radius"   # a car's (speed / turn-rate setpoints): fitted in its channel
 MIN_COMMAND = 1e-3        # a channel whose setpoints never exceed this was not driven at all
 
@@ -200,7 +201,7 @@ class _Dim:
         """(raised, lowered): a change the log should show if it determines this parameter."""
         if self.name in DELAYS:
             return value + 0.05, max(value - 0.05, 0.0)
-        if self.name in COUPLINGS:
+        if self.name in COUPLINGS or self.name == OVERSHOOT:
             return min(value + 0.15, 1.0), max(value - 0.15, 0.0)
         return value * 1.5, value / 1.5
 
@@ -221,6 +222,7 @@ def _dims(fields: tuple[str, ...], series: Series) -> list[_Dim]:
         "max_accel": (0.05, 20.0, True), "max_decel": (0.05, 20.0, True),
         COUPLING: (0.0, 1.0, False), TURN_COUPLING: (0.0, 1.0, False),
         TURN_RADIUS: (0.05, 20.0, True),
+        OVERSHOOT: (0.0, 1.0, False), "speed_overshoot_s": (0.2, 10.0, True),
     }
     return [_Dim(name, *ranges[name]) for name in fields]
 
@@ -272,7 +274,8 @@ class _Channel:
         else:
             out = channels.speed(s.t, s.speed_cmd, self._omega_grid(dt), n, dt,
                                  float(s.speed[0]), p.speed_delay, p.w_c, p.max_speed,
-                                 p.max_accel, p.decel, p.turn_speed_coupling, p.max_yaw_rate)
+                                 p.max_accel, p.decel, p.turn_speed_coupling, p.max_yaw_rate,
+                                 p.speed_overshoot, p.speed_overshoot_s)
         self.evaluations += n
         err = out - self.measured[:, None]
         if per_log:

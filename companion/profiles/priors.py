@@ -36,7 +36,8 @@ def defaults() -> RoverParams:
         turn_speed_coupling=0.5,                       # skid-steer mixing, MOT_STR_THR_MIX's default
         # and the turn rate it gives up at full speed: 2.1 rad/s in place, about 1.8 at full
         # throttle on ArduPilot SITL rover-skid (the cautious side of none)
-        speed_turn_coupling=0.15)
+        speed_turn_coupling=0.15,
+        speed_overshoot=0.0, speed_overshoot_s=1.0)       # none: what most speed loops do
 
 
 @dataclass(frozen=True)

@@ -13,6 +13,8 @@ A small TOML file, units in the key names, a header saying how it was made::
     max_m_s = 4.0
     accel_max_m_s2 = 1.0          # while |v| grows
     decel_max_m_s2 = 1.0          # while |v| shrinks
+    overshoot = 0.2               # share the speed overshoots a change by (ArduPilot's PI)
+    overshoot_s = 1.0             # and how long it takes to come back (time constant)
 
     [turn_rate]
     delay_s = 0.04
@@ -64,7 +66,9 @@ MIN_LAG = 1e-3          # s: a lag shorter than a plant step is no lag
 _CHANNELS: dict[str, dict[str, tuple[str, str]]] = {
     "speed": {"delay_s": ("speed_delay", "delay"), "lag_s": ("w_c", "lag"),
               "max_m_s": ("max_speed", "limit"), "accel_max_m_s2": ("max_accel", "limit"),
-              "decel_max_m_s2": ("max_decel", "limit")},
+              "decel_max_m_s2": ("max_decel", "limit"),
+              "overshoot": ("speed_overshoot", "share"),
+              "overshoot_s": ("speed_overshoot_s", "limit")},
     "turn_rate": {"delay_s": ("yaw_delay", "delay"), "lag_s": ("w_c_yaw", "lag"),
                   "max_rad_s": ("max_yaw_rate", "limit"),
                   "accel_max_rad_s2": ("max_yaw_accel", "limit"),
@@ -161,7 +165,8 @@ def dumps(vehicle: VehicleFile) -> str:
               "max_yaw_accel": p.max_yaw_accel, "max_yaw_decel": p.yaw_decel,
               "turn_speed_coupling": p.turn_speed_coupling,
               "speed_turn_coupling": p.speed_turn_coupling, "course_gain": p.course_gain,
-              "min_turn_radius": p.min_turn_radius, "max_lat_accel": p.max_lat_accel}
+              "min_turn_radius": p.min_turn_radius, "max_lat_accel": p.max_lat_accel,
+              "speed_overshoot": p.speed_overshoot, "speed_overshoot_s": p.speed_overshoot_s}
     for section, keys in _CHANNELS.items():
         if section in _OPTIONAL and not any(float(values[name]) for name, _ in keys.values()):
             continue
