@@ -419,19 +419,33 @@ def _speed_scale(series: Series, prior: RoverParams) -> float:
 
 def _fit_channel(series: Series, base: RoverParams, prior: RoverParams, fields: tuple[str, ...],
                  which: int, cfg: Search, rng: np.random.Generator,
+                 extra: tuple[str, ...] = (),
                  ) -> tuple[dict[str, float], dict[str, str], int]:
+    """One channel's search over ``fields``; then, with ``extra``, a second search over all
+    of them from the first's best (the extras at their priors), kept only when it explains
+    the log better by more than ``tol`` (so a vehicle without what the extras describe fits
+    exactly as without them, and the first search keeps its budget for the usual fields)."""
     channel = _Channel(series, base, which, _speed_scale(series, prior))
     commands = series.yaw_rate_cmd if which == 1 else series.speed_cmd
     start: dict[str, float] = {}
-    for name in fields:
+    for name in fields + extra:
         start[name] = _prior_value(prior, name, start)
     if float(np.max(np.abs(commands))) < MIN_COMMAND:
         # Never driven: nothing in the log speaks to this channel.
-        return start, {name: PRIOR for name in fields}, 0
+        return start, {name: PRIOR for name in fields + extra}, 0
     dims = _dims(fields, series)
     u0 = np.array([dim.unit(start[dim.name]) for dim in dims])
-    u_best, _ = _search(channel, dims, u0, cfg, rng)
+    u_best, cost = _search(channel, dims, u0, cfg, rng)
     best = {dim.name: float(dim.value(u_best[i])) for i, dim in enumerate(dims)}
+    if extra:
+        wide = _dims(fields + extra, series)
+        u1 = np.array([dim.unit({**start, **best}[dim.name]) for dim in wide])
+        u_more, more = _search(channel, wide, u1, replace(cfg, schedule=EXTRA_SCHEDULE), rng)
+        if more < cost * (1.0 - cfg.tol):
+            best = {dim.name: float(dim.value(u_more[i])) for i, dim in enumerate(wide)}
+        else:
+            best.update({name: start[name] for name in extra})
+        dims = wide
     values, status = _settle(channel, dims, best, prior, cfg)
     still = [dim for dim in dims if status[dim.name] == FITTED]
     if still and len(still) < len(dims):
@@ -440,6 +454,11 @@ def _fit_channel(series: Series, base: RoverParams, prior: RoverParams, fields: 
         values, again = _settle(channel, still, values, prior, cfg)
         status.update(again)
     return values, status, channel.evaluations
+
+
+# The second search of a channel with extra fields: from the first's best, narrower each round
+# (the first round keeps the best among random sets, the rest sample around it).
+EXTRA_SCHEDULE = ((60, 0.02),) + ((60, 0.02),) * 6 + ((40, 0.01),)
 
 
 def _derived(params: RoverParams, series: Series) -> Series:
@@ -545,7 +564,9 @@ def _fit_channels(series: Series, prior: RoverParams, search: Search,
     yaw, yaw_status, n_yaw = _fit_channel(series, prior, prior, yaw_fields, 1, search, rng)
     progress("speed channel")
     base = prior.with_(**yaw)
-    speed, speed_status, n_speed = _fit_channel(series, base, prior, SPEED_FIELDS, 0, search, rng)
+    # the speed loop's overshoot: searched only once the usual fields are (the second search)
+    speed, speed_status, n_speed = _fit_channel(series, base, prior, SPEED_FIELDS[:-2], 0, search,
+                                                rng, extra=SPEED_FIELDS[-2:])
     params = base.with_(**speed)
     if yaw_status[TURN_COUPLING] != PRIOR:
         # The share was of the search's speed scale; the model's is of the fitted top speed.

@@ -17,6 +17,7 @@ __all__ = ["COURSE_FIELDS", "FILE_NAMES", "Priors", "SPEED_FIELDS", "YAW_FIELDS"
 # vehicle file's names for people.
 YAW_FIELDS = ("yaw_delay", "w_c_yaw", "max_yaw_rate", "max_yaw_accel", "max_yaw_decel",
               "speed_turn_coupling")
+# (the speed loop's overshoot last: the fit searches it after the others)
 SPEED_FIELDS = ("speed_delay", "w_c", "max_speed", "max_accel", "max_decel", "turn_speed_coupling",
                 "speed_overshoot", "speed_overshoot_s")
 FILE_NAMES = {"speed_delay": "speed.delay_s", "w_c": "speed.lag_s", "max_speed": "speed.max_m_s",
