@@ -532,7 +532,8 @@ def fit(series: Series, prior: RoverParams, search: Search = Search(),
     channels, the course gain and turning radius are fitted on a grid and the turn-rate
     channel once more with them."""
     if series.vector:
-        first = _fit_channels(_derived(prior, series), prior, search, progress)
+        # (the first pass only seeds the course loop's grid: no overshoot search in it)
+        first = _fit_channels(_derived(prior, series), prior, search, progress, overshoot=False)
         progress("course loop")
         course, course_status = _fit_course(series, first.params, prior, search)
         again_prior = prior.with_(**course)
@@ -553,7 +554,7 @@ def fit(series: Series, prior: RoverParams, search: Search = Search(),
 
 
 def _fit_channels(series: Series, prior: RoverParams, search: Search,
-                  progress: Callable[[str], None]) -> Fit:
+                  progress: Callable[[str], None], overshoot: bool = True) -> Fit:
     rng = np.random.default_rng(search.seed)
     progress("turn-rate channel")
     yaw_fields = YAW_FIELDS
@@ -566,7 +567,7 @@ def _fit_channels(series: Series, prior: RoverParams, search: Search,
     base = prior.with_(**yaw)
     # the speed loop's overshoot: searched only once the usual fields are (the second search)
     speed, speed_status, n_speed = _fit_channel(series, base, prior, SPEED_FIELDS[:-2], 0, search,
-                                                rng, extra=SPEED_FIELDS[-2:])
+                                                rng, extra=SPEED_FIELDS[-2:] if overshoot else ())
     params = base.with_(**speed)
     if yaw_status[TURN_COUPLING] != PRIOR:
         # The share was of the search's speed scale; the model's is of the fitted top speed.
