@@ -1,6 +1,7 @@
 """The paper's comparison on the real autopilot: PZC, PID and Kanayama flying ArduPilot Rover SITL.
 
-Boots one ``ardurover`` (stock ``rover-skid``; ``--param NAME=VALUE`` for another vehicle) and
+Boots one ``ardurover`` (stock ``rover-skid``, or ``--model rover``: the Ackermann car on
+rover.parm alone; ``--param NAME=VALUE`` for another vehicle) and
 flies ``companion run --controller C`` for every controller of :mod:`companion.core.controllers`
 on the paper's ellipse (``missions/paper_ellipse_0xx.toml``: 60 s, anchored at the rover's start
 pose) at each ``--f-r``, 40 Hz telemetry, in two configurations:
@@ -51,10 +52,13 @@ CONFIGS = {"defaults": [], "calibrated": ["--vehicle", CALIBRATED]}
 NATIVE = "ardupilot-guided"     # the controller column of ArduPilot's own following
 
 
-def fly(url: str, controller: str, f_r: float, config: str, logs: Path) -> dict:
-    """One ``companion run``: its JSON result, or the exit code and the tail of its stderr."""
+def fly(url: str, controller: str, f_r: float, config: str, logs: Path,
+        vehicle: str = CALIBRATED) -> dict:
+    """One ``companion run``: its JSON result, or the exit code and the tail of its stderr.
+    ``vehicle``: the calibrated configuration's vehicle file."""
+    flags = ["--vehicle", vehicle] if CONFIGS[config] else []
     argv = [sys.executable, "-m", "companion", "run", "--connect", url, "--mission",
-            str(ROOT / "missions" / MISSIONS[f_r]), *CONFIGS[config], "--controller", controller,
+            str(ROOT / "missions" / MISSIONS[f_r]), *flags, "--controller", controller,
             "--arm", "--json", "--no-zenoh", "--log-dir", str(logs), "-q",
             # the first run waits for SITL's boot (GPS, EKF origin, arming: about 40 s)
             "--telemetry-timeout", "90", "--arm-timeout", "120"]
@@ -95,14 +99,14 @@ def table(out: dict) -> str:
                          f"{number(l.get('max_yaw_rate'), '.3g')} rad/s"
                          for c, l in limits.items())
     lines = [
-        f"ArduPilot Rover SITL `rover-skid` {out['params'] or '(stock)'}, speedup "
+        f"ArduPilot Rover SITL `{out.get('model', 'rover-skid')}` {out['params'] or '(stock)'}, speedup "
         f"{out['speedup']:g}, measured {out['date']}: the paper's ellipse, 60 s at 40 Hz, "
         "anchored at the start pose; steady RMS of |p_ref - p| over the last 30 s and f_cost "
         "from the vehicle's LOCAL_POSITION_NED; yaw@limit: share of those 30 s with the "
         "yaw-rate setpoint at its limit.",
         "",
         f"Gains: pzc as `companion run` picks them (defaults: the shipped tuned gains; "
-        f"calibrated: the gains file beside `{CALIBRATED}`); pid and kanayama their defaults, "
+        f"calibrated: the gains file beside `{out.get('vehicle', CALIBRATED)}`); pid and kanayama their defaults, "
         f"not tuned for this vehicle: {pid.defaults_source()}; {kan.defaults_source()}. "
         f"Limits, the same for all three controllers: {lim_text or 'n/a'}.",
         "",
@@ -122,11 +126,15 @@ def table(out: dict) -> str:
 
 def main() -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--model", default="rover-skid",
+                   help="SITL frame: rover-skid (default) or rover (Ackermann, rover.parm only)")
     p.add_argument("--f-r", default="0.04,0.08", help="ellipse speeds (of 0.04, 0.08, 0.12)")
     p.add_argument("--controllers", default=",".join(controllers.NAMES))
     p.add_argument("--configs", default=",".join(CONFIGS), help="defaults, calibrated")
     p.add_argument("--param", action="append", default=[], metavar="NAME=VALUE",
                    help="an ArduPilot parameter for this vehicle (repeatable)")
+    p.add_argument("--vehicle", default=CALIBRATED, metavar="FILE",
+                   help=f"the calibrated configuration's vehicle file (default {CALIBRATED})")
     p.add_argument("--speedup", type=float, default=1.0, help="SITL speedup (default 1)")
     p.add_argument("--no-native", dest="native", action="store_false",
                    help="skip ArduPilot's own GUIDED following")
@@ -145,18 +153,21 @@ def main() -> int:
     if bad:
         p.error(f"unknown configuration or speed: {bad}")
     out = {"date": datetime.date.today().isoformat(), "speedup": args.speedup, "params": params,
+           "model": args.model, "vehicle": args.vehicle,
            "command": shlex.join(["python", "benchmarks/sitl_controllers.py", *sys.argv[1:]]),
            "rows": []}
     t0 = time.monotonic()
     with tempfile.TemporaryDirectory(prefix="sitl-controllers-") as tmp:
         logs = Path(args.keep) if args.keep else Path(tmp) / "logs"
-        sitl = ArduPilotSITL(Path(tmp) / "sitl", speedup=args.speedup, params=params).start()
+        sitl = ArduPilotSITL(Path(tmp) / "sitl", speedup=args.speedup, params=params,
+                             model=args.model).start()
         try:
             url = sitl.url(0)
             for f_r in speeds:
                 for config in configs:
                     for name in names:
-                        row = row_of(fly(url, name, f_r, config, logs), name, f_r, config)
+                        row = row_of(fly(url, name, f_r, config, logs, args.vehicle), name, f_r,
+                                     config)
                         out["rows"].append(row)
                         print(json.dumps(row), file=sys.stderr, flush=True)
                 if args.native:

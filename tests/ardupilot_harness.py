@@ -5,7 +5,8 @@ companion pointed at it.
 Where the autopilot is (first found wins):
 
 * ``ARDUPILOT_SITL``: the ``ardurover`` binary; default parameters from ``ARDUPILOT_DEFAULTS``
-  (comma-separated), else ``rover.parm`` (+ ``rover-skid.parm`` for the skid-steer model) next
+  (comma-separated; ``rover-skid.parm`` among them is left out for another model than
+  ``rover-skid``), else ``rover.parm`` (+ ``rover-skid.parm`` for the skid-steer model) next
   to the binary;
 * ``ARDUPILOT_DIR``: an ArduPilot source tree, ``build/sitl/bin/ardurover`` and
   ``Tools/autotest/default_params/rover.parm`` (+ ``rover-skid.parm``).
@@ -59,6 +60,10 @@ def sitl_paths(model: str = "rover-skid") -> tuple[Path, list[Path]]:
         defaults_env = os.environ.get("ARDUPILOT_DEFAULTS")
         defaults = ([Path(p) for p in defaults_env.split(",") if p] if defaults_env
                     else [binary.parent / n for n in names])
+        if not skid:
+            # ARDUPILOT_DEFAULTS names the skid-steer frame's file too: another model (the
+            # Ackermann `rover`) boots on rover.parm alone, as ArduPilot's own tests do.
+            defaults = [p for p in defaults if p.name != "rover-skid.parm"]
         source = "ARDUPILOT_SITL"
     elif tree_env:
         binary = Path(tree_env, "build", "sitl", "bin", "ardurover")

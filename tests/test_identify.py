@@ -116,7 +116,10 @@ def test_fit_recovers_known_parameters_from_noisy_data():
     series = synthetic(TRUE, 60.0, speed_amp=4.5, rate_amp=2.6)
     result = fit(series, defaults())
     p = result.params
-    assert all(s == FITTED for s in result.status.values()), result.status
+    # (TRUE's speed loop does not overshoot: how long an overshoot would last is not seen)
+    status = {k: v for k, v in result.status.items() if k != "speed_overshoot_s"}
+    assert all(s == FITTED for s in status.values()), result.status
+    assert p.speed_overshoot < 0.02 and result.status["speed_overshoot_s"] == PRIOR
     for name in ("max_accel", "max_decel", "max_yaw_accel", "max_yaw_decel", "max_yaw_rate"):
         assert within(getattr(p, name), getattr(TRUE, name), 0.05), (name, getattr(p, name))
     assert within(p.max_speed, TRUE.max_speed, 0.1)

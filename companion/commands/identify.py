@@ -285,7 +285,10 @@ def fly_and_fit(options, fit: FitOptions, space: float):
         log(f"{profile.ident.params_label} parameters: "
             + (", ".join(f"{k} {v:g}" for k, v in sorted(read.items()))
                or "none answered; default priors"))
-        made.append(manoeuvre(profile, profile.priors_from(read).params, space, limits))
+        priors = profile.priors_from(read)
+        if priors.steering is not None:
+            log(f"steering: {priors.steering.label}")
+        made.append(manoeuvre(profile, priors.params, space, limits, priors.steering))
         log(made[-1].describe())
         return made[-1]
 

@@ -10,7 +10,7 @@ force at each grid point, each sample read at the grid point at or just before i
 of ``round(delay / dt)`` steps with zeros before the first setpoint (as
 :class:`companion.sim.plant.CommandDelay`), the clamps with the couplings evaluated on the
 other channel's output at the start of the step (as :meth:`RoverModel.clamp_command`: the speed
-clamp on the turn rate, the turn-rate clamp on the speed), and the exact rate-limited lag of
+clamp on the turn rate, the turn-rate clamp on the speed, as the turning radius and the lateral-acceleration limit do), and the exact rate-limited lag of
 :func:`companion.sim.plant._channel`. Each channel takes the other's output on the grid as
 given (the fit gives the turn-rate channel the measured speed, the speed channel the fitted
 turn-rate model's output); given respond's own, each is respond's. ``tests/test_identify.py``
@@ -24,7 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..core import ops
-from ..sim.plant import _channel
+from ..sim.plant import LAT_ACCEL_MIN_SPEED, _channel, overshoot_step
 
 
 @dataclass(frozen=True)
@@ -55,31 +55,44 @@ def _delayed(commands: np.ndarray, delay, n: int, dt: float):
 
 def turn_rate(t: np.ndarray, yaw_rate_cmd: np.ndarray, n: int, dt: float, omega0: float,
               delay, bandwidth, max_rate, accel, decel, coupling=0.0,
-              speed_grid: np.ndarray | None = None, max_speed=np.inf,
-              ) -> tuple[np.ndarray, np.ndarray]:
+              speed_grid: np.ndarray | None = None, max_speed=np.inf, turn_radius=0.0,
+              lat_accel=np.inf) -> tuple[np.ndarray, np.ndarray]:
     """The turn rate of ``n`` models at the samples ``t``, and on the grid (shape (steps, n)).
 
     With ``coupling`` (``speed_turn_coupling``, c_w) the clamp shrinks with the speed on the
     grid ``speed_grid`` (one value per grid step, or one column per model):
-    ``max_rate (1 - c_w min(1, |v| / max_speed))``."""
+    ``max_rate (1 - c_w min(1, |v| / max_speed))``; with ``turn_radius`` R (Ackermann) it is
+    at most ``|v| / R`` and with ``lat_accel`` a at most ``a / max(|v|, 1 m/s)``, as
+    :meth:`companion.sim.plant.RoverModel.clamp_command`."""
     g = Grid.of(t, dt)
     m = ops.for_size(n)
     command = _delayed(np.asarray(yaw_rate_cmd, dtype=float)[g.held], delay, n, dt)
     coupled = bool(np.any(np.asarray(coupling) > 0))
-    if coupled:
+    curved = bool(np.any(np.asarray(turn_radius) > 0))
+    lateral = bool(np.any(np.isfinite(lat_accel)))
+    by_speed = coupled or curved or lateral
+    if by_speed:
         if speed_grid is None or len(speed_grid) < g.steps:
             raise ValueError("a coupled turn-rate channel needs the speed on every grid step")
-        # The share of the clamp lost, per grid step, before the loop: it does not depend on
-        # the turn rate, so the loop pays one multiply per step for it.
-        share = np.minimum(np.abs(speed_grid[:g.steps]) / max_speed, 1.0)
-        if share.ndim == 1:
-            share = share[:, None]
-        top = max_rate * (1.0 - coupling * share)           # (steps, n)
+        # The clamp per grid step, before the loop: it does not depend on the turn rate, so
+        # the loop pays nothing more for it.
+        speed = np.abs(speed_grid[:g.steps])
+        if speed.ndim == 1:
+            speed = speed[:, None]
+        top = max_rate + np.zeros((g.steps, n))
+        if coupled:
+            top = top * (1.0 - coupling * np.minimum(speed / max_speed, 1.0))
+        if curved:
+            radius = np.asarray(turn_radius, dtype=float)
+            top = np.minimum(top, np.where(radius > 0, speed / np.where(radius > 0, radius, 1.0),
+                                           np.inf))
+        if lateral:
+            top = np.minimum(top, lat_accel / np.maximum(speed, LAT_ACCEL_MIN_SPEED))
     w = np.full(n, float(omega0))
     out = np.empty((g.steps, n))
     for k in range(g.steps):
         out[k] = w
-        limit = top[k] if coupled else max_rate
+        limit = top[k] if by_speed else max_rate
         u = m.clip(command(k), -limit, limit)
         _, w, _, _ = _channel(m, w, u, bandwidth, accel, decel, dt, both=False)
     return out[g.sample_step], out
@@ -87,16 +100,20 @@ def turn_rate(t: np.ndarray, yaw_rate_cmd: np.ndarray, n: int, dt: float, omega0
 
 def speed(t: np.ndarray, speed_cmd: np.ndarray, omega_grid: np.ndarray, n: int, dt: float,
           v0: float, delay, bandwidth, max_speed, accel, decel, coupling,
-          max_yaw_rate) -> np.ndarray:
+          max_yaw_rate, overshoot=0.0, overshoot_s=1.0) -> np.ndarray:
     """The speed of ``n`` models at the samples ``t``, given the turn rate on the grid (one
     column, the fitted turn-rate model's, or one per model), which the coupling (the speed
-    clamp lost while turning) reads."""
+    clamp lost while turning) reads; with ``overshoot`` the channel's output passes
+    :func:`companion.sim.plant.overshoot_step` (the coupling reads the speed itself)."""
     g = Grid.of(t, dt)
     m = ops.for_size(n)
     command = _delayed(np.asarray(speed_cmd, dtype=float)[g.held], delay, n, dt)
     coupled = bool(np.any(np.asarray(coupling) > 0))
+    over = bool(np.any(np.asarray(overshoot) > 0))
     omega = omega_grid if omega_grid.ndim == 2 else omega_grid[:, None]
-    v = np.full(n, float(v0))
+    x = np.full(n, float(v0))          # the channel's output (the speed without overshoot)
+    z = np.full(n, float(v0))
+    v = x
     out = np.empty((g.steps, n))
     for k in range(g.steps):
         out[k] = v
@@ -104,5 +121,10 @@ def speed(t: np.ndarray, speed_cmd: np.ndarray, omega_grid: np.ndarray, n: int, 
         if coupled:
             top = top * (1.0 - coupling * m.minimum(abs(omega[k]) / max_yaw_rate, 1.0))
         u = m.clip(command(k), -top, top)
-        _, v, _, _ = _channel(m, v, u, bandwidth, accel, decel, dt, both=False)
+        _, x1, _, _ = _channel(m, x, u, bandwidth, accel, decel, dt, both=False)
+        if over:
+            v, z = overshoot_step(m, x, x1, z, overshoot, overshoot_s, dt)
+        else:
+            v = x1
+        x = x1
     return out[g.sample_step]

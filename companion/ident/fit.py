@@ -9,7 +9,8 @@ the model the simulations and the bundled plant run; the search steps one channe
 (:mod:`companion.ident.channels`, respond's model step for step, at half the cost) and the
 figures reported come from ``respond`` itself. The turn-rate channel is fitted first
 (delay, lag, clamp, accel, decel, and ``speed_turn_coupling``: the clamp it loses with speed,
-driven by the *measured* speed, so it needs no speed model yet), then the speed channel (delay,
+driven by the *measured* speed, so it needs no speed model yet; for a car, a prior with a
+turning radius, the radius too, and the lateral-acceleration limit as the prior has it), then the speed channel (delay,
 lag, clamp, accel, decel, ``turn_speed_coupling``) with the turn rate the fitted turn-rate model
 produces. The turn-rate coupling is a share of the clamp at top speed, and top speed is fitted
 after it: the turn-rate search measures the speed against a fixed scale (the prior's top speed,
@@ -56,6 +57,8 @@ DELAYS = {"speed_delay", "yaw_delay"}
 COUPLING = "turn_speed_coupling"
 TURN_COUPLING = "speed_turn_coupling"
 COUPLINGS = {COUPLING, TURN_COUPLING}
+OVERSHOOT = "speed_overshoot"     # a share, stepped as the couplings are
+TURN_RADIUS = "min_turn_radius"   # a car's (speed / turn-rate setpoints): fitted in its channel
 MIN_COMMAND = 1e-3        # a channel whose setpoints never exceed this was not driven at all
 
 
@@ -198,7 +201,7 @@ class _Dim:
         """(raised, lowered): a change the log should show if it determines this parameter."""
         if self.name in DELAYS:
             return value + 0.05, max(value - 0.05, 0.0)
-        if self.name in COUPLINGS:
+        if self.name in COUPLINGS or self.name == OVERSHOOT:
             return min(value + 0.15, 1.0), max(value - 0.15, 0.0)
         return value * 1.5, value / 1.5
 
@@ -218,6 +221,8 @@ def _dims(fields: tuple[str, ...], series: Series) -> list[_Dim]:
         "max_yaw_accel": (0.1, 50.0, True), "max_yaw_decel": (0.1, 50.0, True),
         "max_accel": (0.05, 20.0, True), "max_decel": (0.05, 20.0, True),
         COUPLING: (0.0, 1.0, False), TURN_COUPLING: (0.0, 1.0, False),
+        TURN_RADIUS: (0.05, 20.0, True),
+        OVERSHOOT: (0.0, 1.0, False), "speed_overshoot_s": (0.2, 10.0, True),
     }
     return [_Dim(name, *ranges[name]) for name in fields]
 
@@ -250,7 +255,8 @@ class _Channel:
         return channels.turn_rate(s.t, s.yaw_rate_cmd, n, dt, float(s.yaw_rate[0]),
                                   p.yaw_delay, p.yaw_bandwidth, p.max_yaw_rate,
                                   p.max_yaw_accel, p.yaw_decel, p.speed_turn_coupling,
-                                  self._speed_grid(dt), self.speed_scale)
+                                  self._speed_grid(dt), self.speed_scale, p.min_turn_radius,
+                                  p.max_lat_accel)
 
     def _omega_grid(self, dt: float) -> np.ndarray:
         if dt not in self._omega:
@@ -268,7 +274,8 @@ class _Channel:
         else:
             out = channels.speed(s.t, s.speed_cmd, self._omega_grid(dt), n, dt,
                                  float(s.speed[0]), p.speed_delay, p.w_c, p.max_speed,
-                                 p.max_accel, p.decel, p.turn_speed_coupling, p.max_yaw_rate)
+                                 p.max_accel, p.decel, p.turn_speed_coupling, p.max_yaw_rate,
+                                 p.speed_overshoot, p.speed_overshoot_s)
         self.evaluations += n
         err = out - self.measured[:, None]
         if per_log:
@@ -412,19 +419,33 @@ def _speed_scale(series: Series, prior: RoverParams) -> float:
 
 def _fit_channel(series: Series, base: RoverParams, prior: RoverParams, fields: tuple[str, ...],
                  which: int, cfg: Search, rng: np.random.Generator,
+                 extra: tuple[str, ...] = (),
                  ) -> tuple[dict[str, float], dict[str, str], int]:
+    """One channel's search over ``fields``; then, with ``extra``, a second search over all
+    of them from the first's best (the extras at their priors), kept only when it explains
+    the log better by more than ``tol`` (so a vehicle without what the extras describe fits
+    exactly as without them, and the first search keeps its budget for the usual fields)."""
     channel = _Channel(series, base, which, _speed_scale(series, prior))
     commands = series.yaw_rate_cmd if which == 1 else series.speed_cmd
     start: dict[str, float] = {}
-    for name in fields:
+    for name in fields + extra:
         start[name] = _prior_value(prior, name, start)
     if float(np.max(np.abs(commands))) < MIN_COMMAND:
         # Never driven: nothing in the log speaks to this channel.
-        return start, {name: PRIOR for name in fields}, 0
+        return start, {name: PRIOR for name in fields + extra}, 0
     dims = _dims(fields, series)
     u0 = np.array([dim.unit(start[dim.name]) for dim in dims])
-    u_best, _ = _search(channel, dims, u0, cfg, rng)
+    u_best, cost = _search(channel, dims, u0, cfg, rng)
     best = {dim.name: float(dim.value(u_best[i])) for i, dim in enumerate(dims)}
+    if extra:
+        wide = _dims(fields + extra, series)
+        u1 = np.array([dim.unit({**start, **best}[dim.name]) for dim in wide])
+        u_more, more = _search(channel, wide, u1, replace(cfg, schedule=EXTRA_SCHEDULE), rng)
+        if more < cost * (1.0 - cfg.tol):
+            best = {dim.name: float(dim.value(u_more[i])) for i, dim in enumerate(wide)}
+        else:
+            best.update({name: start[name] for name in extra})
+        dims = wide
     values, status = _settle(channel, dims, best, prior, cfg)
     still = [dim for dim in dims if status[dim.name] == FITTED]
     if still and len(still) < len(dims):
@@ -433,6 +454,11 @@ def _fit_channel(series: Series, base: RoverParams, prior: RoverParams, fields: 
         values, again = _settle(channel, still, values, prior, cfg)
         status.update(again)
     return values, status, channel.evaluations
+
+
+# The second search of a channel with extra fields: from the first's best, narrower each round
+# (the first round keeps the best among random sets, the rest sample around it).
+EXTRA_SCHEDULE = ((60, 0.02),) + ((60, 0.02),) * 6 + ((40, 0.01),)
 
 
 def _derived(params: RoverParams, series: Series) -> Series:
@@ -506,7 +532,8 @@ def fit(series: Series, prior: RoverParams, search: Search = Search(),
     channels, the course gain and turning radius are fitted on a grid and the turn-rate
     channel once more with them."""
     if series.vector:
-        first = _fit_channels(_derived(prior, series), prior, search, progress)
+        # (the first pass only seeds the course loop's grid: no overshoot search in it)
+        first = _fit_channels(_derived(prior, series), prior, search, progress, overshoot=False)
         progress("course loop")
         course, course_status = _fit_course(series, first.params, prior, search)
         again_prior = prior.with_(**course)
@@ -527,13 +554,20 @@ def fit(series: Series, prior: RoverParams, search: Search = Search(),
 
 
 def _fit_channels(series: Series, prior: RoverParams, search: Search,
-                  progress: Callable[[str], None]) -> Fit:
+                  progress: Callable[[str], None], overshoot: bool = True) -> Fit:
     rng = np.random.default_rng(search.seed)
     progress("turn-rate channel")
-    yaw, yaw_status, n_yaw = _fit_channel(series, prior, prior, YAW_FIELDS, 1, search, rng)
+    yaw_fields = YAW_FIELDS
+    if not series.vector and float(np.max(prior.min_turn_radius)) > 0:
+        # A car driven by turn-rate setpoints (ArduPilot's Ackermann rover): its turning radius
+        # clamps the turn rate by the measured speed, so the turn-rate channel fits it.
+        yaw_fields = YAW_FIELDS + (TURN_RADIUS,)
+    yaw, yaw_status, n_yaw = _fit_channel(series, prior, prior, yaw_fields, 1, search, rng)
     progress("speed channel")
     base = prior.with_(**yaw)
-    speed, speed_status, n_speed = _fit_channel(series, base, prior, SPEED_FIELDS, 0, search, rng)
+    # the speed loop's overshoot: searched only once the usual fields are (the second search)
+    speed, speed_status, n_speed = _fit_channel(series, base, prior, SPEED_FIELDS[:-2], 0, search,
+                                                rng, extra=SPEED_FIELDS[-2:] if overshoot else ())
     params = base.with_(**speed)
     if yaw_status[TURN_COUPLING] != PRIOR:
         # The share was of the search's speed scale; the model's is of the fitted top speed.

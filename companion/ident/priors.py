@@ -17,7 +17,9 @@ __all__ = ["COURSE_FIELDS", "FILE_NAMES", "Priors", "SPEED_FIELDS", "YAW_FIELDS"
 # vehicle file's names for people.
 YAW_FIELDS = ("yaw_delay", "w_c_yaw", "max_yaw_rate", "max_yaw_accel", "max_yaw_decel",
               "speed_turn_coupling")
-SPEED_FIELDS = ("speed_delay", "w_c", "max_speed", "max_accel", "max_decel", "turn_speed_coupling")
+# (the speed loop's overshoot last: the fit searches it after the others)
+SPEED_FIELDS = ("speed_delay", "w_c", "max_speed", "max_accel", "max_decel", "turn_speed_coupling",
+                "speed_overshoot", "speed_overshoot_s")
 FILE_NAMES = {"speed_delay": "speed.delay_s", "w_c": "speed.lag_s", "max_speed": "speed.max_m_s",
               "max_accel": "speed.accel_max_m_s2", "max_decel": "speed.decel_max_m_s2",
               "yaw_delay": "turn_rate.delay_s", "w_c_yaw": "turn_rate.lag_s",
@@ -25,5 +27,7 @@ FILE_NAMES = {"speed_delay": "speed.delay_s", "w_c": "speed.lag_s", "max_speed":
               "max_yaw_decel": "turn_rate.decel_max_rad_s2",
               "turn_speed_coupling": "coupling.turn_speed",
               "speed_turn_coupling": "coupling.speed_turn",
-              "course_gain": "course.gain_1_s", "min_turn_radius": "course.min_turn_radius_m"}
+              "course_gain": "course.gain_1_s", "min_turn_radius": "course.min_turn_radius_m",
+              "max_lat_accel": "turn_rate.lat_accel_max_m_s2",
+              "speed_overshoot": "speed.overshoot", "speed_overshoot_s": "speed.overshoot_s"}
 COURSE_FIELDS = ("course_gain", "min_turn_radius")     # PX4's velocity-vector interface

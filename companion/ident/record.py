@@ -61,7 +61,8 @@ def parameter_table(params: RoverParams) -> dict[str, dict[str, float | None]]:
         section, key = FILE_NAMES[name].split(".")
         out.setdefault(section, {})[key] = _number(file_value(params, name))
     table = {k: out[k] for k in ("speed", "turn_rate", "coupling")}
-    if params.velocity_vector:
+    table["turn_rate"]["lat_accel_max_m_s2"] = _number(float(params.max_lat_accel))
+    if params.velocity_vector or float(params.min_turn_radius) > 0:
         table["course"] = {"gain_1_s": float(params.course_gain),
                            "min_turn_radius_m": float(params.min_turn_radius)}
     return table

@@ -49,6 +49,15 @@ def model_steering() -> SteeringProfile:
     return next(s for s in STEERING.values() if s.verdict == steering.OK)
 
 
+def steering_of_model(params) -> SteeringProfile:
+    """The steering kind a vehicle model is (``params``: a RoverParams): the first kind other
+    than the model's own whose fields (``model_fields``) are set in it, else the model's
+    (a turning radius: a car; what a plant emulating it serves)."""
+    return next((s for s in STEERING.values() if s.verdict != steering.OK
+                 and any(float(getattr(params, f)) > 0 for f in s.model_fields)),
+                model_steering())
+
+
 def steering_by_airframe(airframe: int) -> SteeringProfile | None:
     return next((s for s in STEERING.values() if s.airframe == airframe), None)
 
@@ -61,4 +70,4 @@ def steering_by_servos(functions: set[int] | frozenset[int]) -> SteeringProfile 
 
 __all__ = ["AUTOPILOTS", "STEERING", "DEFAULT_AUTOPILOT", "AutopilotProfile", "SteeringProfile",
            "autopilot_named", "from_heartbeat", "from_setpoints", "prior_params", "model_steering",
-           "steering_by_airframe", "steering_by_servos"]
+           "steering_of_model", "steering_by_airframe", "steering_by_servos"]

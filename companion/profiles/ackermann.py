@@ -19,4 +19,10 @@ PROFILE = SteeringProfile(
     why=("an Ackermann rover cannot turn in place and its turn rate follows its speed; the "
          "paper's model is a differential drive: identify the vehicle (companion identify) and "
          "keep paths within its turning circle"),
-    model_fields=("min_turn_radius",))
+    model_fields=("min_turn_radius",),
+    # No parameter states the turning radius (steering geometry): 1 m, a small car's (ArduPilot
+    # SITL's `rover` turns at 0.9 m), fitted from the manoeuvre's slow tight turns; a car's
+    # mixer shares nothing between speed and steering, so no coupling.
+    priors=(("min_turn_radius", 1.0), ("turn_speed_coupling", 0.0),
+            ("speed_turn_coupling", 0.0)),
+    priors_why="Ackermann steering")

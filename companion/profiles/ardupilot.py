@@ -25,7 +25,6 @@ from __future__ import annotations
 import math
 from typing import TYPE_CHECKING, Mapping
 
-from . import skid
 from .autopilot import (FLAG_CUSTOM_MODE_ENABLED, FLAG_GUIDED_ENABLED, FLAG_MANUAL_INPUT_ENABLED,
                         MAV_AUTOPILOT_ARDUPILOTMEGA, MAV_FRAME_BODY_NED, MAV_RESULT_FAILED,
                         MAV_TYPE_GROUND_ROVER, MAV_TYPE_SURFACE_BOAT, PARAM_INT8, PARAM_INT16,
@@ -83,9 +82,13 @@ def mode_name(table: ModeTable, base_mode: int, custom_mode: int) -> str:
 # --------------------------------------------------------------------------- priors
 
 # The autopilot parameters a live identification reads (PARAM_REQUEST_READ).
+# SERVOn_FUNCTION: the steering kind (a car's manoeuvre is flown at speed); Rover's outputs are
+# mostly on the first four, eight covers a typical board's main outputs.
+SERVO_PARAMS = tuple(f"SERVO{n}_FUNCTION" for n in range(1, 9))
 PRIOR_PARAMS = ("ATC_ACCEL_MAX", "ATC_DECEL_MAX", "ATC_STR_ACC_MAX", "ATC_STR_DEC_MAX",
-                "ATC_STR_RAT_MAX", "CRUISE_SPEED", "CRUISE_THROTTLE", "WP_SPEED",
-                "MOT_STR_THR_MIX")
+                "ATC_STR_RAT_MAX", "ATC_TURN_MAX_G", "CRUISE_SPEED", "CRUISE_THROTTLE",
+                "WP_SPEED", "MOT_STR_THR_MIX") + SERVO_PARAMS
+GRAVITY = 9.80665      # m/s^2 (AP_Math's GRAVITY_MSS): ATC_TURN_MAX_G is in g
 
 
 def priors(values: Mapping[str, float]) -> Priors:
@@ -98,6 +101,10 @@ def priors(values: Mapping[str, float]) -> Priors:
     * ``ATC_STR_ACC_MAX`` (deg/s^2, 0 = no limit) -> ``max_yaw_accel``; ``ATC_STR_DEC_MAX`` where
       the firmware has it (0 = as accel) -> ``max_yaw_decel``;
     * ``ATC_STR_RAT_MAX`` (deg/s, 0 = no limit) -> ``max_yaw_rate``;
+    * ``ATC_TURN_MAX_G`` (g) -> ``max_lat_accel`` (x 9.81 m/s^2): the turn-rate target is
+      clamped to it over max(|v|, 1 m/s), every steering kind (``get_steering_out_rate``);
+    * ``SERVOn_FUNCTION`` -> the steering kind (26 / 70: a car, :mod:`.ackermann`), whose own
+      priors (turning radius, no mixing) then apply (:meth:`Priors.with_steering`);
     * ``WP_SPEED`` (m/s) -> ``max_speed``: GUIDED holds a faster speed setpoint to it (as seen
       on SITL: docs/design/vehicle-model.md); no faster than full throttle,
       CRUISE_SPEED * 100 / CRUISE_THROTTLE (ArduPilot's throttle feed-forward assumes speed
@@ -139,7 +146,17 @@ def priors(values: Mapping[str, float]) -> Priors:
         take("max_speed", wp_speed, f"WP_SPEED {wp_speed:g}")
     elif full is not None:
         take("max_speed", full, f"CRUISE_SPEED {cruise:g} / CRUISE_THROTTLE {throttle:g} %")
-    return Priors(defaults().with_(**changes), source)
+    turn_g = finite(values, "ATC_TURN_MAX_G")
+    if turn_g is not None and turn_g > 0:
+        take("max_lat_accel", turn_g * GRAVITY, f"ATC_TURN_MAX_G {turn_g:g}")
+    return Priors(defaults().with_(**changes), source).with_steering(steering_of(values))
+
+
+def steering_of(values: Mapping[str, float]):
+    """The steering kind SERVOn_FUNCTION shows (None when none was read or none matches)."""
+    from . import steering_by_servos      # the registry imports this module
+    functions = {int(v) for k in SERVO_PARAMS if (v := finite(values, k)) is not None}
+    return steering_by_servos(functions) if functions else None
 
 
 # --------------------------------------------------------------------------- the plant
@@ -155,17 +172,21 @@ def _limit(value: float | None, scale: float = 1.0) -> float:
 def plant_params(vehicle: RoverParams, loop_rate: float, sysid: int,
                  offboard_loss_timeout: float) -> list[tuple[str, float, int]]:
     """What ``sitl_plant`` serves as this autopilot: the limits from the rover it models in
-    ArduPilot's units (0 for none), a skid-steer frame, the failsafes at the firmware's
+    ArduPilot's units (0 for none), the frame of its steering kind (a turning radius: a car,
+    SERVO1 26 / SERVO3 70; else skid-steer, 73 / 74), the failsafes at the firmware's
     defaults, SCHED_LOOP_RATE its loop rate."""
+    from . import steering_of_model       # the registry imports this module
     deg = 180.0 / math.pi
     top = _limit(vehicle.max_speed)
-    left, right = skid.PROFILE.servo_functions
+    left, right = steering_of_model(vehicle).servo_functions
     return [
         ("ATC_ACCEL_MAX", _limit(vehicle.max_accel), PARAM_REAL32),
         ("ATC_DECEL_MAX", _limit(vehicle.max_decel), PARAM_REAL32),
         ("ATC_STR_ACC_MAX", _limit(vehicle.max_yaw_accel, deg), PARAM_REAL32),
         ("ATC_STR_DEC_MAX", _limit(vehicle.max_yaw_decel, deg), PARAM_REAL32),
         ("ATC_STR_RAT_MAX", _limit(vehicle.max_yaw_rate, deg), PARAM_REAL32),
+        # 0 is no limit in the plant's own units; ArduPilot itself has no "none" (0.6 g default)
+        ("ATC_TURN_MAX_G", _limit(vehicle.max_lat_accel, 1.0 / GRAVITY), PARAM_REAL32),
         ("CRUISE_SPEED", top * PLANT_CRUISE_THROTTLE / 100.0, PARAM_REAL32),
         ("CRUISE_THROTTLE", PLANT_CRUISE_THROTTLE, PARAM_INT8),
         ("FRAME_CLASS", 1, PARAM_INT8), ("FRAME_TYPE", 0, PARAM_INT8),

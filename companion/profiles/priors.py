@@ -19,6 +19,7 @@ from typing import TYPE_CHECKING, Mapping
 
 if TYPE_CHECKING:
     from ..sim.plant import RoverParams
+    from .steering import SteeringProfile
 
 
 @functools.cache
@@ -35,13 +36,24 @@ def defaults() -> RoverParams:
         turn_speed_coupling=0.5,                       # skid-steer mixing, MOT_STR_THR_MIX's default
         # and the turn rate it gives up at full speed: 2.1 rad/s in place, about 1.8 at full
         # throttle on ArduPilot SITL rover-skid (the cautious side of none)
-        speed_turn_coupling=0.15)
+        speed_turn_coupling=0.15,
+        speed_overshoot=0.0, speed_overshoot_s=1.0)       # none: what most speed loops do
 
 
 @dataclass(frozen=True)
 class Priors:
     params: RoverParams
     source: dict[str, str] = field(default_factory=dict)   # RoverParams field -> where from
+    steering: SteeringProfile | None = None    # the kind the parameters show (None: not known)
+
+    def with_steering(self, kind: SteeringProfile | None) -> Priors:
+        """These priors with the steering kind's own (:attr:`SteeringProfile.priors`) over
+        them: what no autopilot parameter states about how the rover steers."""
+        if kind is None:
+            return self
+        changes = kind.prior_changes()
+        source = {**self.source, **{name: kind.priors_why for name in changes}}
+        return Priors(self.params.with_(**changes), source, kind)
 
     def describe(self, name: str) -> str:
         return self.source.get(name, "default")

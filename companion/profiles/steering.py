@@ -4,13 +4,16 @@ One :class:`SteeringProfile` per kind (``skid.py``, ``ackermann.py``), registere
 ``companion/profiles/__init__.py``: the output functions that make it on ArduPilot
 (SERVOn_FUNCTION), its PX4 airframe (CA_AIRFRAME), whether it turns in place, the preflight
 verdict on it (the paper's model is a differential drive: ``ok`` for that kind, ``warn`` with a
-why for the others) and the vehicle model's fields that describe it
-(:class:`companion.sim.plant.RoverParams`).
+why for the others), the vehicle model's fields that describe it
+(:class:`companion.sim.plant.RoverParams`) and the priors identification starts them from.
+Whether it turns in place picks identification's manoeuvre
+(:func:`companion.ident.excite.manoeuvre`: a car's is flown at speed).
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Mapping
 
 OK, WARN = "ok", "warn"        # companion.preflight.checks' statuses
 
@@ -27,3 +30,9 @@ class SteeringProfile:
     verdict: str                       # preflight: OK (the vehicle model's kind) or WARN
     why: str                           # the preflight row's reason
     model_fields: tuple[str, ...]      # RoverParams fields describing it (0: not this kind)
+    # identification's priors for this kind over the autopilot's (RoverParams field -> value)
+    priors: tuple[tuple[str, float], ...] = ()
+    priors_why: str = ""               # where they come from, for the vehicle file
+
+    def prior_changes(self) -> Mapping[str, float]:
+        return dict(self.priors)

@@ -17,6 +17,11 @@ or coupling this is the paper's plant (first-order actuators at ``w_c``); with t
 setpoint meets inside ArduPilot Rover (a rate-limited target, a lag, a delay, shared motor range;
 the "accel" limit applies while ``|v|`` grows, the "decel" one while it shrinks).
 
+Speed overshoot (``speed_overshoot`` g, ``speed_overshoot_s`` tau): the speed channel's output x
+(above) is the speed loop's target; the speed itself overshoots its changes and comes back,
+``v = x + g (x - z)``, ``z' = (x - z) / tau`` (:func:`overshoot_step`: ArduPilot's PI speed loop
+behind a throttle feed-forward that over-drives, as on SITL's Ackermann ``rover``).
+
 ``d_cen`` is the paper's distance between the centre of mass (the tracked point p) and the wheel
 axle; ``w_c`` the paper's actuator bandwidth omega_c (k_c). The commands are clamped to the
 vehicle's top speed and turn rate and held over each step. Works on floats (one rover, e.g. the
@@ -34,6 +39,12 @@ An Ackermann rover cannot turn tighter than its steering allows: with ``min_turn
 (wheel base / tan(max steering angle)) the turn-rate command is also clamped to
 ``|u_omega| <= |v| / R`` (v at the step's start; a rover at rest cannot turn at all). The
 speed and the course loop's turn rate then take their channels' delays.
+
+Lateral acceleration (``max_lat_accel`` a, ArduPilot's ``ATC_TURN_MAX_G`` x g): ArduPilot
+Rover's turn-rate controller (``AR_AttitudeControl::get_steering_out_rate``, every steering
+kind) clamps its target to ``a / max(|v|, 1 m/s)`` (``get_turn_rate_from_lat_accel``; below
+``LAT_ACCEL_MIN_SPEED`` the limit is taken at that speed), so
+``|u_omega| <= a / max(|v|, LAT_ACCEL_MIN_SPEED)`` with v at the step's start.
 :meth:`RoverModel.step_vector` is that step.
 
 Integration. Without rate limits the actuators are linear first-order systems with a
@@ -59,6 +70,10 @@ import numpy as np
 from ..core import ops as _ops
 from ..core.signals import Measurement, Num
 
+# m/s: ArduPilot takes the lateral-acceleration limit at no less than this speed
+# (AR_AttitudeControl.cpp, AR_ATTCONTROL_STEER_SPEED_MIN), so a rover starting off may turn.
+LAT_ACCEL_MIN_SPEED = 1.0
+
 
 @dataclass(frozen=True)
 class RoverParams:
@@ -79,6 +94,9 @@ class RoverParams:
     speed_turn_coupling: Num = 0.0        # c_w: share of the turn-rate clamp lost at full speed
     course_gain: Num = 0.0                # 1/s: PX4's course loop (> 0: velocity-vector input)
     min_turn_radius: Num = 0.0            # m: Ackermann steering, |omega| <= |v| / R (0: none)
+    max_lat_accel: Num = math.inf         # m/s^2: |omega| <= a / max(|v|, 1 m/s) (ATC_TURN_MAX_G g)
+    speed_overshoot: Num = 0.0            # g: v = (1 + g) x - g z, the speed loop's overshoot
+    speed_overshoot_s: Num = 1.0          # tau, s: z' = (x - z) / tau (how long it takes back)
 
     @property
     def yaw_bandwidth(self) -> Num:
@@ -99,7 +117,8 @@ class RoverParams:
                                                  self.yaw_decel)) \
             and not any(_any_positive(v) for v in (self.speed_delay, self.yaw_delay,
                                                    self.turn_speed_coupling,
-                                                   self.speed_turn_coupling))
+                                                   self.speed_turn_coupling,
+                                                   self.speed_overshoot))
 
     @property
     def velocity_vector(self) -> bool:
@@ -136,13 +155,15 @@ def _any_positive(value) -> bool:
 
 @dataclass(slots=True)
 class RoverState:
-    """Pose of the tracked point (x, y, yaw) and actuator outputs (speed v, yaw rate omega)."""
+    """Pose of the tracked point (x, y, yaw) and actuator outputs (speed v, yaw rate omega);
+    ``v_slow`` is the speed overshoot's slow state z (unused without ``speed_overshoot``)."""
 
     x: Num = 0.0
     y: Num = 0.0
     yaw: Num = 0.0
     v: Num = 0.0
     omega: Num = 0.0
+    v_slow: Num = 0.0
 
 
 class RoverModel:
@@ -157,6 +178,8 @@ class RoverModel:
         self._coupled = _any_positive(params.turn_speed_coupling)
         self._turn_coupled = _any_positive(params.speed_turn_coupling)
         self._curvature = _any_positive(params.min_turn_radius)
+        self._lateral = _any_finite(params.max_lat_accel)
+        self._overshoot = _any_positive(params.speed_overshoot)
         self.delay = CommandDelay(params.speed_delay, params.yaw_delay, n) if params.has_delay else None
         self._trig_yaw = None
         self._trig_cs = None
@@ -195,7 +218,8 @@ class RoverModel:
                       v: Num = 0.0) -> tuple[Num, Num]:
         """Top speed and turn rate; with coupling, the speed range the turn rate ``omega`` leaves
         and the turn-rate range the speed ``v`` leaves (both the state at the step's start, so
-        neither clamp depends on the other's result: the motors share one range)."""
+        neither clamp depends on the other's result: the motors share one range); the turning
+        radius and the lateral-acceleration limit take turn rate away with speed as well."""
         m, p = self._m, self.params
         top = p.max_speed
         if self._coupled:
@@ -212,6 +236,8 @@ class RoverModel:
                 top_w = min(top_w, abs(v) / r) if r > 0 else top_w
             else:
                 top_w = np.minimum(top_w, abs(v) / np.where(np.asarray(r) > 0, r, 1e-12))
+        if self._lateral:
+            top_w = m.minimum(top_w, p.max_lat_accel / m.maximum(abs(v), LAT_ACCEL_MIN_SPEED))
         return m.clip(speed, -top, top), m.clip(yaw_rate, -top_w, top_w)
 
     def step_vector(self, s: RoverState, ux: Num, uy: Num, dt: float) -> RoverState:
@@ -233,12 +259,21 @@ class RoverModel:
         return self._step_limited(s, u, w, dt)
 
     def _step_limited(self, s: RoverState, u: Num, w: Num, h: float) -> RoverState:
-        """Rate-limited channels, exact per channel (:func:`_channel`), Simpson for x and y."""
+        """Rate-limited channels, exact per channel (:func:`_channel`), Simpson for x and y;
+        with the speed overshoot, the channel's output x passes :func:`overshoot_step`."""
         m, p = self._m, self.params
-        v_mid, v_end, _, _ = _channel(m, s.v, u, p.w_c, p.max_accel, p.decel, h, integrals=False)
+        v0, z_end = s.v, s.v_slow
+        if self._overshoot:
+            v0 = overshoot_target(s.v, s.v_slow, p.speed_overshoot)
+        v_mid, v_end, _, _ = _channel(m, v0, u, p.w_c, p.max_accel, p.decel, h, integrals=False)
+        if self._overshoot:
+            (v_mid, _), (v_end, z_end) = (
+                overshoot_step(m, v0, x, s.v_slow, p.speed_overshoot, p.speed_overshoot_s, t)
+                for x, t in ((v_mid, 0.5 * h), (v_end, h)))
         w_mid, w_end, i_mid, i_end = _channel(m, s.omega, w, p.yaw_bandwidth, p.max_yaw_accel,
                                               p.yaw_decel, h)
-        return self._simpson(s, s.yaw + i_mid, s.yaw + i_end, v_mid, v_end, w_mid, w_end, h)
+        return self._simpson(s, s.yaw + i_mid, s.yaw + i_end, v_mid, v_end, w_mid, w_end, h,
+                             z_end)
 
     def _decays(self, h: float):
         """e^{-w_c h/2}, e^{-w_c h} and the yaw-loop equivalents, cached for the step size."""
@@ -261,7 +296,7 @@ class RoverModel:
         return self._simpson(s, yaw_mid, yaw_end, v_mid, v_end, w_mid, w_end, h)
 
     def _simpson(self, s: RoverState, yaw_mid, yaw_end, v_mid, v_end, w_mid, w_end,
-                 h: float) -> RoverState:
+                 h: float, v_slow=None) -> RoverState:
         """x, y by Simpson's rule over the step from the heading, speed and turn rate at its
         start, middle and end (each exact); eq. (1) with the d_cen term."""
         m = self._m
@@ -273,7 +308,7 @@ class RoverModel:
         h6 = h / 6.0
         x = s.x + h6 * ((s.v * c0 - lat0 * s0) + 4.0 * (v_mid * c1 - lat1 * s1) + (v_end * c2 - lat2 * s2))
         y = s.y + h6 * ((s.v * s0 + lat0 * c0) + 4.0 * (v_mid * s1 + lat1 * c1) + (v_end * s2 + lat2 * c2))
-        return RoverState(x, y, yaw_end, v_end, w_end)
+        return RoverState(x, y, yaw_end, v_end, w_end, s.v_slow if v_slow is None else v_slow)
 
     def step_rk4(self, s: RoverState, u: Num, w: Num, dt: float) -> RoverState:
         """Classic RK4 on all five states with (u, w) already delayed and clamped: a reference."""
@@ -290,6 +325,26 @@ class RoverModel:
             s.v + h6 * (k1[3] + 2.0 * (k2[3] + k3[3]) + k4[3]),
             s.omega + h6 * (k1[4] + 2.0 * (k2[4] + k3[4]) + k4[4]),
         )
+
+
+def overshoot_target(v: Num, z: Num, g: Num) -> Num:
+    """The speed channel's inner output x behind a speed v with overshoot state z:
+    v = (1 + g) x - g z."""
+    return (v + g * z) / (1.0 + g)
+
+
+def overshoot_step(m, x0: Num, x1: Num, z0: Num, g: Num, tau: Num, t: float) -> tuple[Num, Num]:
+    """(speed, z) ``t`` s on, x having gone from x0 to x1 (linearly, as over one step).
+
+    ArduPilot's speed loop with a throttle feed-forward that over-drives the motors (SITL
+    ``rover`` on rover.parm: CRUISE_THROTTLE 30 % gives 6 m/s, CRUISE_SPEED says 5) and a PI
+    that takes the excess back: the speed overshoots each change of the rate-limited target x by
+    a share g, and returns to it as z catches up, ``z' = (x - z) / tau``, so
+    ``v = x + g (x - z)`` (a lead-lag (1 + (1 + g) tau s) / (1 + tau s) on x). z over the step
+    with x taken at its mean (a step is at most a tick, tau about a second)."""
+    k = 1.0 - m.exp(-t / tau)
+    z1 = z0 + k * (0.5 * (x0 + x1) - z0)
+    return (1.0 + g) * x1 - g * z1, z1
 
 
 def _rate_bounds(m, x, up, down):

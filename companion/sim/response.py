@@ -3,7 +3,7 @@
 What identification fits and what the plant's tests check: given the setpoints an autopilot was
 sent (speed ``v_ref``, turn rate ``omega_ref``, held between samples) this runs only the two
 channels of :class:`companion.sim.plant.RoverModel` (delay -> clamp with both couplings -> rate
-limit -> lag), without the pose, for ``n`` parameter sets side by side (any :class:`RoverParams` field may
+limit -> lag -> the speed's overshoot), without the pose, for ``n`` parameter sets side by side (any :class:`RoverParams` field may
 be an array of length ``n``). The same channel solution (:func:`companion.sim.plant._channel`) and
 delay line as the full model, so a fitted model is the model the simulations run.
 """
@@ -14,7 +14,7 @@ from typing import Sequence
 
 import numpy as np
 
-from .plant import CommandDelay, RoverModel, RoverParams, _channel
+from .plant import CommandDelay, RoverModel, RoverParams, _channel, overshoot_step
 
 
 def respond(params: RoverParams, t: Sequence[float], speed_cmd: Sequence[float],
@@ -47,6 +47,9 @@ def respond(params: RoverParams, t: Sequence[float], speed_cmd: Sequence[float],
     held = np.searchsorted(t, grid + 1e-9 * dt, side="right") - 1
     sample_step = np.minimum(((t - t[0]) / dt + 1e-9).astype(int), steps - 1)
     v = np.full(n, float(v0))
+    x = v                               # the speed channel's output (v without overshoot)
+    z = v
+    over = bool(np.any(np.asarray(p.speed_overshoot) > 0))
     w = np.full(n, float(omega0))
     v_out = np.empty((steps, n))
     w_out = np.empty((steps, n))
@@ -56,6 +59,11 @@ def respond(params: RoverParams, t: Sequence[float], speed_cmd: Sequence[float],
         if delay is not None:
             u_k, w_k = delay.push(u_k + np.zeros(n), w_k + np.zeros(n), dt)
         u_k, w_k = model.clamp_command(u_k, w_k, w, v)
-        _, v, _, _ = _channel(m, v, u_k, p.w_c, p.max_accel, p.decel, dt, both=False)
+        _, x1, _, _ = _channel(m, x, u_k, p.w_c, p.max_accel, p.decel, dt, both=False)
+        if over:
+            v, z = overshoot_step(m, x, x1, z, p.speed_overshoot, p.speed_overshoot_s, dt)
+        else:
+            v = x1
+        x = x1
         _, w, _, _ = _channel(m, w, w_k, p.yaw_bandwidth, p.max_yaw_accel, p.yaw_decel, dt, both=False)
     return v_out[sample_step], w_out[sample_step]

@@ -145,6 +145,7 @@ def ensemble(vehicle: RoverParams, count: int, spread: Spread, sample_period: fl
             w_c=vehicle.w_c / lag_k, w_c_yaw=vehicle.yaw_bandwidth / lag_k,
             max_accel=vehicle.max_accel * lim_k, max_decel=vehicle.decel * lim_k,
             max_yaw_accel=vehicle.max_yaw_accel * lim_k, max_yaw_decel=vehicle.yaw_decel * lim_k,
+            max_lat_accel=vehicle.max_lat_accel * lim_k,
             speed_delay=max(0.0, vehicle.speed_delay + delay),
             yaw_delay=max(0.0, vehicle.yaw_delay + delay),
             turn_speed_coupling=float(np.clip(vehicle.turn_speed_coupling + dc, 0.0, 1.0)),
@@ -158,7 +159,8 @@ def _stack_params(vehicles: Sequence[RoverParams], repeat: int, tile: int) -> Ro
     values = {k: [float(getattr(v, k)) for v in vehicles] for k in
               ("d_cen", "w_c", "max_speed", "max_yaw_rate", "max_accel", "max_yaw_accel",
                "speed_delay", "yaw_delay", "turn_speed_coupling", "speed_turn_coupling",
-               "course_gain", "min_turn_radius")}
+               "course_gain", "min_turn_radius", "max_lat_accel", "speed_overshoot",
+               "speed_overshoot_s")}
     values["w_c_yaw"] = [float(v.yaw_bandwidth) for v in vehicles]
     values["max_decel"] = [float(v.decel) for v in vehicles]
     values["max_yaw_decel"] = [float(v.yaw_decel) for v in vehicles]

@@ -13,6 +13,8 @@ A small TOML file, units in the key names, a header saying how it was made::
     max_m_s = 4.0
     accel_max_m_s2 = 1.0          # while |v| grows
     decel_max_m_s2 = 1.0          # while |v| shrinks
+    overshoot = 0.2               # share the speed overshoots a change by (ArduPilot's PI)
+    overshoot_s = 1.0             # and how long it takes to come back (time constant)
 
     [turn_rate]
     delay_s = 0.04
@@ -20,20 +22,22 @@ A small TOML file, units in the key names, a header saying how it was made::
     max_rad_s = 2.094
     accel_max_rad_s2 = 2.09
     decel_max_rad_s2 = 2.09
+    lat_accel_max_m_s2 = 5.88     # turn rate <= this / max(|v|, 1 m/s) (ATC_TURN_MAX_G x g)
 
     [coupling]
     turn_speed = 0.3              # share of top speed lost at full turn rate (skid-steer mixing)
     speed_turn = 0.15             # share of the turn-rate clamp lost at full speed
 
-    [course]                      # optional: PX4's velocity-vector interface (Ackermann)
-    gain_1_s = 5.0                # PX4's course loop: turn rate per rad of course error
-    min_turn_radius_m = 0.56      # wheel base / tan(max steering angle)
+    [course]                      # optional: PX4's velocity-vector interface, Ackermann steering
+    gain_1_s = 5.0                # PX4's course loop: turn rate per rad of course error (0: none)
+    min_turn_radius_m = 0.56      # wheel base / tan(max steering angle) (a car; 0: turns in place)
 
     [fit]                         # optional: how well the model reproduced the log
     speed_rms_m_s = 0.05
     yaw_rate_rms_rad_s = 0.04
 
-``[course]`` (written only when set) makes it a PX4 vehicle: the companion's velocity vector u_p
+``[course]`` is written only when set; a gain there makes it a PX4 vehicle (a turning radius
+alone is a car driven by speed / turn-rate setpoints: ArduPilot's Ackermann rover): the companion's velocity vector u_p
 is the input, |u_p| through the speed channel and the course atan2(u_p) through PX4's
 proportional course loop into the turn-rate channel, which an Ackermann rover's minimum turning
 radius also clamps (:class:`companion.sim.plant.RoverParams`, ``course_gain`` and
@@ -62,11 +66,14 @@ MIN_LAG = 1e-3          # s: a lag shorter than a plant step is no lag
 _CHANNELS: dict[str, dict[str, tuple[str, str]]] = {
     "speed": {"delay_s": ("speed_delay", "delay"), "lag_s": ("w_c", "lag"),
               "max_m_s": ("max_speed", "limit"), "accel_max_m_s2": ("max_accel", "limit"),
-              "decel_max_m_s2": ("max_decel", "limit")},
+              "decel_max_m_s2": ("max_decel", "limit"),
+              "overshoot": ("speed_overshoot", "share"),
+              "overshoot_s": ("speed_overshoot_s", "limit")},
     "turn_rate": {"delay_s": ("yaw_delay", "delay"), "lag_s": ("w_c_yaw", "lag"),
                   "max_rad_s": ("max_yaw_rate", "limit"),
                   "accel_max_rad_s2": ("max_yaw_accel", "limit"),
-                  "decel_max_rad_s2": ("max_yaw_decel", "limit")},
+                  "decel_max_rad_s2": ("max_yaw_decel", "limit"),
+                  "lat_accel_max_m_s2": ("max_lat_accel", "limit")},
     "coupling": {"turn_speed": ("turn_speed_coupling", "share"),
                  "speed_turn": ("speed_turn_coupling", "share")},
     "course": {"gain_1_s": ("course_gain", "nonneg"),
@@ -158,7 +165,8 @@ def dumps(vehicle: VehicleFile) -> str:
               "max_yaw_accel": p.max_yaw_accel, "max_yaw_decel": p.yaw_decel,
               "turn_speed_coupling": p.turn_speed_coupling,
               "speed_turn_coupling": p.speed_turn_coupling, "course_gain": p.course_gain,
-              "min_turn_radius": p.min_turn_radius}
+              "min_turn_radius": p.min_turn_radius, "max_lat_accel": p.max_lat_accel,
+              "speed_overshoot": p.speed_overshoot, "speed_overshoot_s": p.speed_overshoot_s}
     for section, keys in _CHANNELS.items():
         if section in _OPTIONAL and not any(float(values[name]) for name, _ in keys.values()):
             continue
