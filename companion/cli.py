@@ -30,6 +30,7 @@ COMMANDS = [
     "control",
     "router",
     "plot",
+    "log",
     "pki",
 ]
 

@@ -170,7 +170,7 @@ def run(args) -> int:
     extra = {"plant": " ".join(argv[2:]), "plant_exit": plant_code, "preset": args.preset,
              "d_cen": args.d_cen}
     if flight.paths is not None:
-        extra.update(tlog=flight.paths.tlog, csv=flight.paths.csv)
+        extra.update(tlog=flight.paths.tlog, csv=flight.paths.csv, mcap=flight.paths.mcap)
     if args.plot and trace.log["t"]:
         from ..mission.plot import plot_run
         out = Path(args.out)

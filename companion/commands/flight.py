@@ -97,9 +97,13 @@ def open_flight_log(options: LogOptions, label: str, log: Log):
     if not options.enabled:
         return None, []
     from ..live.flightlog import new_paths, open_csv
-    paths = new_paths(options.folder, label)
-    sink = open_csv(paths.csv)
-    log(f"flight log: {paths.tlog} and {paths.csv}")
+    paths = new_paths(options.folder, label, options.format)
+    if options.format == "mcap":
+        from ..live.mcaplog import open_mcap
+        sink: Any = open_mcap(paths.mcap)
+    else:
+        sink = open_csv(paths.csv)
+    log(f"flight log: {paths.tlog} and {paths.mcap or paths.csv}")
     return paths, [sink]
 
 
