@@ -27,6 +27,7 @@ COMMANDS = [
     "mission",
     "simulate",
     "monitor",
+    "view",
     "control",
     "router",
     "plot",
