@@ -31,6 +31,7 @@ COMMANDS = [
     "control",
     "router",
     "plot",
+    "report",
     "log",
     "pki",
 ]

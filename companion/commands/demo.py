@@ -140,7 +140,9 @@ def run(args) -> int:
         signing_key_file=args.signing_key,
         log=log_options(args), output=OutputOptions(json=args.json, progress=True,
                                                     quiet=args.quiet),
-        bus=bus_options(args))
+        bus=bus_options(args),
+        # the flight record names the vehicle file flown (the demo has its own vehicle)
+        vehicle_file=str(own_file) if own_file is not None else None)
     flight = Flight(options, "demo", log)          # a bad signing key fails here
     argv = plant_argv(args, port, requested_rate(mission, gains))
     if mission.geodetic:
