@@ -89,7 +89,7 @@ def test_the_view_draws_the_rover_and_its_path_and_they_move(tmp_path):
         assert url.startswith(f"http://127.0.0.1:{web}/")
         with playwright.sync_playwright() as p:
             browser = p.chromium.launch(executable_path=CHROMIUM, args=["--no-sandbox"])
-            page = browser.new_page(viewport={"width": 1000, "height": 600})
+            page = browser.new_page(viewport={"width": 900, "height": 540})
             # No internet: whatever the page asks of another host is refused (and listed).
             page.route(lambda u: not u.startswith("http://127.0.0.1"),
                        lambda route: (offsite.append(route.request.url), route.abort()))
