@@ -12,7 +12,6 @@ import sys
 from pathlib import Path
 
 import pytest
-
 from companion_harness import ROOT
 
 VEHICLE = ROOT / "companion" / "sim" / "vehicles" / "ardupilot_skid.toml"

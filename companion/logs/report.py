@@ -18,7 +18,7 @@ import json
 import shlex
 import tempfile
 from dataclasses import dataclass, field
-from datetime import datetime, timezone
+from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
@@ -157,7 +157,7 @@ def flight_section(item: Item) -> str:
 
 def page(item: Item) -> str:
     """A whole self-contained HTML page for a flight or a calibration."""
-    when = datetime.now(timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
+    when = datetime.now(UTC).strftime("%Y-%m-%d %H:%M UTC")
     if item.kind == "flight":
         body = flight_section(item)
     else:
