@@ -43,8 +43,10 @@ SHOTS = os.environ.get("PZC_VIEW_SCREENSHOT")   # where to keep the live view's 
 
 
 def _spawn(*args: str) -> subprocess.Popen:
+    # its own process group: the demo's plant goes down with it (SIGKILL leaves no orphan)
     return subprocess.Popen([sys.executable, "-m", "companion", *args], cwd=ROOT, text=True,
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            start_new_session=True)
 
 
 def _first_line(proc: subprocess.Popen, timeout: float) -> str:
@@ -116,7 +118,7 @@ def test_the_view_draws_the_rover_and_its_path_and_they_move(tmp_path):
                 pytest.fail(f"the map never showed the rover and its path moving "
                             f"(first seen: {first is not None}); last screenshot {shot}")
             assert demo.poll() is None, "the demo ended before the view was checked"
-            demo.send_signal(signal.SIGKILL)           # the rover goes silent
+            os.killpg(demo.pid, signal.SIGKILL)        # the rover (and its plant) go silent
             demo.wait(10)
             deadline = time.monotonic() + 240.0       # the viewer may lag the stream
             while time.monotonic() < deadline:
@@ -133,6 +135,10 @@ def test_the_view_draws_the_rover_and_its_path_and_they_move(tmp_path):
         for proc in (demo, view):
             if proc.poll() is None:
                 proc.send_signal(signal.SIGTERM)
+        try:
+            os.killpg(demo.pid, signal.SIGTERM)         # the demo's plant, whatever happened
+        except ProcessLookupError:
+            pass
         for proc in (demo, view):
             try:
                 outputs[proc.pid] = proc.communicate(timeout=15)
