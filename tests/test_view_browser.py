@@ -33,7 +33,7 @@ def _chromium() -> str | None:
 
 
 CHROMIUM = _chromium()
-pytestmark = [pytest.mark.timeout(900), pytest.mark.skipif(
+pytestmark = [pytest.mark.timeout(1200), pytest.mark.skipif(
     CHROMIUM is None, reason="no Chromium installed (apt-get install chromium; .ci/run does)")]
 
 PATH_COLOUR = (0, 190, 255)      # the first rover's driven path (companion/view/draw.py PATHS)
@@ -79,11 +79,10 @@ def _centre(points: list[tuple[int, int]]) -> tuple[float, float]:
 def test_the_view_draws_the_rover_and_its_path_and_they_move(tmp_path):
     zport, web, grpc = free_tcp_port(), free_tcp_port(), free_tcp_port()
     ep = f"tcp/127.0.0.1:{zport}"
-    demo = _spawn("demo", "--speedup", "1", "--duration", "400", "--no-plot", "--no-log",
-                  "--zenoh-listen", ep, "--no-zenoh-scouting", "-q")
-    view = _spawn("view", "--zenoh-connect", ep, "--no-zenoh-scouting", "--web-port", str(web),
+    view = _spawn("view", "--zenoh-listen", ep, "--no-zenoh-scouting", "--web-port", str(web),
                   "--grpc-port", str(grpc), "--stale-after", "2", "--refresh", "0.25", "--json")
     offsite: list[str] = []
+    demo: subprocess.Popen | None = None
     outputs: dict[int, tuple[str, str]] = {}
     try:
         url = json.loads(_first_line(view, 90.0))["url"]
@@ -95,6 +94,14 @@ def test_the_view_draws_the_rover_and_its_path_and_they_move(tmp_path):
             page.route(lambda u: not u.startswith("http://127.0.0.1"),
                        lambda route: (offsite.append(route.request.url), route.abort()))
             page.goto(url)
+            # The viewer (~50 MB of wasm) first loads and compiles: minutes on a busy machine
+            # with a software rasteriser. The rover starts once the page is up, so the viewer
+            # is not handed minutes of backlog at once.
+            page.wait_for_function(
+                "() => { const e = document.getElementById('center_text');"
+                " return e !== null && !e.classList.contains('visible'); }", timeout=400_000)
+            demo = _spawn("demo", "--speedup", "1", "--duration", "400", "--no-plot",
+                          "--no-log", "--zenoh-connect", ep, "--no-zenoh-scouting", "-q")
             first = None
             deadline = time.monotonic() + 240.0
             while time.monotonic() < deadline:          # the software rasteriser is slow
@@ -132,14 +139,16 @@ def test_the_view_draws_the_rover_and_its_path_and_they_move(tmp_path):
                 pytest.fail("the silent rover was never drawn stale (grey)")
             browser.close()
     finally:
-        for proc in (demo, view):
+        procs = [p for p in (demo, view) if p is not None]
+        for proc in procs:
             if proc.poll() is None:
                 proc.send_signal(signal.SIGTERM)
-        try:
-            os.killpg(demo.pid, signal.SIGTERM)         # the demo's plant, whatever happened
-        except ProcessLookupError:
-            pass
-        for proc in (demo, view):
+        if demo is not None:
+            try:
+                os.killpg(demo.pid, signal.SIGTERM)     # the demo's plant, whatever happened
+            except ProcessLookupError:
+                pass
+        for proc in procs:
             try:
                 outputs[proc.pid] = proc.communicate(timeout=15)
             except subprocess.TimeoutExpired:

@@ -70,8 +70,10 @@ class Drawing:
                     row_shares=[2, 2, 2, 2]),
                 column_shares=[3, 2]),
             collapse_panels=True)
+        # newest_first: a browser that connects late gets the fleet as it is now first,
+        # then the history (not minutes of backlog before the present)
         self.grpc_url = rr.serve_grpc(grpc_port=grpc_port, default_blueprint=blueprint,
-                                      server_memory_limit=memory_limit)
+                                      server_memory_limit=memory_limit, newest_first=True)
         rr.serve_web_viewer(web_port=web_port, open_browser=False, connect_to=self.grpc_url)
         from urllib.parse import quote
         self.url = f"http://127.0.0.1:{web_port}/?url={quote(self.grpc_url, safe='')}"
