@@ -27,9 +27,12 @@ COMMANDS = [
     "mission",
     "simulate",
     "monitor",
+    "view",
     "control",
     "router",
     "plot",
+    "report",
+    "log",
     "pki",
 ]
 

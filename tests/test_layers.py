@@ -29,6 +29,7 @@ ALLOWED: dict[str, set[str]] = {
     "logs": {"core", "live", "mission", "errors"},
     "ident": {"core", "sim", "live", "logs", "profiles", "errors"},
     "preflight": {"live", "profiles", "errors"},
+    "view": {"bus", "errors"},
     "errors": set(),
     "secretfile": {"errors"},
     "progress": {"live"},
@@ -36,7 +37,7 @@ ALLOWED: dict[str, set[str]] = {
     "__main__": {"cli"},
     "__init__": set(),
     "commands": {"core", "sim", "mission", "mav", "live", "bus", "security", "logs", "ident",
-                 "errors", "progress", "secretfile", "__init__", "preflight", "profiles"},
+                 "errors", "progress", "secretfile", "__init__", "preflight", "profiles", "view"},
 }
 SITL_PLANT_ALLOWED = {"core", "sim", "mission", "mav", "profiles", "errors"}   # mission: geo only
 PURE = {"core", "profiles"}   # no I/O: the mathematics, and the facts of autopilots and steering

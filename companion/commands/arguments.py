@@ -180,6 +180,9 @@ def add_safety_arguments(p: argparse.ArgumentParser) -> None:
                    help="where the .tlog (all MAVLink traffic) and .csv (control loop) go "
                         "(default ./logs); written as they go, a crash loses at most 100 ms")
     g.add_argument("--no-log", dest="log", action="store_false", help="write no flight log")
+    g.add_argument("--log-format", choices=("csv", "mcap"), default="csv",
+                   help="the control loop beside the .tlog: csv (default), or mcap in "
+                        "Foxglove's schemas (companion log export writes the same)")
     add_signing_argument(g)
 
 

@@ -140,7 +140,9 @@ def run(args) -> int:
         signing_key_file=args.signing_key,
         log=log_options(args), output=OutputOptions(json=args.json, progress=True,
                                                     quiet=args.quiet),
-        bus=bus_options(args))
+        bus=bus_options(args),
+        # the flight record names the vehicle file flown (the demo has its own vehicle)
+        vehicle_file=str(own_file) if own_file is not None else None)
     flight = Flight(options, "demo", log)          # a bad signing key fails here
     argv = plant_argv(args, port, requested_rate(mission, gains))
     if mission.geodetic:
@@ -170,7 +172,7 @@ def run(args) -> int:
     extra = {"plant": " ".join(argv[2:]), "plant_exit": plant_code, "preset": args.preset,
              "d_cen": args.d_cen}
     if flight.paths is not None:
-        extra.update(tlog=flight.paths.tlog, csv=flight.paths.csv)
+        extra.update(tlog=flight.paths.tlog, csv=flight.paths.csv, mcap=flight.paths.mcap)
     if args.plot and trace.log["t"]:
         from ..mission.plot import plot_run
         out = Path(args.out)

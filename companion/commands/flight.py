@@ -13,6 +13,7 @@ the loop itself stops the rover (zero setpoint, then HOLD) however it ends. A co
 
 from __future__ import annotations
 
+import json
 import signal
 import sys
 from dataclasses import replace
@@ -97,9 +98,13 @@ def open_flight_log(options: LogOptions, label: str, log: Log):
     if not options.enabled:
         return None, []
     from ..live.flightlog import new_paths, open_csv
-    paths = new_paths(options.folder, label)
-    sink = open_csv(paths.csv)
-    log(f"flight log: {paths.tlog} and {paths.csv}")
+    paths = new_paths(options.folder, label, options.format)
+    if options.format == "mcap":
+        from ..live.mcaplog import open_mcap
+        sink: Any = open_mcap(paths.mcap)
+    else:
+        sink = open_csv(paths.csv)
+    log(f"flight log: {paths.tlog} and {paths.mcap or paths.csv}")
     return paths, [sink]
 
 
@@ -173,9 +178,36 @@ class Flight:
             all_sinks.append(ProgressSink(mission.duration, mission.name))
         if self.bus is not None:
             all_sinks.append(self.bus)
-        return fly(self.settings(mission, vehicle), sinks=all_sinks, log=self.log,
-                   switch=self.switch, control=self.bus.control if self.bus else None,
-                   make_tracker=make_tracker)
+        result = fly(self.settings(mission, vehicle), sinks=all_sinks, log=self.log,
+                     switch=self.switch, control=self.bus.control if self.bus else None,
+                     make_tracker=make_tracker)
+        if self.paths is not None:
+            write_record(self.paths, result, self.options.vehicle_file)
+        return result
+
+
+RECORD_SCHEMA = "pzc-rover/flight-record/1"
+
+
+def write_record(paths: Any, result: Any, vehicle_file: str | None) -> None:
+    """``<log>.json`` beside the flight log: the command line, the vehicle file (its text) and
+    the result (gains, limits, metrics) -- what ``companion report`` shows. A run killed
+    before it ends has none; the report then says so."""
+    from pathlib import Path
+    vehicle_text = None
+    if vehicle_file:
+        try:
+            vehicle_text = Path(vehicle_file).read_text(encoding="utf-8", errors="replace")
+        except OSError:
+            vehicle_text = None
+    record = {"schema": RECORD_SCHEMA, "command": sys.argv, "vehicle_file": vehicle_file,
+              "vehicle": vehicle_text, "tlog": paths.tlog, "csv": paths.csv, "mcap": paths.mcap,
+              "result": result.as_dict()}
+    try:
+        Path(paths.tlog).with_suffix(".json").write_text(
+            json.dumps(record, indent=1, default=str) + "\n", encoding="utf-8")
+    except (OSError, ValueError):
+        pass        # the record is a convenience: the flight and its logs stand without it
 
 
 def refuse_user_error(result) -> None:

@@ -26,6 +26,7 @@ class LogOptions:
 
     enabled: bool = True
     folder: str | None = None          # None: ./logs
+    format: str = "csv"                # the loop's log beside the .tlog: "csv" or "mcap"
 
 
 @dataclass(frozen=True)
@@ -111,7 +112,8 @@ def gain_options(args: argparse.Namespace, vehicle: bool = True) -> GainOptions:
 
 def log_options(args: argparse.Namespace) -> LogOptions:
     """add_safety_arguments' --log-dir / --no-log."""
-    return LogOptions(enabled=args.log, folder=args.log_dir)
+    return LogOptions(enabled=args.log, folder=args.log_dir,
+                      format=getattr(args, "log_format", "csv"))
 
 
 def output_options(args: argparse.Namespace, progress: bool = True) -> OutputOptions:

@@ -61,5 +61,5 @@ def run(args) -> int:
     options = FlightOptions.from_args(args)
     result, paths = fly_mission(options, mission)
     print_result(result, options.output.json,
-                 {"tlog": paths.tlog, "csv": paths.csv} if paths else None)
+                 {"tlog": paths.tlog, "csv": paths.csv, "mcap": paths.mcap} if paths else None)
     return result.exit_code

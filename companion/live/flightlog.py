@@ -67,6 +67,10 @@ class Flushing:
         if self.clock() - self._last >= FLUSH_EVERY:
             self.flush()
 
+    def tell(self) -> int:
+        """Bytes written so far (the MCAP writer indexes by offset)."""
+        return self.f.tell()
+
     def idle(self) -> None:
         if self._dirty and self.clock() - self._last >= IDLE_FLUSH:
             self.flush()
@@ -151,11 +155,13 @@ def _clean(text: str) -> str:
 @dataclasses.dataclass(frozen=True)
 class LogPaths:
     tlog: str
-    csv: str
+    csv: str | None                  # None with --log-format mcap
+    mcap: str | None = None          # with --log-format mcap (:mod:`companion.live.mcaplog`)
 
 
-def new_paths(log_dir: str | None, label: str) -> LogPaths:
-    """Fresh ``<dir>/<UTC time>-<label>.tlog`` and ``.csv`` (never overwriting a log)."""
+def new_paths(log_dir: str | None, label: str, log_format: str = "csv") -> LogPaths:
+    """Fresh ``<dir>/<UTC time>-<label>.tlog`` and ``.csv`` (or ``.mcap``), never overwriting
+    a log."""
     directory = Path(log_dir or DEFAULT_DIR)
     try:
         directory.mkdir(parents=True, exist_ok=True)
@@ -166,9 +172,11 @@ def new_paths(log_dir: str | None, label: str) -> LogPaths:
     stem = datetime.now(timezone.utc).strftime("%Y%m%d-%H%M%S") + f"-{label}"
     for n in range(1000):
         base = directory / (stem if n == 0 else f"{stem}-{n}")
-        tlog, csv = base.with_suffix(".tlog"), base.with_suffix(".csv")
-        if not tlog.exists() and not csv.exists():
-            return LogPaths(str(tlog), str(csv))
+        tlog, loop = base.with_suffix(".tlog"), base.with_suffix("." + log_format)
+        if not tlog.exists() and not loop.exists():
+            if log_format == "mcap":
+                return LogPaths(str(tlog), None, str(loop))
+            return LogPaths(str(tlog), str(loop))
     raise UserError(f"--log-dir {directory}: too many logs named {stem}*")
 
 
