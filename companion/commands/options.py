@@ -57,13 +57,15 @@ class FlightOptions:
     log: LogOptions = LogOptions()
     output: OutputOptions = OutputOptions()
     bus: Any = field(default_factory=_no_bus)   # companion.bus.BusOptions
+    gcs_report: bool = True            # --no-gcs-report turns it off (companion.live.gcs)
 
     @classmethod
     def from_args(cls, args: argparse.Namespace) -> "FlightOptions":
         """``companion run``'s flags: every group."""
         return cls(link=link_config(args),
                    runner=runner_config(args, max_start_distance=start_limit(
-                       args.max_start_distance)),
+                       args.max_start_distance), wait_for_mode=args.start_on_guided),
+                   gcs_report=args.gcs_report,
                    gains=gain_options(args), vehicle_file=args.vehicle,
                    controller=args.controller,
                    origin=origin_config(args), realtime=args.realtime,
@@ -76,7 +78,8 @@ class FlightOptions:
 def link_config(args: argparse.Namespace) -> LinkConfig:
     """add_link_arguments + add_timeout_arguments' --heartbeat-timeout."""
     return LinkConfig(url=args.connect, sysid=args.sysid, baud=args.baud,
-                      heartbeat_timeout=args.heartbeat_timeout)
+                      heartbeat_timeout=args.heartbeat_timeout,
+                      source_system=getattr(args, "source_system", None))
 
 
 def runner_config(args: argparse.Namespace, **more: Any) -> RunnerConfig:

@@ -4,7 +4,8 @@ from __future__ import annotations
 
 import argparse
 
-from .arguments import (add_gain_arguments, add_link_arguments, add_origin_arguments,
+from .arguments import (add_gain_arguments, add_gcs_arguments, add_link_arguments,
+                        add_origin_arguments,
                         add_output_arguments, add_safety_arguments, add_timeout_arguments,
                         add_vehicle_arguments, add_zenoh_arguments)
 
@@ -35,6 +36,7 @@ def register(subparsers) -> None:
     p.add_argument("--mission", metavar="FILE", required=True,
                    help="mission file (.toml, .plan, .waypoints)")
     add_origin_arguments(p)
+    add_gcs_arguments(p)
     add_gain_arguments(p)
     add_vehicle_arguments(p)
     add_timeout_arguments(p)

@@ -150,8 +150,9 @@ class Runner:
     def __init__(self, link: Link, tracker: Any, mission: Any, config: RunnerConfig,
                  limits: Limits, sinks: Sequence[Sink] = (), control: ControlChannel | None = None,
                  log: Callable[[str], None] = lambda text: None,
-                 origin: tuple[float, float] | None = None):
+                 origin: tuple[float, float] | None = None, gcs: Any = None):
         self.link, self.tracker, self.mission = link, tracker, mission
+        self.gcs = gcs                    # a ground station's commands (companion.live.gcs)
         self.origin = origin              # the vehicle's EKF origin (lat, lon), when known
         self.config, self.limits, self.log = config, limits, log
         self.sinks = list(sinks)
@@ -262,6 +263,8 @@ class Runner:
                 self._on_heartbeat(msg)
             elif kind == "COMMAND_ACK":
                 self._on_ack(msg)
+            elif kind in ("COMMAND_LONG", "COMMAND_INT") and self.gcs is not None:
+                self.gcs.on_command(msg, self._on_request)   # DO_PAUSE_CONTINUE, ACKed
             elif kind == "STATUSTEXT" and link.is_vehicle(msg):
                 self.log("vehicle says: " + "".join(c if c.isprintable() else "?"
                                                      for c in msg.text))
@@ -509,6 +512,12 @@ class Runner:
         # Only a heartbeat that arrived since engaging began counts: after an outage the last
         # one still says GUIDED while the vehicle sits in the HOLD we sent it.
         if not e.mode_seen:
+            if cfg.wait_for_mode:         # --start-on-guided: the pilot or a GCS engages
+                if not e.said_arm_wait:
+                    e.said_arm_wait = True
+                    self.log(f"waiting for the pilot or a ground station to select "
+                             f"{self.track_mode} and arm")
+                return
             if now - e.since > cfg.mode_timeout:
                 self._finish(f"failsafe: the vehicle did not enter {self.track_mode} within "
                              f"{cfg.mode_timeout:g} s", ExitCode.FAULT)
@@ -516,6 +525,8 @@ class Runner:
                 self._request_mode(self.track_mode, now)
             return
         if not link.armed:
+            if cfg.wait_for_mode:
+                return
             if now - e.since > cfg.arm_timeout:
                 self._finish(f"failsafe: the vehicle was not armed within {cfg.arm_timeout:g} s"
                              + ("" if cfg.arm else " (use --arm to arm it from here)"), ExitCode.FAULT)

@@ -18,6 +18,7 @@ from typing import Any, Callable, Sequence
 from ..core import controllers
 from ..core.limits import Limits
 from ..errors import UserError
+from . import gcs
 from . import origin as origin_mod
 from . import policy
 from .config import LinkConfig, OriginConfig, RunnerConfig
@@ -39,6 +40,7 @@ class RunSettings:
     origin: OriginConfig = OriginConfig()
     realtime: bool = False             # --realtime: SCHED_FIFO for the loop
     controller: str = controllers.DEFAULT   # --controller: a name in companion.core.controllers
+    gcs_report: bool = True            # STATUSTEXT / NAMED_VALUE_FLOAT / DO_PAUSE_CONTINUE
 
 
 REALTIME_PRIORITY = 10   # low among real-time tasks: above every normal process, below the kernel's
@@ -118,8 +120,12 @@ def fly(s: RunSettings, sinks: Sequence[Sink] = (), control: ControlChannel | No
             log(f"gains: {gains_source}; {limits_text}")
             tracker = make_tracker(link, limits)
         config = replace(s.runner, period=1.0 / accepted if accepted else None)
+        reporter, commands = gcs.attach(link) if s.gcs_report else (None, None)
+        sinks = [*sinks, reporter] if reporter is not None else sinks
         runner = Runner(link, tracker, mission, config, limits, sinks, control, log,
-                        origin=origin.latlon if origin is not None else None)
+                        origin=origin.latlon if origin is not None else None, gcs=commands)
+        if reporter is not None:
+            reporter.watch(runner.status)
         # Sinks that write files (the flight-log CSV) flush when the loop is about to sleep.
         link.on_idle.extend(idle for sink in sinks if (idle := getattr(sink, "idle", None)))
         if switch is not None:
