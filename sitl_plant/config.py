@@ -38,3 +38,5 @@ class PlantConfig:
     ekf_delay: float = 0.0
     mav_type: int | None = None
     mavlink1: bool = False
+    gcs: str | None = None             # --gcs URL: a ground station's second link
+    mission_drop_item: int | None = None   # --mission-drop-item N: never answer item N

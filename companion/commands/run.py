@@ -34,7 +34,8 @@ def register(subparsers) -> None:
         epilog=EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
     add_link_arguments(p, default_connect=True)
     p.add_argument("--mission", metavar="FILE", required=True,
-                   help="mission file (.toml, .plan, .waypoints)")
+                   help="mission file (.toml, .plan, .waypoints), or 'vehicle': the mission "
+                        "stored on the vehicle, pulled at start (companion mission pull)")
     add_origin_arguments(p)
     add_gcs_arguments(p)
     add_gain_arguments(p)
@@ -55,8 +56,13 @@ def run(args) -> int:
     from .flight import fly_mission, load_mission
     from .options import FlightOptions
     from .run_result import print_result
-    mission = load_mission(args.mission, args.origin)
     options = FlightOptions.from_args(args)
+    path = args.mission
+    if path == "vehicle":
+        from .flight import logger
+        from .mission_pull import vehicle_mission_file
+        path = str(vehicle_mission_file(options, logger("companion run", options.output.quiet)))
+    mission = load_mission(path, args.origin)
     result, paths = fly_mission(options, mission)
     print_result(result, options.output.json,
                  {"tlog": paths.tlog, "csv": paths.csv} if paths else None)

@@ -225,4 +225,5 @@ PROFILE = AutopilotProfile(
         arm_texts=("Throttle armed", "Throttle disarmed"),
         tick_aligned=True,              # 40 Hz on a 50 Hz scheduler: 20 / 20 / 20 / 40 ms
         params=plant_params),
+    mission_home_item=True, auto_mode="AUTO",
 )

@@ -1,0 +1,50 @@
+"""The mission stored on the vehicle, read over MAVLink into a QGroundControl ``.plan``.
+
+Connects like a run (:class:`companion.live.link.Link`: the same identity, signing and serial
+handling), waits for the vehicle's heartbeat, reads its mission with the mission protocol
+(:mod:`companion.mav.mission_transfer`) and returns it as a .plan, the format
+:mod:`companion.mission.plan_import` reads (``companion mission pull``, ``companion run
+--mission vehicle``). A vehicle that never answers is a user's problem (exit 2: wrong link or
+id); a transfer that started and broke is a fault (exit 3); a partial mission is never returned.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Any, Callable
+
+from ..errors import ExitCode, UserError
+from ..mav import mission_transfer as mt
+from .config import LinkConfig
+
+
+def pull_plan(config: LinkConfig, transfer: mt.TransferConfig = mt.TransferConfig(),
+              log: Callable[[str], None] = lambda text: None) -> tuple[dict[str, Any], int]:
+    """(the vehicle's mission as a .plan object, its item count as stored)."""
+    from .link import Link
+    link = Link(config)
+    try:
+        v = link.wait_vehicle()
+        try:
+            items = mt.pull(link.master, v.sysid, v.compid, transfer, log)
+        except mt.TransferError as err:
+            raise UserError(f"{config.url}: {err}", ExitCode.FAULT if err.started
+                            else ExitCode.USER_ERROR) from None
+        plan = mt.to_plan(items, v.profile.mission_home_item, vehicle_type=v.mav_type)
+        return plan, items.count()
+    finally:
+        link.close()
+
+
+def write_plan(plan: dict[str, Any], path: str | Path) -> Path:
+    """Write a .plan whole or not at all (a temporary file renamed into place)."""
+    path = Path(path)
+    tmp = path.with_name(path.name + ".part")
+    try:
+        tmp.write_text(json.dumps(plan, indent=2) + "\n", encoding="utf-8")
+        tmp.replace(path)
+    except OSError as exc:
+        tmp.unlink(missing_ok=True)
+        raise UserError(f"{path}: cannot write: {exc.strerror or exc}") from None
+    return path
