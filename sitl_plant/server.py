@@ -25,6 +25,7 @@ from .clock import LockstepGate, Pacer
 from .config import PlantConfig
 from .earth import Earth, e7
 from .link import Link
+from .auto import Auto
 from .mission import MissionStore
 from .modes import hold_mode
 from .setpoint import Setpoint
@@ -53,12 +54,14 @@ class PlantServer:
         # does (what is not addressed to the plant alone goes across); no pose streams on it.
         self.gcs = gcs
         self.mission = MissionStore(drop_item=config.mission_drop_item)
+        self._current_sent = 0            # MISSION_CURRENT last announced (0 at boot)
         self.vehicle = vehicle or Vehicle(config.vehicle)
         self.wall = wall
         gpi = config.global_position_rate
         self.streams = streams.StreamSchedule(
             config.loop_rate, tick_aligned=config.tick_aligned,
-            initial={streams.GLOBAL_POSITION_INT: int(round(1e6 / gpi)) if gpi > 0 else None})
+            initial={streams.GLOBAL_POSITION_INT: int(round(1e6 / gpi)) if gpi > 0 else None,
+                     streams.MISSION_CURRENT: None})
         self.earth = Earth(config.origin, config.vehicle.start[:2])
         self._after_ack: list[Callable[[], None]] = []
         self.telemetry = TelemetryPipe(config.telemetry)
@@ -80,6 +83,8 @@ class PlantServer:
             bytewise=v.autopilot.bytewise_params, overrides=config.params,
             loss=config.param_loss, seed=config.telemetry.seed)
         self._update_mav_type()
+        if self.vehicle.autopilot.auto_mode is not None:
+            self.vehicle.auto = Auto(self.mission, self.earth.origin)
 
     def _update_mav_type(self) -> None:
         self.link.mav_type = (self.config.mav_type if self.config.mav_type is not None
@@ -162,6 +167,10 @@ class PlantServer:
             vehicle.step(dt)
             if vehicle.texts:
                 self._flush_texts()
+            auto = vehicle.auto
+            if auto is not None and (auto.reached or auto.texts
+                                     or self.mission.current != self._current_sent):
+                self._flush_mission()
             if self.t_us >= nxt:
                 self._tick()
                 nxt = self._next_send_us()
@@ -203,6 +212,8 @@ class PlantServer:
                                 self._status_sensors())
             elif mid == streams.GLOBAL_POSITION_INT:
                 self._global_position()
+            elif mid == streams.MISSION_CURRENT:
+                link._send(link.mav.mission_current_send, self.mission.current)
             else:
                 if sample is None:
                     sample = self._sample()
@@ -253,6 +264,19 @@ class PlantServer:
         self.link.heartbeat(v.autopilot, v.base_mode, v.custom_mode, v.armed)
         if self.gcs is not None:
             self.gcs.heartbeat(v.autopilot, v.base_mode, v.custom_mode, v.armed)
+
+    def _flush_mission(self) -> None:
+        """AUTO's news to both links: items reached, its texts, the current item if it moved."""
+        reached, texts = self.vehicle.auto.pop()
+        links = [self.link] + ([self.gcs] if self.gcs is not None else [])
+        for link in links:
+            for seq in reached:
+                link._send(link.mav.mission_item_reached_send, seq)
+            for severity, text in texts:
+                link.statustext(severity, text)
+            if self.mission.current != self._current_sent:
+                link._send(link.mav.mission_current_send, self.mission.current)
+        self._current_sent = self.mission.current
 
     def _flush_texts(self) -> None:
         for severity, text in self.vehicle.pop_texts():

@@ -178,3 +178,56 @@ def test_start_on_guided_engages_nothing_and_tracks_once_the_gcs_does(tmp_path):
                                        for s in proxy.companion_sent("COMMAND_LONG")), sent
     assert "waiting for the pilot or a ground station to select GUIDED" in comp.stderr
     assert json.loads(comp.stdout.strip().splitlines()[-1])["reason"] == "mission_done"
+
+
+def handover_items(twice: bool) -> list:
+    """Home; waypoint; [enable; two waypoints; disable]; waypoint (x2 with ``twice``)."""
+    def wp(north: float, east: float):
+        lat, lon = geo.latlon_from_ne(north, east, ORIGIN)
+        return mt.waypoint(0, lat, lon, 0.0)
+
+    def guided(on: bool):
+        return mt.item(0, 92, 2, (1.0 if on else 0.0, 0.0, 0.0, 0.0), 0, 0, 0.0)
+
+    out = [mt.item(0, 16, 0, (0.0, 0.0, 0.0, 0.0), int(round(ORIGIN[0] * 1e7)),
+                   int(round(ORIGIN[1] * 1e7)), 0.0),
+           wp(8.0, 0.0), guided(True), wp(14.0, 4.0), wp(10.0, 10.0), guided(False),
+           wp(4.0, 12.0)]
+    if twice:
+        out += [guided(True), wp(0.0, 6.0), wp(-2.0, 0.0), guided(False), wp(4.0, -4.0)]
+    for i, it in enumerate(out):
+        it.seq = i
+    return out
+
+
+def test_handover_inside_auto_twice(tmp_path):
+    """AUTO drives to the first waypoint, the companion tracks each enable..disable segment
+    from the rover's pose, hands back, AUTO goes on and reaches the last waypoint."""
+    gcs_port = free_udp_port()
+    items = handover_items(twice=True)
+    with PlantProcess("--speedup", "2", "--gcs", f"udpout:127.0.0.1:{gcs_port}") as plant, \
+            GroundStation(f"udpin:127.0.0.1:{gcs_port}") as gcs:
+        gcs.wait_for(lambda: gcs.of("HEARTBEAT", (1, 1)), 10.0, "the plant's heartbeat")
+        gcs.upload(1, items)
+        with Companion(plant.port, "--handover", "--no-zenoh", "--json", "--log-dir",
+                       str(tmp_path)) as comp:
+            gcs.wait_for(lambda: gcs.of("HEARTBEAT", (1, COMPANION)), 20.0, "the companion")
+            time.sleep(1.0)
+            assert gcs.command((1, 1), 400, 1) == 0
+            assert gcs.command((1, 1), 176, 1, 10) == 0          # AUTO, by the GCS
+            code = comp.wait(120.0)
+        time.sleep(0.3)
+        reached = [m.seq for m in gcs.of("MISSION_ITEM_REACHED", (1, 1))]
+    assert code == 0, comp.stderr
+    r = comp.result()
+    assert r["reason"].startswith("mission_done: AUTO reached the last mission item"), r
+    segs = r["handovers"]
+    assert [s["items"] for s in segs] == [[2, 5], [7, 10]], segs
+    assert all(s["ended"].startswith("handed back") for s in segs)
+    for s in segs:
+        assert s["steady_rms"] < 0.2, segs
+    assert reached[0] == 1 and reached[-1] == len(items) - 1, reached
+    texts = gcs.texts((1, COMPANION))
+    assert sum(t.startswith("PZC: tracking: hand-over") for t in texts) == 2, texts
+    assert sum(t.startswith("PZC: hand-back") for t in texts) == 2, texts
+    print(f"\nhand-overs on the plant: {segs}")

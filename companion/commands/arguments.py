@@ -106,6 +106,10 @@ def add_gcs_arguments(p: argparse.ArgumentParser) -> None:
                         "ground station switches the vehicle to GUIDED (PX4: OFFBOARD) and "
                         "arms it, then track; leaving that mode ends the run as a pilot's "
                         "switch does")
+    g.add_argument("--handover", action="store_true",
+                   help="ArduPilot: wait while the vehicle flies its own AUTO mission and track "
+                        "each segment between a NAV_GUIDED_ENABLE 1 and 0 item when AUTO "
+                        "reaches it, then hand back (the mission is pulled from the vehicle)")
 
 
 def add_origin_arguments(p: argparse.ArgumentParser) -> None:

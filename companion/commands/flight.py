@@ -162,7 +162,7 @@ class Flight:
         return RunSettings(link=link, mission=mission, runner=o.runner, gains=o.gains,
                            vehicle=vehicle if vehicle is not None else KnownVehicle(),
                            origin=o.origin, realtime=o.realtime, controller=o.controller,
-                           gcs_report=o.gcs_report)
+                           gcs_report=o.gcs_report, handover=o.handover)
 
     def fly(self, mission: Any, vehicle: Any = None, sinks: Sequence[Any] = (),
             make_tracker: Callable[[Any, Any], Any] | None = None):

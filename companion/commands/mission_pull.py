@@ -41,7 +41,7 @@ def register(sub) -> None:
 
 def pull(url: str, sysid: int | None, baud: int | None, source_system: int | None,
          signing_key: bytes | None, heartbeat_timeout: float, timeout: float, retries: int,
-         log) -> tuple[dict, int]:
+         log):
     from ..live.config import LinkConfig
     from ..live.vehicle_mission import pull_plan
     from ..mav.mission_transfer import TransferConfig
@@ -54,9 +54,10 @@ def run_pull(args) -> int:
     from ..live.vehicle_mission import write_plan
     from .flight import logger, signing_key
     log = logger("companion mission pull", args.quiet)
-    plan, count = pull(args.connect, args.sysid, args.baud, args.source_system,
-                       signing_key(args.signing_key), args.heartbeat_timeout, args.timeout,
-                       args.retries, log)
+    pulled = pull(args.connect, args.sysid, args.baud, args.source_system,
+                  signing_key(args.signing_key), args.heartbeat_timeout, args.timeout,
+                  args.retries, log)
+    plan, count = pulled.plan, pulled.count
     if args.out:
         if Path(args.out).suffix.lower() != ".plan":
             from ..errors import UserError
@@ -69,20 +70,34 @@ def run_pull(args) -> int:
     return 0
 
 
-def vehicle_mission_file(options, log) -> Path:
+def vehicle_mission_file(options, log):
     """``run --mission vehicle``: pull the stored mission, keep it beside the flight logs (or in
-    a temporary folder with --no-log) and return its path."""
+    a temporary folder with --no-log): (its path, the Pulled mission)."""
     import tempfile
 
     from ..live.vehicle_mission import write_plan
     from .flight import signing_key
     link = options.link
-    plan, count = pull(link.url, link.sysid, link.baud, link.source_system,
-                       signing_key(options.signing_key_file), link.heartbeat_timeout, 1.5, 5,
-                       log)
+    pulled = pull(link.url, link.sysid, link.baud, link.source_system,
+                  signing_key(options.signing_key_file), link.heartbeat_timeout, 1.5, 5, log)
     folder = Path(options.log.folder or "logs") if options.log.enabled else \
         Path(tempfile.mkdtemp(prefix="pzc-vehicle-mission-"))
     folder.mkdir(parents=True, exist_ok=True)
-    path = write_plan(plan, folder / time.strftime("vehicle-mission-%Y%m%d-%H%M%S.plan"))
-    log(f"pulled the vehicle's mission: {count} items, kept as {path}")
-    return path
+    path = write_plan(pulled.plan, folder / time.strftime("vehicle-mission-%Y%m%d-%H%M%S.plan"))
+    log(f"pulled the vehicle's mission: {pulled.count} items, kept as {path}")
+    return path, pulled
+
+
+def handover_plan(pulled):
+    """``run --handover``: the segments of the pulled mission (a UserError if the autopilot has
+    no guided sub-mode in its missions, or a segment is malformed)."""
+    from ..errors import UserError
+    from ..live.handover import HandoverPlan, segments
+    if pulled.profile.auto_mode is None:
+        raise UserError(f"--handover: {pulled.profile.label} has no guided sub-mode inside a "
+                        "mission (ArduPilot's NAV_GUIDED_ENABLE); see docs/ground-station.md")
+    found = segments(pulled.items)
+    if not found:
+        raise UserError("--handover: the vehicle's mission has no NAV_GUIDED_ENABLE 1 ... "
+                        "NAV_GUIDED_ENABLE 0 segment for the companion")
+    return HandoverPlan(found, len(pulled.items) - 1)

@@ -58,6 +58,15 @@ class FlightOptions:
     output: OutputOptions = OutputOptions()
     bus: Any = field(default_factory=_no_bus)   # companion.bus.BusOptions
     gcs_report: bool = True            # --no-gcs-report turns it off (companion.live.gcs)
+    handover: Any = None               # --handover: a companion.live.handover.HandoverPlan
+
+    def for_handover(self, plan: Any, auto_mode: str) -> "FlightOptions":
+        """--handover: AUTO's guided sub-mode is the track mode, entered by the mission, never
+        asked for; the rover's pose at each hand-over is the segment's start (no start limit)."""
+        from dataclasses import replace
+        runner = replace(self.runner, wait_for_mode=True, track_mode=auto_mode,
+                         autostart=False, max_start_distance=math.inf)
+        return replace(self, runner=runner, handover=plan)
 
     @classmethod
     def from_args(cls, args: argparse.Namespace) -> "FlightOptions":

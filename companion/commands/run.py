@@ -33,7 +33,7 @@ def register(subparsers) -> None:
                     "PZC law so the rover follows the mission.",
         epilog=EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
     add_link_arguments(p, default_connect=True)
-    p.add_argument("--mission", metavar="FILE", required=True,
+    p.add_argument("--mission", metavar="FILE",
                    help="mission file (.toml, .plan, .waypoints), or 'vehicle': the mission "
                         "stored on the vehicle, pulled at start (companion mission pull)")
     add_origin_arguments(p)
@@ -57,11 +57,24 @@ def run(args) -> int:
     from .options import FlightOptions
     from .run_result import print_result
     options = FlightOptions.from_args(args)
-    path = args.mission
-    if path == "vehicle":
+    path, handover = args.mission, None
+    if path is None and not args.handover:
+        from ..errors import UserError
+        raise UserError("companion run needs --mission FILE (or --mission vehicle, or "
+                        "--handover)")
+    if args.handover and path not in (None, "vehicle"):
+        from ..errors import UserError
+        raise UserError("--handover flies the mission stored on the vehicle: give --mission "
+                        "vehicle (or no --mission)")
+    if path == "vehicle" or args.handover:
         from .flight import logger
-        from .mission_pull import vehicle_mission_file
-        path = str(vehicle_mission_file(options, logger("companion run", options.output.quiet)))
+        from .mission_pull import handover_plan, vehicle_mission_file
+        pulled_path, pulled = vehicle_mission_file(options, logger("companion run",
+                                                                   options.output.quiet))
+        path = str(pulled_path)
+        if args.handover:
+            handover = handover_plan(pulled)
+            options = options.for_handover(handover, pulled.profile.auto_mode)
     mission = load_mission(path, args.origin)
     result, paths = fly_mission(options, mission)
     print_result(result, options.output.json,

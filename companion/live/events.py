@@ -28,6 +28,7 @@ FAILSAFE = "failsafe"
 PILOT_OVERRIDE = "pilot_override"
 STOPPED = "stopped"
 MISSION_LOADED = "mission_loaded"
+HANDED_BACK = "handed_back"          # --handover: a segment ended, AUTO drives again
 
 
 @dataclass(slots=True)

@@ -42,7 +42,7 @@ MAV_RESULT_ACCEPTED, MAV_RESULT_TEMPORARILY_REJECTED, MAV_RESULT_DENIED = 0, 1, 
 
 # pzc_state: the runner's State values as numbers (stable: a GCS graph or script reads them)
 STATE_CODES = {"waiting": 0, "engaging": 1, "ready": 2, "tracking": 3, "paused": 4,
-               "failsafe": 5, "done": 6, "handover_wait": 7}
+               "failsafe": 5, "done": 6}
 VALUE_NAMES = ("pzc_err", "pzc_state", "pzc_prog", "pzc_mt")
 
 # What each event says, and how loud.
@@ -55,6 +55,7 @@ _EVENT_TEXT = {
     ev.MISSION_LOADED: (INFO, "loaded"),
     ev.FAILSAFE: (CRITICAL, "FAILSAFE"),
     ev.PILOT_OVERRIDE: (WARNING, "pilot took over"),
+    ev.HANDED_BACK: (NOTICE, "hand-back"),
 }
 
 

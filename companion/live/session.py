@@ -19,6 +19,7 @@ from ..core import controllers
 from ..core.limits import Limits
 from ..errors import UserError
 from . import gcs
+from . import handover as handover_mod
 from . import origin as origin_mod
 from . import policy
 from .config import LinkConfig, OriginConfig, RunnerConfig
@@ -41,6 +42,7 @@ class RunSettings:
     realtime: bool = False             # --realtime: SCHED_FIFO for the loop
     controller: str = controllers.DEFAULT   # --controller: a name in companion.core.controllers
     gcs_report: bool = True            # STATUSTEXT / NAMED_VALUE_FLOAT / DO_PAUSE_CONTINUE
+    handover: Any = None               # --handover: a live.handover.HandoverPlan
 
 
 REALTIME_PRIORITY = 10   # low among real-time tasks: above every normal process, below the kernel's
@@ -122,8 +124,11 @@ def fly(s: RunSettings, sinks: Sequence[Sink] = (), control: ControlChannel | No
         config = replace(s.runner, period=1.0 / accepted if accepted else None)
         reporter, commands = gcs.attach(link) if s.gcs_report else (None, None)
         sinks = [*sinks, reporter] if reporter is not None else sinks
+        latlon = origin.latlon if origin is not None else None
+        handover = (None if s.handover is None
+                    else handover_mod.attach(s.handover, link, latlon, log))
         runner = Runner(link, tracker, mission, config, limits, sinks, control, log,
-                        origin=origin.latlon if origin is not None else None, gcs=commands)
+                        origin=latlon, gcs=commands, handover=handover)
         if reporter is not None:
             reporter.watch(runner.status)
         # Sinks that write files (the flight-log CSV) flush when the loop is about to sleep.
@@ -158,4 +163,6 @@ def fly(s: RunSettings, sinks: Sequence[Sink] = (), control: ControlChannel | No
                **({"ekf_origin": origin.as_dict()} if origin is not None else {}),
                "missed_gaps": st.gaps, "backlog": st.backlog,
                "sink_errors": runner.sink_errors, "signing_rejected": link.signing_rejected,
-               "tracker_resets": runner.tracker_resets, "udp_recv_buffer": link.recv_buffer})
+               "tracker_resets": runner.tracker_resets, "udp_recv_buffer": link.recv_buffer,
+               **({"handovers": [r.as_dict() for r in handover.results]}
+                  if handover is not None else {})})

@@ -11,6 +11,7 @@ id); a transfer that started and broke is a fault (exit 3); a partial mission is
 from __future__ import annotations
 
 import json
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable
 
@@ -19,9 +20,20 @@ from ..mav import mission_transfer as mt
 from .config import LinkConfig
 
 
+@dataclass(frozen=True)
+class Pulled:
+    plan: dict[str, Any]               # the .plan (JSON object)
+    items: list[Any]                   # MISSION_ITEM_INT, as stored (home first on ArduPilot)
+    profile: Any                       # the vehicle's autopilot profile
+
+    @property
+    def count(self) -> int:
+        return len(self.items)
+
+
 def pull_plan(config: LinkConfig, transfer: mt.TransferConfig = mt.TransferConfig(),
-              log: Callable[[str], None] = lambda text: None) -> tuple[dict[str, Any], int]:
-    """(the vehicle's mission as a .plan object, its item count as stored)."""
+              log: Callable[[str], None] = lambda text: None) -> Pulled:
+    """The vehicle's mission: as a .plan, as items, and whose it is."""
     from .link import Link
     link = Link(config)
     try:
@@ -32,7 +44,7 @@ def pull_plan(config: LinkConfig, transfer: mt.TransferConfig = mt.TransferConfi
             raise UserError(f"{config.url}: {err}", ExitCode.FAULT if err.started
                             else ExitCode.USER_ERROR) from None
         plan = mt.to_plan(items, v.profile.mission_home_item, vehicle_type=v.mav_type)
-        return plan, items.count()
+        return Pulled(plan, [items.wp(i) for i in range(items.count())], v.profile)
     finally:
         link.close()
 
