@@ -100,3 +100,60 @@ def test_uploaded_pulled_identical_flown_within_1m_and_paused_from_the_gcs(ardup
           f"identical past home; waypoints passed within {[round(m, 3) for m in misses]} m; "
           f"steady RMS {res['steady_rms']:.3f} m; GCS heard {len(texts)} texts: {texts}")
     assert max(misses) < 1.0, misses
+
+
+def _handover_items(home: tuple[float, float]) -> list:
+    def wp(north: float, east: float):
+        lat, lon = geo.latlon_from_ne(north, east, home)
+        return mt.waypoint(0, lat, lon, 0.0)
+
+    def guided(on: bool):
+        return mt.item(0, 92, 2, (1.0 if on else 0.0, 0.0, 0.0, 0.0), 0, 0, 0.0)
+
+    out = [mt.item(0, 16, 0, (0.0, 0.0, 0.0, 0.0), int(round(home[0] * 1e7)),
+                   int(round(home[1] * 1e7)), 0.0),
+           mt.item(0, 178, 2, (1.0, 1.5, -1.0, 0.0), 0, 0, 0.0),
+           wp(12.0, 0.0), guided(True), wp(20.0, 6.0), wp(14.0, 14.0), guided(False),
+           wp(4.0, 16.0), guided(True), wp(-2.0, 8.0), wp(2.0, 0.0), guided(False),
+           wp(10.0, -6.0)]
+    for i, it in enumerate(out):
+        it.seq = i
+    return out
+
+
+@pytest.mark.sitl
+@pytest.mark.slow
+def test_handover_inside_auto_twice_on_ardupilot(ardupilot, tmp_path):
+    """waypoint, NAV_GUIDED_ENABLE 1, two waypoints, NAV_GUIDED_ENABLE 0, waypoint, and once
+    more: ArduPilot's AUTO drives itself to the waypoints outside the segments, the companion
+    tracks each segment and hands back, AUTO reaches the last waypoint."""
+    sitl = ardupilot(speedup=SPEEDUP)
+    with GroundStation(sitl.url(0)) as gcs:
+        fix = gcs.wait_for(lambda: [m for m in gcs.of("GPS_RAW_INT", (1, 1))
+                                    if m.fix_type >= 3], 60.0, "a 3-D GPS fix")
+        home = (fix[-1].lat / 1e7, fix[-1].lon / 1e7)
+        items = _handover_items(home)
+        gcs.upload(1, items)
+        sitl.wait_log("SERIAL1 on TCP port", 15.0)
+        with CompanionProcess(sitl.url(1), "--handover", "--no-zenoh", "--json",
+                              "--log-dir", str(tmp_path / "logs"), "--w-c", "1.2",
+                              "--max-speed", "2", "--max-yaw-rate", "1.5") as comp:
+            gcs.wait_for(lambda: gcs.of("HEARTBEAT", (1, COMPANION)), 30.0, "the companion")
+            deadline = time.monotonic() + BOOT_WALL
+            while gcs.command((1, 1), 400, 1) != 0:          # the GCS arms (EKF permitting)
+                assert time.monotonic() < deadline, "never armed"
+                time.sleep(1.0)
+            while gcs.command((1, 1), 176, 1, 10) != 0:      # ... and starts AUTO (once the
+                assert time.monotonic() < deadline, gcs.texts((1, 1))   # EKF has a position)
+                time.sleep(1.0)
+            code = comp.wait(240.0)
+        time.sleep(0.5)
+        reached = [m.seq for m in gcs.of("MISSION_ITEM_REACHED", (1, 1))]
+    assert code == 0, comp.stderr
+    r = comp.result()
+    segs = r["handovers"]
+    print(f"\nArduPilot SITL hand-overs: {segs}; items reached {reached}; reason {r['reason']}")
+    assert [s["items"] for s in segs] == [[3, 6], [8, 11]], segs
+    assert all(s["ended"].startswith("handed back") for s in segs), segs
+    assert r["reason"].startswith("mission_done: AUTO reached the last mission item"), r
+    assert 2 in reached and len(items) - 1 in reached, reached

@@ -38,6 +38,7 @@ EMERGENCY, ALERT, CRITICAL, ERROR, WARNING, NOTICE, INFO, DEBUG = range(8)
 TEXT_MAX = 50            # STATUSTEXT.text: 50 characters
 PREFIX = "PZC: "
 MAV_CMD_DO_PAUSE_CONTINUE = 193
+LINGER_S = 0.3           # wall s between the last report and the link's closing
 MAV_RESULT_ACCEPTED, MAV_RESULT_TEMPORARILY_REJECTED, MAV_RESULT_DENIED = 0, 1, 2
 
 # pzc_state: the runner's State values as numbers (stable: a GCS graph or script reads them)
@@ -143,7 +144,11 @@ class GcsReporter:
             self.values_sent += 1
 
     def close(self) -> None:
-        pass
+        # The last text and values left just now: give the autopilot a moment to route them
+        # before the link closes (ArduPilot SITL dropped a STATUSTEXT that arrived together
+        # with the TCP close: seen 2026-12-02). The rover is already stopped.
+        if self.texts_sent:
+            time.sleep(LINGER_S)
 
 
 class GcsCommands:
