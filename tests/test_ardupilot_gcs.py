@@ -157,3 +157,51 @@ def test_handover_inside_auto_twice_on_ardupilot(ardupilot, tmp_path):
     assert all(s["ended"].startswith("handed back") for s in segs), segs
     assert r["reason"].startswith("mission_done: AUTO reached the last mission item"), r
     assert 2 in reached and len(items) - 1 in reached, reached
+
+
+@pytest.mark.sitl
+@pytest.mark.slow
+@pytest.mark.parametrize("identity", ["onboard", "255"])
+def test_the_gcs_failsafe_still_fires_while_the_companion_runs(ardupilot, tmp_path, identity):
+    """FS_GCS_ENABLE 1: the ground station (system 255) goes silent while the companion tracks.
+    With the companion's onboard identity (the vehicle's system id, component 191) ArduPilot's
+    GCS failsafe fires and stops the rover; heart-beating as 255 (``--source-system 255``, what
+    the companion did before) it keeps the failsafe from ever firing."""
+    from ardupilot_harness import circle_mission
+    sitl = ardupilot(speedup=SPEEDUP, params={"FS_GCS_ENABLE": 1, "FS_GCS_TIMEOUT": 5})
+    mission = circle_mission(tmp_path / "circle.toml", duration=600.0)
+    extra = ["--source-system", "255"] if identity == "255" else []
+    gcs = GroundStation(sitl.url(0)).__enter__()
+    gcs.wait_for(lambda: gcs.of("HEARTBEAT", (1, 1)), 30.0, "the vehicle's heartbeat")
+    sitl.wait_log("SERIAL2 on TCP port", 15.0)
+    # a listener that is no ground station (system 250: not MAV_GCS_SYSID): the vehicle's texts
+    watch = GroundStation(sitl.url(2), sysid=250).__enter__()
+    with CompanionProcess(sitl.url(1), "--mission", str(mission), "--arm", "--no-zenoh",
+                          "--json", "--no-log", "--w-c", "1.2", *extra) as comp:
+        me = (255 if identity == "255" else 1, COMPANION)
+        gcs.wait_for(lambda: any("tracking" in t for t in gcs.texts(me)), BOOT_WALL, "tracking")
+        time.sleep(2.0)
+        gcs.__exit__(None, None, None)                   # the ground station is lost
+        t_lost = time.monotonic()
+        try:
+            code = comp.wait(10.0 + 30.0 / SPEEDUP)      # FS_GCS_TIMEOUT 5 vehicle s + margin
+        except AssertionError:
+            code = None                                  # still tracking: no failsafe
+        waited = time.monotonic() - t_lost
+    time.sleep(0.5)
+    watch.__exit__(None, None, None)
+    said = watch.texts((1, 1))
+    if identity == "onboard":
+        assert code == 3, comp.stderr
+        assert "mode changed to HOLD" in comp.stderr, comp.stderr
+        # this build words its GCS failsafe "Radio Failsafe" (with FS_GCS_ENABLE 0 nothing
+        # happens at all: seen 2026-12-02)
+        assert any("ailsafe" in t for t in said), " | ".join(said[-12:])
+        print(f"\nonboard identity: GCS failsafe after {waited:.2f} s wall "
+              f"({waited * SPEEDUP:.1f} vehicle s at x{SPEEDUP}); companion exit {code}; "
+              f"the vehicle said {[t for t in said if 'ailsafe' in t]}")
+    else:
+        assert code is None, comp.stderr
+        assert not any("ailsafe" in t for t in said), said
+        print(f"\n--source-system 255: no GCS failsafe in {waited:.1f} s wall "
+              f"({waited * SPEEDUP:.0f} vehicle s) after the ground station was lost")
