@@ -14,8 +14,9 @@ request for item N (a link that loses it every time), so a download cannot compl
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any, Callable
+from typing import Any
 
 MISSION_TYPE = 0
 ACCEPTED, ERROR, NO_SPACE, INVALID_SEQUENCE = 0, 1, 4, 13

@@ -7,8 +7,9 @@ from __future__ import annotations
 import os
 import threading
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any, Callable
+from typing import Any
 
 os.environ["MAVLINK20"] = "1"
 from pymavlink import mavutil  # noqa: E402
@@ -38,7 +39,7 @@ class GroundStation:
         self._thread = threading.Thread(target=self._run, daemon=True)
         self._next_hb = 0.0
 
-    def __enter__(self) -> "GroundStation":
+    def __enter__(self) -> GroundStation:
         self._thread.start()
         return self
 

@@ -17,11 +17,11 @@ import sys
 import time
 
 import pytest
-
 from ardupilot_harness import ROOT, CompanionProcess
+from gcs_harness import COMPANION, GroundStation
+
 from companion.mav import mission_transfer as mt
 from companion.mission import geo
-from gcs_harness import COMPANION, GroundStation
 
 SPEEDUP = 5
 BOOT_WALL = 120.0 / SPEEDUP + 30.0

@@ -26,7 +26,8 @@ sending is the link's pymavlink ``mav``.
 from __future__ import annotations
 
 import time
-from typing import Any, Callable
+from collections.abc import Callable
+from typing import Any
 
 from ..errors import ExitCode
 from . import events as ev

@@ -11,9 +11,10 @@ id); a transfer that started and broke is a fault (exit 3); a partial mission is
 from __future__ import annotations
 
 import json
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 from ..errors import ExitCode, UserError
 from ..mav import mission_transfer as mt
@@ -31,7 +32,7 @@ class Pulled:
         return len(self.items)
 
 
-def pull_plan(config: LinkConfig, transfer: mt.TransferConfig = mt.TransferConfig(),
+def pull_plan(config: LinkConfig, transfer: mt.TransferConfig = mt.DEFAULT,
               log: Callable[[str], None] = lambda text: None) -> Pulled:
     """The vehicle's mission: as a .plan, as items, and whose it is."""
     from .link import Link

@@ -23,8 +23,9 @@ from __future__ import annotations
 import math
 import os
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any, Callable
+from typing import Any
 
 os.environ["MAVLINK20"] = "1"   # before pymavlink.mavutil is imported: MAVLink 2 frames
 os.environ.setdefault("MAVLINK_DIALECT", "ardupilotmega")
@@ -51,6 +52,9 @@ class TransferConfig:
     retries: int = 5         # times a request is sent again before giving up
 
 
+DEFAULT = TransferConfig()
+
+
 def _wait(master: Any, kinds: tuple[str, ...], sysid: int, compid: int,
           timeout: float) -> Any | None:
     """The next message of ``kinds`` from (sysid, compid) within ``timeout`` s, else None."""
@@ -69,7 +73,7 @@ def _ack_error(msg: Any) -> str:
     return f"MISSION_ACK {name}"
 
 
-def pull(master: Any, sysid: int, compid: int, config: TransferConfig = TransferConfig(),
+def pull(master: Any, sysid: int, compid: int, config: TransferConfig = DEFAULT,
          log: Callable[[str], None] = lambda text: None) -> mavwp.MAVWPLoader:
     """Read the vehicle's mission: every MISSION_ITEM_INT, in order (raises TransferError)."""
     mav, c = master.mav, config
@@ -118,7 +122,7 @@ def pull(master: Any, sysid: int, compid: int, config: TransferConfig = Transfer
 
 
 def push(master: Any, sysid: int, compid: int, items: list[Any],
-         config: TransferConfig = TransferConfig()) -> None:
+         config: TransferConfig = DEFAULT) -> None:
     """Upload ``items`` (MISSION_ITEM_INT messages, seq 0..n-1) as a ground station does."""
     mav, c = master.mav, config
     done: set[int] = set()
