@@ -135,7 +135,8 @@ def test_handover_inside_auto_twice_on_ardupilot(ardupilot, tmp_path):
         items = _handover_items(home)
         gcs.upload(1, items)
         sitl.wait_log("SERIAL1 on TCP port", 15.0)
-        with CompanionProcess(sitl.url(1), "--handover", "--no-zenoh", "--json",
+        with CompanionProcess(sitl.url(1), "--handover", "--mission", "vehicle", "--no-zenoh",
+                              "--json",
                               "--log-dir", str(tmp_path / "logs"), "--w-c", "1.2",
                               "--max-speed", "2", "--max-yaw-rate", "1.5") as comp:
             gcs.wait_for(lambda: gcs.of("HEARTBEAT", (1, COMPANION)), 30.0, "the companion")

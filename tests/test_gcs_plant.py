@@ -209,7 +209,7 @@ def test_handover_inside_auto_twice(tmp_path):
             GroundStation(f"udpin:127.0.0.1:{gcs_port}") as gcs:
         gcs.wait_for(lambda: gcs.of("HEARTBEAT", (1, 1)), 10.0, "the plant's heartbeat")
         gcs.upload(1, items)
-        with Companion(plant.port, "--handover", "--no-zenoh", "--json", "--log-dir",
+        with Companion(plant.port, "--handover", "--mission", "vehicle", "--no-zenoh", "--json", "--log-dir",
                        str(tmp_path)) as comp:
             gcs.wait_for(lambda: gcs.of("HEARTBEAT", (1, COMPANION)), 20.0, "the companion")
             time.sleep(1.0)

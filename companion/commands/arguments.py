@@ -109,7 +109,7 @@ def add_gcs_arguments(p: argparse.ArgumentParser) -> None:
     g.add_argument("--handover", action="store_true",
                    help="ArduPilot: wait while the vehicle flies its own AUTO mission and track "
                         "each segment between a NAV_GUIDED_ENABLE 1 and 0 item when AUTO "
-                        "reaches it, then hand back (the mission is pulled from the vehicle)")
+                        "reaches it, then hand back; with --mission vehicle (pulled from it)")
 
 
 def add_origin_arguments(p: argparse.ArgumentParser) -> None:

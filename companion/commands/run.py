@@ -33,7 +33,7 @@ def register(subparsers) -> None:
                     "PZC law so the rover follows the mission.",
         epilog=EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
     add_link_arguments(p, default_connect=True)
-    p.add_argument("--mission", metavar="FILE",
+    p.add_argument("--mission", metavar="FILE", required=True,
                    help="mission file (.toml, .plan, .waypoints), or 'vehicle': the mission "
                         "stored on the vehicle, pulled at start (companion mission pull)")
     add_origin_arguments(p)
@@ -58,14 +58,10 @@ def run(args) -> int:
     from .run_result import print_result
     options = FlightOptions.from_args(args)
     path, handover = args.mission, None
-    if path is None and not args.handover:
+    if args.handover and path != "vehicle":
         from ..errors import UserError
-        raise UserError("companion run needs --mission FILE (or --mission vehicle, or "
-                        "--handover)")
-    if args.handover and path not in (None, "vehicle"):
-        from ..errors import UserError
-        raise UserError("--handover flies the mission stored on the vehicle: give --mission "
-                        "vehicle (or no --mission)")
+        raise UserError(f"--handover flies the mission stored on the vehicle: give --mission "
+                        f"vehicle, not {path!r}")
     if path == "vehicle" or args.handover:
         from .flight import logger
         from .mission_pull import handover_plan, vehicle_mission_file
