@@ -61,6 +61,9 @@ _EVENT_TEXT = {
 }
 
 
+_STATE_TEXT = {"engaging": "engaging {mode}", "ready": "ready: {mode}, waiting to track"}
+
+
 def fit(text: str, limit: int = TEXT_MAX) -> str:
     """``text`` as printable ASCII within ``limit`` characters ('...' where it was cut)."""
     clean = "".join(c if " " <= c <= "~" else "?" for c in text)
@@ -105,6 +108,7 @@ class GcsReporter:
         self.status_of: Callable[[], dict[str, Any]] | None = None
         self.texts_sent = 0
         self.values_sent = 0
+        self.last_state = ""
 
     def watch(self, status_of: Callable[[], dict[str, Any]]) -> None:
         """Where the values come from (the runner's ``status``), once the runner exists."""
@@ -139,17 +143,29 @@ class GcsReporter:
     def send_values(self) -> None:
         if self.status_of is None:
             return
+        status = self.status_of()
+        state = str(status.get("state"))
+        if state != self.last_state:
+            # The states no life-cycle event announces (those keep the events' contract:
+            # Zenoh, the CSV), seen here at the values' rate.
+            self.last_state = state
+            said = _STATE_TEXT.get(state)
+            if said is not None:
+                self.say(INFO, PREFIX + said.format(mode=status.get("track_mode", "")))
         ms = int((self.clock() - self.t0) * 1e3) & 0xFFFFFFFF
-        for name, value in values(self.status_of(), self.err):
+        for name, value in values(status, self.err):
             self.mav.named_value_float_send(ms, name.encode("ascii"), value)
             self.values_sent += 1
 
     def close(self) -> None:
-        # The last text and values left just now: give the autopilot a moment to route them
-        # before the link closes (ArduPilot SITL dropped a STATUSTEXT that arrived together
-        # with the TCP close: seen 2026-12-02). The rover is already stopped.
-        if self.texts_sent:
-            time.sleep(LINGER_S)
+        pass
+
+    @property
+    def linger(self) -> float:
+        """Wall s the link should stay open (and read) after the run: the last text and values
+        left just now, and ArduPilot SITL dropped a STATUSTEXT that arrived together with the
+        TCP close (seen 2026-12-02). The rover is already stopped by then."""
+        return LINGER_S if self.texts_sent else 0.0
 
 
 class GcsCommands:
@@ -159,6 +175,11 @@ class GcsCommands:
                  reporter: GcsReporter | None = None):
         self.mav, self.sysid, self.compid, self.reporter = mav, sysid, compid, reporter
         self.handled = 0
+
+    def refused(self, text: str) -> None:
+        """A control request (the Zenoh queryable) the loop turned down, for the GCS too."""
+        if self.reporter is not None:
+            self.reporter.refused(text)
 
     def for_us(self, msg: Any) -> bool:
         return (msg.command == MAV_CMD_DO_PAUSE_CONTINUE

@@ -98,6 +98,17 @@ class Link:
         self._recv_failed = False                 # the last read raised (see wait)
         self.last_ack: dict[int, int] = {}        # command id -> last result
 
+    def linger(self, seconds: float) -> None:
+        """Keep reading (and dropping) for ``seconds`` before closing, so what was just sent
+        gets through and what arrives meanwhile is still read (and counted)."""
+        deadline = time.monotonic() + seconds
+        while (left := deadline - time.monotonic()) > 0:
+            if self.recv() is None:      # (not self.wait: the sinks' idle hooks are closed)
+                if self._recv_failed:
+                    time.sleep(min(left, 0.02))
+                else:
+                    self.master.select(min(left, 0.02))
+
     def close(self) -> None:
         try:
             self.master.close()

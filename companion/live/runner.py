@@ -249,6 +249,8 @@ class Runner:
             if self.control is not None:
                 for request in self.control.poll():
                     self._on_request(request)
+                    if not request.ok and self.gcs is not None:
+                        self.gcs.refused(f"{request.verb}: {request.message}")
             t_read = clock()
             msg = recv()
             if msg is None:
@@ -732,6 +734,7 @@ class Runner:
     def status(self) -> dict[str, Any]:
         t = self.telemetry
         return {"state": self.state.value, "mission": self.mission.name,
+                "track_mode": self.track_mode,
                 "mission_time": self.clock.time, "duration": self.mission.duration,
                 "mode": self.link.mode, "armed": self.link.armed, "cycles": self.stats.cycles,
                 "telemetry_received": t.received, "telemetry_rejected": dict(t.rejected),

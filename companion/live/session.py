@@ -140,6 +140,8 @@ def fly(s: RunSettings, sinks: Sequence[Sink] = (), control: ControlChannel | No
         if s.realtime:
             take_realtime(log)
         outcome = runner.run()
+        if reporter is not None:
+            link.linger(reporter.linger)
     finally:
         link.close()
     st, t = runner.stats, runner.telemetry
