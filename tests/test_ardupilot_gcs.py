@@ -24,14 +24,15 @@ from companion.mav import mission_transfer as mt
 from companion.mission import geo
 
 SPEEDUP = 5
-BOOT_WALL = 120.0 / SPEEDUP + 30.0
+TRACK_SPEEDUP = 2
+BOOT_WALL = 120.0 / TRACK_SPEEDUP + 30.0
 LEG = [(15.0, 0.0), (15.0, 12.0), (0.0, 12.0)]      # north, east of home (m)
 
 
 def _items(home: tuple[float, float]) -> list:
     out = [mt.item(0, 16, 0, (0.0, 0.0, 0.0, 0.0), int(round(home[0] * 1e7)),
                    int(round(home[1] * 1e7)), 0.0)]
-    out.append(mt.item(1, 178, 2, (1.0, 1.5, -1.0, 0.0), 0, 0, 0.0))    # DO_CHANGE_SPEED 1.5
+    out.append(mt.item(1, 178, 2, (1.0, 1.0, -1.0, 0.0), 0, 0, 0.0))    # DO_CHANGE_SPEED 1
     for north, east in LEG:
         lat, lon = geo.latlon_from_ne(north, east, home)
         out.append(mt.waypoint(len(out), lat, lon, 0.0))
@@ -41,7 +42,9 @@ def _items(home: tuple[float, float]) -> list:
 @pytest.mark.sitl
 @pytest.mark.slow
 def test_uploaded_pulled_identical_flown_within_1m_and_paused_from_the_gcs(ardupilot, tmp_path):
-    sitl = ardupilot(speedup=SPEEDUP)
+    # x2, not x5: the waypoint test has 1 m for the tracking and the 0.83 m a rounded corner
+    # takes; at x5 a loaded machine (three SITLs on two cores) made it 1.17-1.33 m
+    sitl = ardupilot(speedup=TRACK_SPEEDUP)
     with GroundStation(sitl.url(0)) as gcs:
         hb = gcs.wait_for(lambda: gcs.of("HEARTBEAT", (1, 1)), 30.0, "the vehicle's heartbeat")
         assert hb
@@ -169,7 +172,9 @@ def test_the_gcs_failsafe_still_fires_while_the_companion_runs(ardupilot, tmp_pa
     GCS failsafe fires and stops the rover; heart-beating as 255 (``--source-system 255``, what
     the companion did before) it keeps the failsafe from ever firing."""
     from ardupilot_harness import circle_mission
-    sitl = ardupilot(speedup=SPEEDUP, params={"FS_GCS_ENABLE": 1, "FS_GCS_TIMEOUT": 5})
+    # FS_GCS_TIMEOUT is vehicle time, heartbeats come once a wall second: at SPEEDUP 5 a 5 s
+    # timeout is one wall second and a late heartbeat under load trips it; 20 s is 4 wall s
+    sitl = ardupilot(speedup=SPEEDUP, params={"FS_GCS_ENABLE": 1, "FS_GCS_TIMEOUT": 20})
     mission = circle_mission(tmp_path / "circle.toml", duration=600.0)
     extra = ["--source-system", "255"] if identity == "255" else []
     gcs = GroundStation(sitl.url(0)).__enter__()
@@ -185,7 +190,7 @@ def test_the_gcs_failsafe_still_fires_while_the_companion_runs(ardupilot, tmp_pa
         gcs.__exit__(None, None, None)                   # the ground station is lost
         t_lost = time.monotonic()
         try:
-            code = comp.wait(10.0 + 30.0 / SPEEDUP)      # FS_GCS_TIMEOUT 5 vehicle s + margin
+            code = comp.wait(10.0 + 60.0 / SPEEDUP)      # FS_GCS_TIMEOUT 20 vehicle s + margin
         except AssertionError:
             code = None                                  # still tracking: no failsafe
         waited = time.monotonic() - t_lost
