@@ -106,3 +106,50 @@ def test_a_segment_is_the_waypoints_between_an_enable_and_a_disable():
 def test_a_malformed_segment_is_refused_naming_the_item(rows, words):
     with pytest.raises(UserError, match=words):
         segments(_mission(*rows))
+
+
+class _Mav:
+    def __init__(self):
+        self.acks, self.texts = [], []
+
+    def command_ack_send(self, command, result, *rest):
+        self.acks.append((command, result, rest[-2:]))
+
+    def statustext_send(self, severity, text):
+        self.texts.append(text.decode())
+
+
+class _Cmd:
+    def __init__(self, param1, target=(1, 191), command=193):
+        self.command, self.param1 = command, param1
+        self.target_system, self.target_component = target
+
+    def get_srcSystem(self):
+        return 255
+
+    def get_srcComponent(self):
+        return 190
+
+
+@pytest.mark.parametrize("param1, verb, result", [
+    (0.0, "pause", gcs.MAV_RESULT_ACCEPTED), (1.0, "resume", gcs.MAV_RESULT_ACCEPTED),
+    (math.nan, None, gcs.MAV_RESULT_DENIED), (2.0, None, gcs.MAV_RESULT_DENIED)])
+def test_do_pause_continue_becomes_the_loops_request_and_is_acked(param1, verb, result):
+    mav = _Mav()
+    cmds = gcs.GcsCommands(mav, lambda: 1, 191, gcs.GcsReporter(mav))
+    asked = []
+
+    def handle(req):
+        asked.append(req.verb)
+        req.reply(True, "ok")
+    assert cmds.on_command(_Cmd(param1), handle)
+    assert asked == ([verb] if verb else [])
+    assert mav.acks == [(193, result, (255, 190))]
+    assert (mav.texts == []) == (verb is not None)
+
+
+def test_commands_for_the_autopilot_are_left_alone():
+    cmds = gcs.GcsCommands(_Mav(), lambda: 1, 191)
+    assert not cmds.on_command(_Cmd(0.0, target=(1, 1)), lambda req: None)
+    assert not cmds.on_command(_Cmd(0.0, command=176), lambda req: None)
+    assert cmds.on_command(_Cmd(0.0, target=(0, 0)), lambda req: req.reply(False, "no"))

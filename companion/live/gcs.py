@@ -190,7 +190,13 @@ class GcsCommands:
         """Handle a COMMAND_LONG / COMMAND_INT if it is ours (True), else leave it (False)."""
         if not self.for_us(msg):
             return False
-        verb = "pause" if int(round(msg.param1)) == 0 else "resume"
+        if msg.param1 not in (0.0, 1.0):           # NaN, or anything but pause / continue
+            self.mav.command_ack_send(msg.command, MAV_RESULT_DENIED, 0, 0,
+                                      msg.get_srcSystem(), msg.get_srcComponent())
+            if self.reporter is not None:
+                self.reporter.refused(f"DO_PAUSE_CONTINUE param1 {msg.param1!r}")
+            return True
+        verb = "pause" if msg.param1 == 0.0 else "resume"
         request = ControlRequest(verb, allow_path=False)
         handle(request)                # the loop answers at once (single thread)
         result = MAV_RESULT_ACCEPTED if request.ok else MAV_RESULT_TEMPORARILY_REJECTED
