@@ -111,6 +111,10 @@ def build_parser() -> argparse.ArgumentParser:
     link.add_argument("--connect", metavar="URL", default=DEFAULT_URL,
                       help=f"any pymavlink connection string (default {DEFAULT_URL})")
     link.add_argument("--sysid", type=_sysid, default=1, help="MAVLink system id (default 1)")
+    link.add_argument("--gcs", metavar="URL",
+                      help="a second link, a ground station's (as ArduPilot's SERIAL1): "
+                           "heartbeats, texts, commands and mission transfers, and messages "
+                           "routed to and from the companion's link; no pose streams")
     link.add_argument("--autopilot", choices=list(profiles.AUTOPILOTS),
                       default=profiles.DEFAULT_AUTOPILOT,
                       help=f"personality (default {profiles.DEFAULT_AUTOPILOT})")
@@ -206,6 +210,9 @@ def build_parser() -> argparse.ArgumentParser:
                           "another imitates a vehicle that is not a rover")
     flt.add_argument("--mavlink1", action="store_true",
                      help="send MAVLink 1 frames (a port set to SERIALn_PROTOCOL 1)")
+    flt.add_argument("--mission-drop-item", type=int, metavar="N", dest="mission_drop_item",
+                     help="never answer a request for stored mission item N (a partial "
+                          "transfer, for tests)")
     flt.add_argument("--signing-key", metavar="FILE", dest="signing_key",
                      help="MAVLink 2 signing: 32-byte secret (raw or 64 hex digits, mode 600); "
                           "unsigned commands and setpoints are ignored")
@@ -260,7 +267,8 @@ def config_from_args(args: argparse.Namespace) -> PlantConfig:
                        global_position_rate=args.global_position_rate,
                        params=tuple(args.param), param_loss=args.param_loss,
                        ekf_delay=args.ekf_delay, mav_type=args.mav_type, mavlink1=args.mavlink1,
-                       gps_faults=tuple(args.gps_faults))
+                       gps_faults=tuple(args.gps_faults),
+                       gcs=args.gcs, mission_drop_item=args.mission_drop_item)
 
 
 def _install_signals(server) -> tuple[socket.socket, socket.socket]:
@@ -300,7 +308,16 @@ def main(argv: list[str] | None = None) -> int:
     except LinkError as err:
         print(f"sitl-plant: error: {err}", file=sys.stderr)
         return 2
-    server = PlantServer(config, link)
+    gcs = None
+    if config.gcs is not None:
+        try:
+            gcs = Link(config.gcs, config.sysid, config.compid, config.signing_key,
+                       mavlink1=config.mavlink1)
+        except LinkError as err:
+            link.close()
+            print(f"sitl-plant: error: --gcs: {err}", file=sys.stderr)
+            return 2
+    server = PlantServer(config, link, gcs=gcs)
     wake = _install_signals(server)
     clock = "lockstep" if config.lockstep else "paced"
     print(f"sitl-plant: sysid {config.sysid} on {config.connect}, preset {config.preset}, "
@@ -310,6 +327,8 @@ def main(argv: list[str] | None = None) -> int:
         server.run()
     finally:
         link.close()
+        if gcs is not None:
+            gcs.close()
         signal.set_wakeup_fd(-1)
         for sock in wake:
             sock.close()

@@ -40,3 +40,5 @@ class PlantConfig:
     mav_type: int | None = None
     mavlink1: bool = False
     gps_faults: tuple[GpsFault, ...] = ()   # --gps-glitch / --gps-loss (sitl_plant.status)
+    gcs: str | None = None             # --gcs URL: a ground station's second link
+    mission_drop_item: int | None = None   # --mission-drop-item N: never answer item N

@@ -25,6 +25,8 @@ from .clock import LockstepGate, Pacer
 from .config import PlantConfig
 from .earth import Earth, e7
 from .link import Link
+from .auto import Auto
+from .mission import MissionStore
 from .modes import hold_mode
 from .setpoint import Setpoint
 from .telemetry import TelemetryPipe
@@ -43,9 +45,16 @@ MAX_WAIT = 0.1  # wall s: the loop wakes at least this often (signals, lockstep 
 
 class PlantServer:
     def __init__(self, config: PlantConfig, link: Link, vehicle: Vehicle | None = None,
-                 wall: Callable[[], float] = time.monotonic):
+                 wall: Callable[[], float] = time.monotonic, gcs: Link | None = None):
         self.config = config
         self.link = link
+        # --gcs URL: a second link, a ground station's (ArduPilot's SERIAL1 / telemetry radio):
+        # heartbeats and texts to it, its commands and mission transfers answered on it, and
+        # messages routed between it and the companion's link as ArduPilot's MAVLink routing
+        # does (what is not addressed to the plant alone goes across); no pose streams on it.
+        self.gcs = gcs
+        self.mission = MissionStore(drop_item=config.mission_drop_item)
+        self._current_sent = 0            # MISSION_CURRENT last announced (0 at boot)
         self.vehicle = vehicle or Vehicle(config.vehicle)
         self.wall = wall
         gpi = config.global_position_rate
@@ -53,6 +62,7 @@ class PlantServer:
             config.loop_rate, tick_aligned=config.tick_aligned,
             initial={streams.GLOBAL_POSITION_INT: int(round(1e6 / gpi)) if gpi > 0 else None,
                      streams.EKF_STATUS_REPORT: None})
+                     streams.MISSION_CURRENT: None})
         self.earth = Earth(config.origin, config.vehicle.start[:2])
         self._after_ack: list[Callable[[], None]] = []
         self.telemetry = TelemetryPipe(config.telemetry)
@@ -74,6 +84,8 @@ class PlantServer:
             bytewise=v.autopilot.bytewise_params, overrides=config.params,
             loss=config.param_loss, seed=config.telemetry.seed)
         self._update_mav_type()
+        if self.vehicle.autopilot.auto_mode is not None:
+            self.vehicle.auto = Auto(self.mission, self.earth.origin)
 
     def _update_mav_type(self) -> None:
         self.link.mav_type = (self.config.mav_type if self.config.mav_type is not None
@@ -156,13 +168,18 @@ class PlantServer:
             vehicle.step(dt)
             if vehicle.texts:
                 self._flush_texts()
+            auto = vehicle.auto
+            if auto is not None and (auto.reached or auto.texts
+                                     or self.mission.current != self._current_sent):
+                self._flush_mission()
             if self.t_us >= nxt:
                 self._tick()
                 nxt = self._next_send_us()
 
     def _wait(self, timeout: float) -> None:
         wake_fd = self.wake.fileno() if self.wake is not None else None
-        fds = [fd for fd in (self.link.fd, wake_fd) if fd is not None]
+        gcs_fd = self.gcs.fd if self.gcs is not None else None
+        fds = [fd for fd in (self.link.fd, wake_fd, gcs_fd) if fd is not None]
         timeout = min(max(timeout, 0.0), MAX_WAIT)
         if not fds:
             time.sleep(timeout)
@@ -178,6 +195,8 @@ class PlantServer:
                 pass
         if self.link.fd in ready and not self._drain():
             self.link.check_eof()
+        if gcs_fd is not None and gcs_fd in ready:
+            self._drain_gcs()
 
     # --- output -----------------------------------------------------------------------------
     def _tick(self) -> None:
@@ -187,6 +206,8 @@ class PlantServer:
         for mid in self.streams.due(t_us):
             if mid == streams.HEARTBEAT:
                 link.heartbeat(v.autopilot, v.base_mode, v.custom_mode, v.armed)
+                if self.gcs is not None:
+                    self.gcs.heartbeat(v.autopilot, v.base_mode, v.custom_mode, v.armed)
             elif mid == streams.SYS_STATUS:
                 link.sys_status(link.bad_data, v.setpoints_ignored.get("non-finite", 0),
                                 self._status_sensors())
@@ -194,6 +215,8 @@ class PlantServer:
                 self._global_position()
             elif mid == streams.EKF_STATUS_REPORT:
                 link.ekf_status(self._ekf_report())
+            elif mid == streams.MISSION_CURRENT:
+                link._send(link.mav.mission_current_send, self.mission.current)
             else:
                 if sample is None:
                     sample = self._sample()
@@ -248,25 +271,84 @@ class PlantServer:
         v.texts.append((SEVERITY_WARNING, "Pilot took over: HOLD"))
         self._flush_texts()
         self.link.heartbeat(v.autopilot, v.base_mode, v.custom_mode, v.armed)
+        if self.gcs is not None:
+            self.gcs.heartbeat(v.autopilot, v.base_mode, v.custom_mode, v.armed)
+
+    def _flush_mission(self) -> None:
+        """AUTO's news to both links: items reached, its texts, the current item if it moved."""
+        reached, texts = self.vehicle.auto.pop()
+        links = [self.link] + ([self.gcs] if self.gcs is not None else [])
+        for link in links:
+            for seq in reached:
+                link._send(link.mav.mission_item_reached_send, seq)
+            for severity, text in texts:
+                link.statustext(severity, text)
+            if self.mission.current != self._current_sent:
+                link._send(link.mav.mission_current_send, self.mission.current)
+        self._current_sent = self.mission.current
 
     def _flush_texts(self) -> None:
         for severity, text in self.vehicle.pop_texts():
             self.link.statustext(severity, text)
+            if self.gcs is not None and self.gcs is not self.link:
+                self.gcs.statustext(severity, text)
 
     # --- input ------------------------------------------------------------------------------
     def _drain(self) -> int:
         """Handle every message waiting; returns how many were read (garbage included)."""
         n = 0
+        if self.gcs is not None:
+            self._drain_gcs()
         while True:
             msg = self.link.recv()
             if msg is None:
                 return n
             n += 1
+            if self.gcs is not None and self._routed(msg):
+                self._forward(msg, self.gcs)
             try:
                 self._handle(msg)
             except Exception:             # noqa: BLE001 - no input may stop the vehicle
                 self.link.bad_data += 1   # a well-formed frame with nonsense in it
                 self.handler_errors += 1  # (a bug to fix: the fuzz test asserts none)
+            if self.vehicle.texts:
+                self._flush_texts()
+
+    def _routed(self, msg: Any) -> bool:
+        """Whether a message goes on to the other link: all but what is for the plant alone."""
+        if msg.get_type() == "BAD_DATA":
+            return False
+        target = getattr(msg, "target_system", None)
+        if target is None or target == 0:
+            return True
+        return (target != self.config.sysid
+                or getattr(msg, "target_component", 0) not in (0, self.config.compid))
+
+    @staticmethod
+    def _forward(msg: Any, to: Link) -> None:
+        try:
+            to.conn.write(msg.get_msgbuf())
+        except OSError:
+            pass   # like a radio link
+
+    def _drain_gcs(self) -> None:
+        """The ground station's link: route, then answer what is for the plant on that link."""
+        gcs = self.gcs
+        while (msg := gcs.recv()) is not None:
+            if msg.get_type() == "BAD_DATA":
+                continue
+            if self._routed(msg):
+                self._forward(msg, self.link)
+            target = getattr(msg, "target_system", None)
+            if target is None or (target == 0 and msg.get_type() == "HEARTBEAT"):
+                continue
+            saved, self.link = self.link, gcs    # replies go back where the request came from
+            try:
+                self._handle(msg)
+            except Exception:             # noqa: BLE001 - no input may stop the vehicle
+                self.handler_errors += 1
+            finally:
+                self.link = saved
             if self.vehicle.texts:
                 self._flush_texts()
 
@@ -295,6 +377,10 @@ class PlantServer:
         elif kind in ("PARAM_REQUEST_LIST", "PARAM_REQUEST_READ", "PARAM_SET"):
             if self._for_us(msg) and self.params.handle(msg, self.link.param_value):
                 self._update_mav_type()
+        elif kind.startswith("MISSION_"):
+            if self._for_us(msg) and getattr(msg, "target_component", 0) in (0, self.config.compid):
+                link = self.link
+                self.mission.handle(msg, link.mav, lambda fn: lambda *a: link._send(fn, *a))
         elif kind == "SET_MODE":
             if self._for_us(msg):
                 if msg.base_mode & FLAG_CUSTOM_MODE_ENABLED:

@@ -20,6 +20,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 from enum import IntEnum
+from typing import Any
 
 import companion.profiles as profiles
 from companion.core.angles import wrap
@@ -37,6 +38,7 @@ OFFBOARD_LOST_TEXT = "Offboard signal lost, switching to Hold"
 
 # MAVLink severities used in STATUSTEXT.
 SEVERITY_WARNING = 4
+SEVERITY_NOTICE = 5
 SEVERITY_INFO = 6
 
 
@@ -86,6 +88,16 @@ class Vehicle:
         self.texts: list[tuple[int, str]] = []
         self.setpoints_used = 0
         self.setpoints_ignored: dict[str, int] = {}
+        self.auto: Any = None      # sitl_plant.auto.Auto: the stored mission in AUTO (the server's)
+
+    @property
+    def in_auto(self) -> bool:
+        return self.auto is not None and self.mode.name == self.autopilot.auto_mode
+
+    @property
+    def takes_setpoints(self) -> bool:
+        """In the track mode, or in AUTO's guided sub-mode (NAV_GUIDED_ENABLE)."""
+        return self.mode.follows_setpoints or (self.in_auto and self.auto.guided)
 
     # --- what the heartbeat reports -------------------------------------------------------
     @property
@@ -98,7 +110,9 @@ class Vehicle:
 
     def commands(self) -> tuple[float, float]:
         """(speed, yaw rate) the autopilot asks of the actuators right now."""
-        if not (self.armed and self.mode.follows_setpoints):
+        if self.armed and self.in_auto and not self.auto.guided:
+            return self.auto.commands(self.state, self.config.params, self.config.guidance)
+        if not (self.armed and self.takes_setpoints):
             return 0.0, 0.0
         return guidance.commands(self.target, self.state, self.config.params,
                                  self.config.guidance)
@@ -114,7 +128,13 @@ class Vehicle:
         if self._offboard and mode.follows_setpoints and not self._proof_of_life():
             self._say(SEVERITY_WARNING, OFFBOARD_REFUSED_TEXT)
             return Result.DENIED
+        auto = mode.name == self.autopilot.auto_mode and self.auto is not None
+        if auto and not self.auto.can_start():
+            self._say(SEVERITY_NOTICE, "No Mission. Can't set AUTO.")
+            return Result.FAILED
         self._enter(mode)
+        if auto:
+            self.auto.start(self.state)
         return Result.ACCEPTED
 
     def arm(self, on: bool) -> Result:
@@ -134,7 +154,7 @@ class Vehicle:
         """Handle one SET_POSITION_TARGET_LOCAL_NED addressed to us; returns what became of it."""
         if self._offboard:
             self._note_stream()
-        elif not (self.armed and self.mode.follows_setpoints):
+        elif not (self.armed and self.takes_setpoints):
             return self._ignored("not guided and armed")
         pose = Pose(self.state.x, self.state.y, self.state.yaw)
         decode = decode_px4 if self.autopilot.setpoint.velocity_vector else decode_ardupilot
@@ -148,7 +168,12 @@ class Vehicle:
     # --- time -------------------------------------------------------------------------------
     def step(self, dt: float) -> None:
         """Advance ``dt`` seconds: timers first (they act on this instant), then the dynamics."""
-        if self.mode.follows_setpoints:
+        if self.in_auto and self.armed:
+            was_guided = self.auto.guided
+            self.auto.step(self.state)
+            if self.auto.guided and not was_guided:
+                self.target, self._target_fresh = None, False   # the guided sub-mode starts stopped
+        if self.takes_setpoints:
             if self._offboard:
                 self._offboard_loss()
             else:
@@ -160,7 +185,7 @@ class Vehicle:
             # model as PX4 gets it (no pivot: an Ackermann rover drives its turning circle);
             # other targets (a stop, a position) as the vector that asks for that turn rate.
             target = self.target
-            if self.armed and self.mode.follows_setpoints and isinstance(target, HeadingSpeed):
+            if self.armed and self.takes_setpoints and isinstance(target, HeadingSpeed):
                 speed, heading = target.speed, target.heading
             else:
                 heading = self.state.yaw + rate / p.course_gain

@@ -43,10 +43,11 @@ def test_demo_writes_both_logs_by_default_and_says_where(demo_logs):
     assert f"flight log: {r['tlog']} and {r['csv']}" in stderr
     frames, bad = read_tlog(tlog)
     assert bad == 0
-    kinds = {(m.get_type(), m.get_srcSystem()) for _, m in frames}
-    # both directions: the vehicle's telemetry and the companion's setpoints and commands
+    kinds = {(m.get_type(), m.get_srcComponent()) for _, m in frames}
+    # both directions: the vehicle's telemetry (component 1) and the companion's setpoints
+    # and commands (component 191 of the same system)
     assert {("LOCAL_POSITION_NED", 1), ("ATTITUDE", 1), ("HEARTBEAT", 1),
-            ("SET_POSITION_TARGET_LOCAL_NED", 255), ("COMMAND_LONG", 255)} <= kinds
+            ("SET_POSITION_TARGET_LOCAL_NED", 191), ("COMMAND_LONG", 191)} <= kinds
     setpoints = [m for _, m in frames if m.get_type() == "SET_POSITION_TARGET_LOCAL_NED"]
     assert len(setpoints) == r["setpoints_sent"]
     stamps = [t for t, _ in frames]

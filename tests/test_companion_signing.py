@@ -80,7 +80,8 @@ def test_a_signed_pair_flies_end_to_end_and_logs_signed_frames(tmp_path):
     assert bad == 0 and len(frames) > 1000
     # every frame of the run, both directions, carries a signature (incompat_flags bit 0)
     assert all(m.get_msgbuf()[2] & 1 for _, m in frames)
-    assert {m.get_srcSystem() for _, m in frames} == {1, 255}
+    # the vehicle (1, 1) and the companion, a component of its system (1, 191)
+    assert {(m.get_srcSystem(), m.get_srcComponent()) for _, m in frames} == {(1, 1), (1, 191)}
 
 
 # --- strangers against the plant ---------------------------------------------------------------

@@ -105,6 +105,22 @@ def test_each_way_of_getting_it_wrong_is_named(obs, name, status, value_part):
         name == "HEARTBEAT type"
 
 
+def test_the_onboard_identity_leaves_the_gcs_failsafe_to_the_ground_station():
+    """The companion as the vehicle's own system (component 191): MAV_GCS_SYSID 255 is right
+    (and MAV_OPTIONS enforcing drops nothing of ours: measured on SITL, docs/ground-station.md);
+    one naming the vehicle's own id would let the companion hide a lost ground station."""
+    onboard = replace(GOOD, companion_sysid=1, vehicle_sysid=1)
+    r = rows(onboard)
+    assert all(x.status == OK for x in r.values()), [x for x in r.values() if x.status != OK]
+    assert "not taken for the ground station" in r["MAV_GCS_SYSID"].why
+    assert rows(replace(onboard, params={**GOOD_PARAMS, "MAV_OPTIONS": 1}))[
+        "MAV_GCS_SYSID"].status == OK
+    wrong = rows(replace(onboard, params={**GOOD_PARAMS, "MAV_GCS_SYSID": 1}))["MAV_GCS_SYSID"]
+    assert wrong.status == WARN and wrong.fix == {"MAV_GCS_SYSID": 255.0}
+    off = rows(replace(onboard, params={**GOOD_PARAMS, "FS_GCS_ENABLE": 0}))["FS_GCS_ENABLE"]
+    assert off.status == WARN and "ground station" in off.why
+
+
 def test_a_missing_parameter_is_a_warning_that_says_so():
     params = dict(GOOD_PARAMS)
     del params["FS_GCS_ENABLE"]

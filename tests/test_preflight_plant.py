@@ -86,7 +86,9 @@ def test_a_plant_set_up_wrong_fails_each_check_and_names_it():
                       "--param", "FS_GCS_TIMEOUT=30", "--param", "MAV_OPTIONS=1",
                       "--param", "MAV_GCS_SYSID=250", "--param", "FRAME_CLASS=3",
                       "--param", "ATC_DECEL_MAX=-1") as plant:
-        r = preflight(plant.port, "--json")
+        # as a ground station's id (the companion's before 2026-12-02): MAV_OPTIONS enforcing
+        # another GCS id drops it (the onboard identity's rows: test_preflight_checks.py)
+        r = preflight(plant.port, "--json", "--source-system", "255")
     assert r.returncode == 1, r.stderr
     s, c = statuses(r), checks(r)
     assert s == {
@@ -128,9 +130,10 @@ def test_fix_yes_sets_reads_back_and_the_values_stay_for_the_next_run():
     with PlantProcess("--preset", "ardupilot-skid", "--param", "FS_ACTION=0",
                       "--param", "FS_GCS_TIMEOUT=30", "--param", "MAV_OPTIONS=1",
                       "--param", "MAV_GCS_SYSID=250", "--param-loss", "0.3") as plant:
-        before = preflight(plant.port, "--json", "--fix")             # no --yes, no terminal
-        fixed = preflight(plant.port, "--json", "--fix", "--yes")
-        after = preflight(plant.port, "--json")
+        gcs_id = ("--source-system", "255")     # the rows for a companion heart-beating as 255
+        before = preflight(plant.port, "--json", "--fix", *gcs_id)    # no --yes, no terminal
+        fixed = preflight(plant.port, "--json", "--fix", "--yes", *gcs_id)
+        after = preflight(plant.port, "--json", *gcs_id)
     assert before.returncode == 2 and "--yes" in before.stderr and before.stdout == ""
     assert fixed.returncode == 1, fixed.stderr              # unsigned still warns
     out = json.loads(fixed.stdout)

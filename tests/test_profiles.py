@@ -194,7 +194,10 @@ def test_every_autopilot_profile_fills_the_interface(p):
     assert profiles.AUTOPILOTS[p.name] is p and p.label
     for f in dataclasses.fields(p):
         value = getattr(p, f.name)
-        assert value is not None or f.name in ("mode_types", "offboard_warmup"), f.name
+        # None where the autopilot has no such thing: no MAV_TYPE restriction, no offboard
+        # warm-up, no guided sub-mode inside a mission (auto_mode: PX4)
+        assert value is not None or f.name in ("mode_types", "offboard_warmup",
+                                               "auto_mode"), f.name
     assert p.mav_autopilot and all(type(i) is int for i in p.mav_autopilot)
     table = p.modes
     assert len(table.names()) == len(table.modes) == len({m.custom_mode for m in table.modes})
@@ -203,6 +206,7 @@ def test_every_autopilot_profile_fills_the_interface(p):
         assert table.by_name(name) is not None, name
     assert p.track_mode in p.plant.modes and p.hold_mode in p.plant.modes
     assert p.offboard_warmup is None or p.offboard_warmup > 0
+    assert p.auto_mode is None or table.by_name(p.auto_mode) is not None
     sp = p.setpoint
     # bit 11 ignores the yaw rate: set exactly when the autopilot gets the velocity vector
     assert bool(sp.type_mask & (1 << 11)) == sp.velocity_vector

@@ -51,6 +51,16 @@ def at_least_one(text: str) -> int:
     return value
 
 
+def mavlink_id(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not an integer: {text!r}") from None
+    if not 1 <= value <= 255:
+        raise argparse.ArgumentTypeError(f"a MAVLink id is 1..255, not {value}")
+    return value
+
+
 def baud_rate(text: str) -> int:
     from ..mav.connection import parse_baud
     try:
@@ -69,7 +79,7 @@ def allow_negative_pairs(parser: argparse.ArgumentParser) -> None:
 
 def add_link_arguments(p: argparse.ArgumentParser, title: str | None = None, *,
                        default_connect: bool = False, required: bool = False) -> None:
-    """--connect, --baud, --sysid, --arm: the vehicle and how to reach it."""
+    """--connect, --baud, --sysid, --source-system, --arm: the vehicle and how to reach it."""
     g = p.add_argument_group(title) if title else p
     g.add_argument("--connect", metavar="URL", required=required,
                    default=LINK.url if default_connect else None,
@@ -77,8 +87,29 @@ def add_link_arguments(p: argparse.ArgumentParser, title: str | None = None, *,
     g.add_argument("--baud", type=baud_rate, metavar="BPS", help=BAUD_HELP)
     g.add_argument("--sysid", type=int, metavar="N",
                    help="system id of the vehicle to follow (default: the first heartbeat's)")
+    g.add_argument("--source-system", type=mavlink_id, metavar="N",
+                   help="the companion's own MAVLink system id (default: the vehicle's, as an "
+                        "onboard computer's; component 191). 255 is a ground station's: see "
+                        "docs/ground-station.md before choosing it")
     g.add_argument("--arm", action="store_true",
                    help="arm the vehicle (retrying once a second); default: wait for it")
+
+
+def add_gcs_arguments(p: argparse.ArgumentParser) -> None:
+    """What the ground station sees of the run and may ask of it (docs/ground-station.md)."""
+    g = p.add_argument_group("ground station (docs/ground-station.md)")
+    g.add_argument("--no-gcs-report", dest="gcs_report", action="store_false",
+                   help="send no STATUSTEXT / NAMED_VALUE_FLOAT to the ground station and "
+                        "ignore its MAV_CMD_DO_PAUSE_CONTINUE")
+    g.add_argument("--start-on-guided", action="store_true",
+                   help="engage nothing: wait (without a timeout) until the pilot or a "
+                        "ground station switches the vehicle to GUIDED (PX4: OFFBOARD) and "
+                        "arms it, then track; leaving that mode ends the run as a pilot's "
+                        "switch does")
+    g.add_argument("--handover", action="store_true",
+                   help="ArduPilot: wait while the vehicle flies its own AUTO mission and track "
+                        "each segment between a NAV_GUIDED_ENABLE 1 and 0 item when AUTO "
+                        "reaches it, then hand back; with --mission vehicle (pulled from it)")
 
 
 def add_origin_arguments(p: argparse.ArgumentParser) -> None:

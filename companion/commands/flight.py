@@ -166,7 +166,8 @@ class Flight:
                        tlog=self.paths.tlog if self.paths is not None else None)
         return RunSettings(link=link, mission=mission, runner=o.runner, gains=o.gains,
                            vehicle=vehicle if vehicle is not None else KnownVehicle(),
-                           origin=o.origin, realtime=o.realtime, controller=o.controller)
+                           origin=o.origin, realtime=o.realtime, controller=o.controller,
+                           gcs_report=o.gcs_report, handover=o.handover)
 
     def fly(self, mission: Any, vehicle: Any = None, sinks: Sequence[Any] = (),
             make_tracker: Callable[[Any, Any], Any] | None = None):

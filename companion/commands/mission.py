@@ -40,6 +40,9 @@ def register(subparsers) -> None:
     _common(show)
     show.set_defaults(func=run_show)
 
+    from . import mission_pull
+    mission_pull.register(sub)
+
 
 def _common(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--origin", metavar="LAT,LON",

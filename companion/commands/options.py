@@ -58,13 +58,24 @@ class FlightOptions:
     log: LogOptions = LogOptions()
     output: OutputOptions = OutputOptions()
     bus: Any = field(default_factory=_no_bus)   # companion.bus.BusOptions
+    gcs_report: bool = True            # --no-gcs-report turns it off (companion.live.gcs)
+    handover: Any = None               # --handover: a companion.live.handover.HandoverPlan
+
+    def for_handover(self, plan: Any, auto_mode: str) -> "FlightOptions":
+        """--handover: AUTO's guided sub-mode is the track mode, entered by the mission, never
+        asked for; the rover's pose at each hand-over is the segment's start (no start limit)."""
+        from dataclasses import replace
+        runner = replace(self.runner, wait_for_mode=True, track_mode=auto_mode,
+                         autostart=False, max_start_distance=math.inf)
+        return replace(self, runner=runner, handover=plan)
 
     @classmethod
     def from_args(cls, args: argparse.Namespace) -> "FlightOptions":
         """``companion run``'s flags: every group."""
         return cls(link=link_config(args),
                    runner=runner_config(args, max_start_distance=start_limit(
-                       args.max_start_distance)),
+                       args.max_start_distance), wait_for_mode=args.start_on_guided),
+                   gcs_report=args.gcs_report,
                    gains=gain_options(args), vehicle_file=args.vehicle,
                    controller=args.controller,
                    origin=origin_config(args), realtime=args.realtime,
@@ -77,7 +88,8 @@ class FlightOptions:
 def link_config(args: argparse.Namespace) -> LinkConfig:
     """add_link_arguments + add_timeout_arguments' --heartbeat-timeout."""
     return LinkConfig(url=args.connect, sysid=args.sysid, baud=args.baud,
-                      heartbeat_timeout=args.heartbeat_timeout)
+                      heartbeat_timeout=args.heartbeat_timeout,
+                      source_system=getattr(args, "source_system", None))
 
 
 def runner_config(args: argparse.Namespace, **more: Any) -> RunnerConfig:

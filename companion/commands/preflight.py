@@ -16,7 +16,7 @@ import json
 import sys
 
 from ..errors import UserError
-from .arguments import BAUD_HELP, baud_rate, positive
+from .arguments import BAUD_HELP, baud_rate, mavlink_id, positive
 from .flight import logger, signing_key
 from ..live.config import DEFAULT_RATE, LINK
 
@@ -35,6 +35,9 @@ def register(subparsers) -> None:
                    help="pymavlink connection string (the companion's link to the autopilot)")
     p.add_argument("--baud", type=baud_rate, metavar="BPS", help=BAUD_HELP)
     p.add_argument("--sysid", type=int, metavar="N", help="system id of the vehicle")
+    p.add_argument("--source-system", type=mavlink_id, metavar="N",
+                   help="the companion's system id to check the GCS failsafe for, as `run "
+                        "--source-system` (default: the vehicle's)")
     p.add_argument("--rate", type=positive, default=DEFAULT_RATE, metavar="HZ",
                    help=f"pose telemetry rate the control loop will ask for (default {DEFAULT_RATE:g})")
     p.add_argument("--vehicle", metavar="FILE",
@@ -83,7 +86,8 @@ def run(args) -> int:
     log = logger("companion preflight", args.quiet)
     cfg = GatherConfig(rate_hz=args.rate)
     link, probe = connect(LinkConfig(url=args.connect, sysid=args.sysid, signing_key=key,
-                                     heartbeat_timeout=args.heartbeat_timeout, baud=args.baud))
+                                     heartbeat_timeout=args.heartbeat_timeout, baud=args.baud,
+                                     source_system=args.source_system))
     try:
         v = link.vehicle
         log(f"{v.autopilot} system {v.sysid} (MAV_TYPE {v.mav_type}): reading parameters")

@@ -4,7 +4,8 @@ from __future__ import annotations
 
 import argparse
 
-from .arguments import (add_gain_arguments, add_link_arguments, add_origin_arguments,
+from .arguments import (add_gain_arguments, add_gcs_arguments, add_link_arguments,
+                        add_origin_arguments,
                         add_output_arguments, add_safety_arguments, add_timeout_arguments,
                         add_vehicle_arguments, add_zenoh_arguments)
 
@@ -37,8 +38,10 @@ def register(subparsers) -> None:
         epilog=EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
     add_link_arguments(p, default_connect=True)
     p.add_argument("--mission", metavar="FILE", required=True,
-                   help="mission file (.toml, .plan, .waypoints)")
+                   help="mission file (.toml, .plan, .waypoints), or 'vehicle': the mission "
+                        "stored on the vehicle, pulled at start (companion mission pull)")
     add_origin_arguments(p)
+    add_gcs_arguments(p)
     add_gain_arguments(p)
     add_vehicle_arguments(p)
     add_timeout_arguments(p)
@@ -57,8 +60,22 @@ def run(args) -> int:
     from .flight import fly_mission, load_mission
     from .options import FlightOptions
     from .run_result import print_result
-    mission = load_mission(args.mission, args.origin)
     options = FlightOptions.from_args(args)
+    path, handover = args.mission, None
+    if args.handover and path != "vehicle":
+        from ..errors import UserError
+        raise UserError(f"--handover flies the mission stored on the vehicle: give --mission "
+                        f"vehicle, not {path!r}")
+    if path == "vehicle" or args.handover:
+        from .flight import logger
+        from .mission_pull import handover_plan, vehicle_mission_file
+        pulled_path, pulled = vehicle_mission_file(options, logger("companion run",
+                                                                   options.output.quiet))
+        path = str(pulled_path)
+        if args.handover:
+            handover = handover_plan(pulled)
+            options = options.for_handover(handover, pulled.profile.auto_mode)
+    mission = load_mission(path, args.origin)
     result, paths = fly_mission(options, mission)
     print_result(result, options.output.json,
                  {"tlog": paths.tlog, "csv": paths.csv, "mcap": paths.mcap} if paths else None)

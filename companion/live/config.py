@@ -14,13 +14,21 @@ MAV_COMP_ID_ONBOARD_COMPUTER = 191    # pymavlink's mavlink.MAV_COMP_ID_ONBOARD_
 DEFAULT_RATE = 40.0    # Hz: the telemetry / control rate asked for when nobody says (a stock
                        # ArduPilot's); the policy (companion.live.policy) decides the rest
 MAX_RATE = 1000.0      # Hz
+PLACEHOLDER_SYSID = 255   # the connection's system id until the vehicle's is known (nothing
+                          # is sent before then)
+GCS_REPORT_HZ = 4.0    # NAMED_VALUE_FLOAT values to the ground station (companion.live.gcs)
 
 
 @dataclass(frozen=True)
 class LinkConfig:
     url: str
     sysid: int | None = None          # vehicle to follow; None: the first vehicle heartbeat's
-    source_system: int = 255
+    # The companion's own MAVLink identity, by the onboard-computer conventions (mavlink.io,
+    # "MAVLink routing" / "onboard computer"): the vehicle's system id, component 191. None:
+    # take the vehicle's system id from its first heartbeat (docs/ground-station.md says why
+    # not 255, a ground station's id: ArduPilot's GCS failsafe would take the companion's
+    # heartbeat for the ground station's and never fire when the real one is lost).
+    source_system: int | None = None
     source_component: int = MAV_COMP_ID_ONBOARD_COMPUTER
     heartbeat_timeout: float = 10.0   # s to wait for the vehicle's first heartbeat
     ack_timeout: float = 1.0          # s to wait for one COMMAND_ACK
@@ -55,6 +63,12 @@ class RunnerConfig:
     # threshold FS_EKF_THRESH defaults to 0.8 too
     estimate_variance: float = 0.8
     retake_after_failsafe: bool = False   # re-engage once the autopilot's failsafe has cleared
+    # --start-on-guided: never ask for the track mode nor arm; wait (without a timeout) until
+    # the pilot or a ground station switches the vehicle into it, armed, then track
+    wait_for_mode: bool = False
+    # the mode the pilot leaves the vehicle in while the companion tracks (None: the profile's
+    # track mode); --handover: its AUTO, whose guided sub-mode takes the setpoints
+    track_mode: str | None = None
 
 
 @dataclass(frozen=True)

@@ -29,6 +29,7 @@ PILOT_OVERRIDE = "pilot_override"
 AUTOPILOT_FAILSAFE = "autopilot_failsafe"   # the autopilot's own failsafe took the vehicle
 STOPPED = "stopped"
 MISSION_LOADED = "mission_loaded"
+HANDED_BACK = "handed_back"          # --handover: a segment ended, AUTO drives again
 
 
 @dataclass(slots=True)

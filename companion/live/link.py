@@ -40,7 +40,7 @@ from ..mav.connection import open_connection  # noqa: E402
 from ..mav.sockets import size_receive_buffer  # noqa: E402
 from ..errors import UserError  # noqa: E402
 from ..core.signals import Command  # noqa: E402
-from .config import LinkConfig  # noqa: E402,F401  (its home; imported from here too)
+from .config import PLACEHOLDER_SYSID, LinkConfig  # noqa: E402,F401  (its home; imported from here too)
 from .. import profiles  # noqa: E402
 from ..profiles.autopilot import AutopilotProfile, ModeTable  # noqa: E402
 
@@ -72,7 +72,9 @@ class Link:
         self.config = config
         # A URL or a serial device (DEVICE[,BAUD] or config.baud); one-line UserError if not.
         self.master = open_connection(
-            config.url, baud=config.baud, source_system=config.source_system,
+            config.url, baud=config.baud,
+            source_system=(PLACEHOLDER_SYSID if config.source_system is None
+                           else config.source_system),
             source_component=config.source_component, dialect="ardupilotmega")
         self.mav = self.master.mav
         self.recv_buffer = size_receive_buffer(self.master)
@@ -105,6 +107,17 @@ class Link:
         if isinstance(self.master, mavutil.mavtcp):
             # pymavlink calls these on EOF / reset (and would print, then reconnect blocking)
             self.master.handle_eof = self.master.handle_disconnect = self._tcp_dropped
+
+    def linger(self, seconds: float) -> None:
+        """Keep reading (and dropping) for ``seconds`` before closing, so what was just sent
+        gets through and what arrives meanwhile is still read (and counted)."""
+        deadline = time.monotonic() + seconds
+        while (left := deadline - time.monotonic()) > 0:
+            if self.recv() is None:      # (not self.wait: the sinks' idle hooks are closed)
+                if self._recv_failed:
+                    time.sleep(min(left, 0.02))
+                else:
+                    self.master.select(min(left, 0.02))
 
     def close(self) -> None:
         try:
@@ -183,9 +196,18 @@ class Link:
     def is_for_us(self, msg: Any) -> bool:
         """A COMMAND_ACK (or any targeted message) addressed to us or to everyone: the vehicle
         answers every ground station on the link, and another's ACK is not ours."""
-        cfg = self.config
-        return (getattr(msg, "target_system", 0) in (0, cfg.source_system)
-                and getattr(msg, "target_component", 0) in (0, cfg.source_component))
+        return (getattr(msg, "target_system", 0) in (0, self.source_system)
+                and getattr(msg, "target_component", 0) in (0, self.config.source_component))
+
+    @property
+    def source_system(self) -> int:
+        """The companion's own system id as sent: ``config.source_system``, else the vehicle's
+        (once its heartbeat is known)."""
+        return int(self.mav.srcSystem)
+
+    @property
+    def source_component(self) -> int:
+        return int(self.mav.srcComponent)
 
     def is_vehicle_heartbeat(self, msg: Any) -> bool:
         """A HEARTBEAT of our vehicle that still says what it said at first (autopilot and
@@ -228,6 +250,9 @@ class Link:
                                        msg.type)
             self.master.target_system = self.vehicle.sysid
             self.master.target_component = self.vehicle.compid
+            if cfg.source_system is None:
+                # The onboard-computer convention: a component of the vehicle's own system.
+                self.mav.srcSystem = self.vehicle.sysid
             self._modes = profile.modes_for(msg.type)
             sp = profile.setpoint
             self._frame, self._mask, self._vector = sp.frame, sp.type_mask, sp.velocity_vector

@@ -169,8 +169,11 @@ class Runner:
     def __init__(self, link: Link, tracker: Any, mission: Any, config: RunnerConfig,
                  limits: Limits, sinks: Sequence[Sink] = (), control: ControlChannel | None = None,
                  log: Callable[[str], None] = lambda text: None,
-                 origin: tuple[float, float] | None = None):
+                 origin: tuple[float, float] | None = None, gcs: Any = None,
+                 handover: Any = None):
         self.link, self.tracker, self.mission = link, tracker, mission
+        self.gcs = gcs                    # a ground station's commands (companion.live.gcs)
+        self.handover = handover          # --handover: segments inside AUTO (live.handover)
         self.origin = origin              # the vehicle's EKF origin (lat, lon), when known
         self.config, self.limits, self.log = config, limits, log
         self.sinks = list(sinks)
@@ -197,7 +200,7 @@ class Runner:
 
     @property
     def track_mode(self) -> str:
-        return self.profile.track_mode
+        return self.config.track_mode or self.profile.track_mode
 
     @property
     def hold_mode(self) -> str:
@@ -271,6 +274,8 @@ class Runner:
             if self.control is not None:
                 for request in self.control.poll():
                     self._on_request(request)
+                    if not request.ok and self.gcs is not None:
+                        self.gcs.refused(f"{request.verb}: {request.message}")
             t_read = clock()
             msg = recv()
             if msg is None:
@@ -289,6 +294,11 @@ class Runner:
                 self._on_ack(msg)
             elif kind == estimate_kind:
                 self._on_estimate(msg, t_read)
+            elif (kind in ("MISSION_CURRENT", "MISSION_ITEM_REACHED")
+                  and self.handover is not None and link.is_vehicle(msg)):
+                self.handover.on_message(msg, self)
+            elif kind in ("COMMAND_LONG", "COMMAND_INT") and self.gcs is not None:
+                self.gcs.on_command(msg, self._on_request)   # DO_PAUSE_CONTINUE, ACKed
             elif kind == "STATUSTEXT" and link.is_vehicle(msg):
                 text = "".join(c if c.isprintable() else "?" for c in msg.text)
                 self.log("vehicle says: " + text)
@@ -331,7 +341,8 @@ class Runner:
                     return
                 self.log(f"telemetry flowing; engaging {self.track_mode}")
                 self._enter_engaging(State.WAITING)
-            self.link.send_stop(s.time_boot_ms)
+            if self.handover is None or not self.handover.quiet:
+                self.link.send_stop(s.time_boot_ms)   # (not while AUTO drives itself)
             if self.state is State.ENGAGING:
                 if self.engagement.warm_t0 is None:
                     self.engagement.warm_t0 = s.t
@@ -382,6 +393,9 @@ class Runner:
             self.stats.segment_start()
         mt = clock.offset + (s.t - clock.segment_t0)
         clock.time = mt
+        if mt >= self.mission.duration - 1e-9 and self.handover is not None:
+            self._hand_back(s.time_boot_ms)
+            return
         if mt >= self.mission.duration - 1e-9:
             self._emit(ev.MISSION_DONE, f"{self.mission.duration:g} s of mission tracked")
             self._finish("mission_done", ExitCode.OK, s.time_boot_ms)
@@ -676,6 +690,12 @@ class Runner:
         # Only a heartbeat that arrived since engaging began counts: after an outage the last
         # one still says GUIDED while the vehicle sits in the HOLD we sent it.
         if not e.mode_seen:
+            if cfg.wait_for_mode:         # --start-on-guided: the pilot or a GCS engages
+                if not e.said_arm_wait:
+                    e.said_arm_wait = True
+                    self.log(f"waiting for the pilot or a ground station to select "
+                             f"{self.track_mode} and arm")
+                return
             if now - e.since > cfg.mode_timeout:
                 self._finish(f"failsafe: the vehicle did not enter {self.track_mode} within "
                              f"{cfg.mode_timeout:g} s", ExitCode.FAULT)
@@ -683,6 +703,8 @@ class Runner:
                 self._request_mode(self.track_mode, now)
             return
         if not link.armed:
+            if cfg.wait_for_mode:
+                return
             if now - e.since > cfg.arm_timeout:
                 self._finish(f"failsafe: the vehicle was not armed within {cfg.arm_timeout:g} s"
                              + ("" if cfg.arm else " (use --arm to arm it from here)"), ExitCode.FAULT)
@@ -767,6 +789,8 @@ class Runner:
         verb, state = req.verb, self.state
         if verb == "status":
             req.reply(True, json.dumps(self.status()))
+        elif verb == "start" and self.handover is not None:
+            req.reply(False, "--handover: AUTO starts each segment, not `start`")
         elif verb == "start":
             if state is State.READY:
                 self.state = State.TRACKING
@@ -834,9 +858,49 @@ class Runner:
         self._emit(ev.MISSION_LOADED, new.name, {"source": new.source, "duration": new.duration})
         req.reply(True, f"loaded '{new.name}' ({new.duration:g} s); send `start`")
 
+    # --- hand-over inside AUTO (companion.live.handover calls these) ---------------------------
+    def handover_pose(self) -> tuple[float, float, float] | None:
+        """The rover's last pose, if the loop is engaged (AUTO and armed) and may track."""
+        return self.heard.pose if self.state is State.READY else None
+
+    def handover_begin(self, mission: Any) -> None:
+        """AUTO reached a NAV_GUIDED_ENABLE: track ``mission`` (from the rover's pose) now."""
+        self.mission, self.trajectory = mission, None
+        self.clock.time, self.clock.offset, self.clock.segment_t0 = 0.0, 0.0, None
+        self.stats = TrackingStats(mission.duration, self.config.period)
+        self.tracker.reset()
+        self.state = State.TRACKING
+        self.log(f"hand-over: tracking '{mission.name}' ({mission.duration:.1f} s)")
+        self._emit(ev.TRACKING, mission.name)
+
+    def _hand_back(self, time_boot_ms: int) -> None:
+        self.link.send_stop(time_boot_ms)
+        segment = self.handover.hand_back()
+        self.handover_ended(f"handed back to AUTO at item {segment.resume_seq}", True)
+
+    def handover_ended(self, why: str, handed_back: bool) -> None:
+        """The segment is over (done, or AUTO took it back): silent until the next one."""
+        from .handover import SegmentResult
+        st = self.stats
+        seg = self.handover.handing_back if handed_back else None
+        items = (seg.enable_seq, seg.resume_seq) if seg else (self.handover.current, -1)
+        self.handover.results.append(SegmentResult(items[0], items[1], self.clock.time,
+                                                   st.steady_rms, st.f_cost, why))
+        if self.state in (State.TRACKING, State.PAUSED):
+            self.state = State.READY
+        self.log(f"hand-over: {why}; steady RMS {st.steady_rms:.3f} m over "
+                 f"{self.clock.time:.1f} s")
+        self._emit(ev.HANDED_BACK, why, {"steady_rms": st.steady_rms})
+
+    def handover_finished(self, reason: str) -> None:
+        """AUTO completed the mission: the run ends, the vehicle left as AUTO leaves it."""
+        self._emit(ev.MISSION_DONE, reason)
+        self._finish(f"mission_done: {reason}", ExitCode.OK, hold=False, stop=False)
+
     def status(self) -> dict[str, Any]:
         t = self.telemetry
         return {"state": self.state.value, "mission": self.mission.name,
+                "track_mode": self.track_mode,
                 "mission_time": self.clock.time, "duration": self.mission.duration,
                 "mode": self.link.mode, "armed": self.link.armed, "cycles": self.stats.cycles,
                 "telemetry_received": t.received, "telemetry_rejected": dict(t.rejected),

@@ -18,6 +18,8 @@ from typing import Any, Callable, Sequence
 from ..core import controllers
 from ..core.limits import Limits
 from ..errors import UserError
+from . import gcs
+from . import handover as handover_mod
 from . import origin as origin_mod
 from . import policy
 from .config import LinkConfig, OriginConfig, RunnerConfig
@@ -39,6 +41,8 @@ class RunSettings:
     origin: OriginConfig = OriginConfig()
     realtime: bool = False             # --realtime: SCHED_FIFO for the loop
     controller: str = controllers.DEFAULT   # --controller: a name in companion.core.controllers
+    gcs_report: bool = True            # STATUSTEXT / NAMED_VALUE_FLOAT / DO_PAUSE_CONTINUE
+    handover: Any = None               # --handover: a live.handover.HandoverPlan
 
 
 REALTIME_PRIORITY = 10   # low among real-time tasks: above every normal process, below the kernel's
@@ -130,8 +134,15 @@ def fly(s: RunSettings, sinks: Sequence[Sink] = (), control: ControlChannel | No
             log(f"gains: {gains_source}; {limits_text}")
             tracker = make_tracker(link, limits)
         config = replace(s.runner, period=1.0 / accepted if accepted else None)
+        reporter, commands = gcs.attach(link) if s.gcs_report else (None, None)
+        sinks = [*sinks, reporter] if reporter is not None else sinks
+        latlon = origin.latlon if origin is not None else None
+        handover = (None if s.handover is None
+                    else handover_mod.attach(s.handover, link, latlon, log))
         runner = Runner(link, tracker, mission, config, limits, sinks, control, log,
-                        origin=origin.latlon if origin is not None else None)
+                        origin=latlon, gcs=commands, handover=handover)
+        if reporter is not None:
+            reporter.watch(runner.status)
         # Sinks that write files (the flight-log CSV) flush when the loop is about to sleep.
         link.on_idle.extend(idle for sink in sinks if (idle := getattr(sink, "idle", None)))
         if switch is not None:
@@ -141,6 +152,8 @@ def fly(s: RunSettings, sinks: Sequence[Sink] = (), control: ControlChannel | No
         if s.realtime:
             take_realtime(log)
         outcome = runner.run()
+        if reporter is not None:
+            link.linger(reporter.linger)
     finally:
         link.close()
     st, t = runner.stats, runner.telemetry
@@ -165,4 +178,6 @@ def fly(s: RunSettings, sinks: Sequence[Sink] = (), control: ControlChannel | No
                "missed_gaps": st.gaps, "backlog": st.backlog,
                "sink_errors": runner.sink_errors, "signing_rejected": link.signing_rejected,
                "tracker_resets": runner.tracker_resets, "udp_recv_buffer": link.recv_buffer,
-               "tcp_reconnects": link.reconnects})
+               "tcp_reconnects": link.reconnects,
+               **({"handovers": [r.as_dict() for r in handover.results]}
+                  if handover is not None else {})})

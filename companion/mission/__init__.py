@@ -3,6 +3,6 @@
 May import: ``core``, ``sim`` (rover parameters, gains files), ``errors``; no MAVLink or Zenoh.
 """
 
-from .file import Mission, load, loads, paper_ellipse
+from .file import Mission, from_local_points, load, loads, paper_ellipse
 
-__all__ = ["Mission", "load", "loads", "paper_ellipse"]
+__all__ = ["Mission", "from_local_points", "load", "loads", "paper_ellipse"]

@@ -462,6 +462,33 @@ def _profile(top: Table, traj, duration: float, period: float | None,
 # --------------------------------------------------------------------------- imported plans
 
 
+def _waypoint_path(points, speed: float, corner_radius: float | None, source: str):
+    """(trajectory, duration, profile) of a path through ``points`` (local north, east) at
+    ``speed``: corners rounded as a .plan's, raised-cosine ramps at both ends."""
+    try:
+        traj = Polyline(points, speed=speed, corner_radius=corner_radius or PLAN_CORNER_RADIUS,
+                        accel=DEFAULT_ACCEL, shrink_corners=True)
+    except paths.PathError as exc:
+        raise UserError(f"{source}: {exc}") from None
+    duration = traj.motion_end
+    traj = replace(traj, duration=duration)
+    try:
+        profile = measure(traj, duration, motion_end=duration)
+    except (ArithmeticError, ValueError) as exc:
+        raise UserError(f"{source}: {exc}") from None
+    return traj, duration, profile
+
+
+def from_local_points(name: str, points, speed: float, source: str,
+                      description: str = "") -> Mission:
+    """A mission along ``points`` (local north, east metres around the EKF origin) at
+    ``speed``, as a .plan's waypoints are flown (a hand-over segment: companion.live.handover)."""
+    traj, duration, profile = _waypoint_path(points, speed, None, source)
+    return Mission(name=name, description=description, trajectory=traj, duration=duration,
+                   rate_hz=None, filter_gains=None, pzc_gains=None, limits=None, vehicle=None,
+                   frame="local", source=source, kind="plan", period=None, profile=profile)
+
+
 def _from_plan(path: Path, *, origin: tuple[float, float] | None, speed: float | None,
                corner_radius: float | None) -> Mission:
     from . import plan_import
@@ -472,18 +499,7 @@ def _from_plan(path: Path, *, origin: tuple[float, float] | None, speed: float |
         if speed is None:
             speed = plan_import.DEFAULT_SPEED
             warnings.append(f"{path}: the file gives no speed: using {speed:g} m/s")
-    try:
-        traj = Polyline(plan.points, speed=speed,
-                              corner_radius=corner_radius or PLAN_CORNER_RADIUS,
-                              accel=DEFAULT_ACCEL, shrink_corners=True)
-    except paths.PathError as exc:
-        raise UserError(f"{path}: {exc}") from None
-    duration = traj.motion_end
-    traj = replace(traj, duration=duration)
-    try:
-        profile = measure(traj, duration, motion_end=duration)
-    except (ArithmeticError, ValueError) as exc:
-        raise UserError(f"{path}: {exc}") from None
+    traj, duration, profile = _waypoint_path(plan.points, speed, corner_radius, str(path))
     where = "home" if plan.home is not None and plan.origin == plan.home else "the EKF origin"
     return Mission(
         name=path.stem,

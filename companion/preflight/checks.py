@@ -104,6 +104,7 @@ class Observed:
     signing_key: bool = False               # the companion signs (and verified the vehicle's)
     serial: bool = False                    # the link is a serial device (a wire)
     companion_sysid: int = 255
+    vehicle_sysid: int | None = None        # the vehicle's (the companion's too, by default)
     params: Mapping[str, float] = field(default_factory=dict)
     sensors: tuple[int, int, int] | None = None      # SYS_STATUS present, enabled, health
     prearm_texts: tuple[str, ...] = ()
@@ -376,6 +377,8 @@ def _gcs_sysid_names(f: GcsFailsafe, params: Mapping[str, float]) -> tuple[str, 
 
 
 def _gcs_failsafe(obs: Observed, f: GcsFailsafe) -> list[Check]:
+    if obs.vehicle_sysid is not None and obs.companion_sysid == obs.vehicle_sysid:
+        return _gcs_failsafe_onboard(obs, f)
     p, out = obs.params, []
     me = obs.companion_sysid
     track = obs.profile.track_mode
@@ -440,6 +443,68 @@ def _gcs_failsafe(obs: Observed, f: GcsFailsafe) -> list[Check]:
         out.append(Check(sysid_name, WARN, value, f"{me} (the companion's system id)",
                          "the GCS failsafe watches another system: a dead companion goes "
                          "unnoticed", {sysid_name: float(me)}))
+    return out
+
+
+def _gcs_failsafe_onboard(obs: Observed, f: GcsFailsafe) -> list[Check]:
+    """The companion is a component of the vehicle's own system (the default, docs/
+    ground-station.md): the GCS failsafe watches the ground station alone, and the companion's
+    own death is caught by the guided timeout, not by this failsafe."""
+    p, out = obs.params, []
+    me = obs.companion_sysid
+    missing = _param(f.enable, obs, "1", "the GCS failsafe notices a lost ground station")
+    if missing:
+        out.append(missing)
+    elif p[f.enable] == 0:
+        out.append(Check(f.enable, WARN, "0 (off)", "1",
+                         "the ground station's link can be lost unnoticed; the companion "
+                         f"(system {me}, the vehicle's own) does not stand in for it",
+                         {f.enable: 1.0}))
+    else:
+        out.append(Check(f.enable, OK, _num(p[f.enable]), "1",
+                         f"a lost ground station triggers {f.action}; the companion's heartbeat "
+                         "does not keep it from firing"))
+    missing = _param(f.action, obs, f.action_hold_label, "what the failsafe does")
+    if missing:
+        out.append(missing)
+    elif p[f.action] == 0:
+        out.append(Check(f.action, WARN, "0 (nothing)", f.action_hold_label,
+                         "a failsafe that does nothing leaves the rover driving",
+                         {f.action: float(f.action_hold)}))
+    else:
+        out.append(Check(f.action, OK, _num(p[f.action]), f.action_hold_label,
+                         f"the failsafe takes the rover out of {obs.profile.track_mode}"))
+    lo_t, hi_t = f.timeout_range
+    missing = _param(f.timeout, obs, f"{f.timeout_fix:g} s",
+                     "how long a lost ground station goes unnoticed")
+    if missing:
+        out.append(missing)
+    elif lo_t <= p[f.timeout] <= hi_t:
+        out.append(Check(f.timeout, OK, f"{p[f.timeout]:g} s", f"{lo_t:g} to {hi_t:g} s",
+                         "longer than a few lost 1 Hz heartbeats, short enough to matter"))
+    else:
+        out.append(Check(f.timeout, WARN, f"{p[f.timeout]:g} s",
+                         f"{lo_t:g} to {hi_t:g} s ({f.timeout_fix:g})",
+                         f"a ground station heart-beats each second: under {lo_t:g} s a few "
+                         f"lost ones trip it, over {hi_t:g} s a lost one goes unnoticed",
+                         {f.timeout: f.timeout_fix}))
+    sysid_name, hi_name, _enforce_name = _gcs_sysid_names(f, p)
+    missing = _param(sysid_name, obs, "the ground station's id (255)",
+                     "which system the GCS failsafe watches")
+    if missing:
+        out.append(missing)
+        return out
+    lo = int(p[sysid_name])
+    hi = int(p.get(hi_name, 0) or 0) if hi_name else 0
+    value = f"{lo}" + (f"..{hi}" if hi > lo else "")
+    if lo <= me <= max(lo, hi):
+        out.append(Check(sysid_name, WARN, value, "the ground station's id (255), not "
+                         f"{me}", f"the GCS failsafe watches system {me}, the vehicle and its "
+                         "companion: a lost ground station goes unnoticed", {sysid_name: 255.0}))
+    else:
+        out.append(Check(sysid_name, OK, value, "the ground station's id",
+                         f"the companion (system {me}, component 191) is not taken for the "
+                         "ground station"))
     return out
 
 

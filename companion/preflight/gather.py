@@ -190,7 +190,7 @@ class Probe:
             autopilot=v.autopilot, mav_type=v.mav_type, modes=frozenset(link.mode_names()),
             armed=link.armed, mavlink_version=seen.mavlink_version or 2, signed=seen.signed,
             signing_key=signing_key, serial=serial,
-            companion_sysid=link.config.source_system,
+            companion_sysid=link.source_system, vehicle_sysid=v.sysid,
             params={name: p.value for name, p in self.params.items()},
             sensors=None if sys_status is None else (
                 int(sys_status.onboard_control_sensors_present),

@@ -274,4 +274,5 @@ PROFILE = AutopilotProfile(
         params=plant_params),
     failsafe=FAILSAFE,
     estimate=ESTIMATE,
+    mission_home_item=True, auto_mode="AUTO",
 )

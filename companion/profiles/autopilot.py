@@ -270,6 +270,12 @@ class AutopilotProfile:
     plant: PlantFacts
     failsafe: FailsafeFacts
     estimate: EstimateFacts
+    # the stored mission's item 0 is the home position, not a mission item (ArduPilot; PX4
+    # keeps home apart): companion.mav.mission_transfer
+    mission_home_item: bool = False
+    # the guided sub-mode inside the mission (ArduPilot Rover's MAV_CMD_NAV_GUIDED_ENABLE):
+    # companion run --handover; None: the autopilot has none
+    auto_mode: str | None = None
 
     def modes_for(self, mav_type: int) -> ModeTable:
         """The mode table for a vehicle of this MAV_TYPE (empty for a type it does not cover)."""
