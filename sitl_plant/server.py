@@ -61,7 +61,7 @@ class PlantServer:
         self.streams = streams.StreamSchedule(
             config.loop_rate, tick_aligned=config.tick_aligned,
             initial={streams.GLOBAL_POSITION_INT: int(round(1e6 / gpi)) if gpi > 0 else None,
-                     streams.EKF_STATUS_REPORT: None})
+                     streams.EKF_STATUS_REPORT: None,
                      streams.MISSION_CURRENT: None})
         self.earth = Earth(config.origin, config.vehicle.start[:2])
         self._after_ack: list[Callable[[], None]] = []
