@@ -165,6 +165,15 @@ class Counters:
     refusals_logged: dict[str, int] = field(default_factory=dict)   # as last logged
 
 
+@dataclass(slots=True)
+class GroundStation:
+    """What a ground station adds to the loop: its commands and STATUSTEXT
+    (:mod:`companion.live.gcs`) and, with ``--handover``, the segments inside AUTO
+    (:mod:`companion.live.handover`); None where the run has none."""
+    gcs: Any = None
+    handover: Any = None
+
+
 class Runner:
     def __init__(self, link: Link, tracker: Any, mission: Any, config: RunnerConfig,
                  limits: Limits, sinks: Sequence[Sink] = (), control: ControlChannel | None = None,
@@ -172,8 +181,7 @@ class Runner:
                  origin: tuple[float, float] | None = None, gcs: Any = None,
                  handover: Any = None):
         self.link, self.tracker, self.mission = link, tracker, mission
-        self.gcs = gcs                    # a ground station's commands (companion.live.gcs)
-        self.handover = handover          # --handover: segments inside AUTO (live.handover)
+        self.ground = GroundStation(gcs, handover)
         self.origin = origin              # the vehicle's EKF origin (lat, lon), when known
         self.config, self.limits, self.log = config, limits, log
         self.sinks = list(sinks)
@@ -274,8 +282,8 @@ class Runner:
             if self.control is not None:
                 for request in self.control.poll():
                     self._on_request(request)
-                    if not request.ok and self.gcs is not None:
-                        self.gcs.refused(f"{request.verb}: {request.message}")
+                    if not request.ok and self.ground.gcs is not None:
+                        self.ground.gcs.refused(f"{request.verb}: {request.message}")
             t_read = clock()
             msg = recv()
             if msg is None:
@@ -295,10 +303,10 @@ class Runner:
             elif kind == estimate_kind:
                 self._on_estimate(msg, t_read)
             elif (kind in ("MISSION_CURRENT", "MISSION_ITEM_REACHED")
-                  and self.handover is not None and link.is_vehicle(msg)):
-                self.handover.on_message(msg, self)
-            elif kind in ("COMMAND_LONG", "COMMAND_INT") and self.gcs is not None:
-                self.gcs.on_command(msg, self._on_request)   # DO_PAUSE_CONTINUE, ACKed
+                  and self.ground.handover is not None and link.is_vehicle(msg)):
+                self.ground.handover.on_message(msg, self)
+            elif kind in ("COMMAND_LONG", "COMMAND_INT") and self.ground.gcs is not None:
+                self.ground.gcs.on_command(msg, self._on_request)   # DO_PAUSE_CONTINUE, ACKed
             elif kind == "STATUSTEXT" and link.is_vehicle(msg):
                 text = "".join(c if c.isprintable() else "?" for c in msg.text)
                 self.log("vehicle says: " + text)
@@ -341,7 +349,7 @@ class Runner:
                     return
                 self.log(f"telemetry flowing; engaging {self.track_mode}")
                 self._enter_engaging(State.WAITING)
-            if self.handover is None or not self.handover.quiet:
+            if self.ground.handover is None or not self.ground.handover.quiet:
                 self.link.send_stop(s.time_boot_ms)   # (not while AUTO drives itself)
             if self.state is State.ENGAGING:
                 if self.engagement.warm_t0 is None:
@@ -393,7 +401,7 @@ class Runner:
             self.stats.segment_start()
         mt = clock.offset + (s.t - clock.segment_t0)
         clock.time = mt
-        if mt >= self.mission.duration - 1e-9 and self.handover is not None:
+        if mt >= self.mission.duration - 1e-9 and self.ground.handover is not None:
             self._hand_back(s.time_boot_ms)
             return
         if mt >= self.mission.duration - 1e-9:
@@ -789,7 +797,7 @@ class Runner:
         verb, state = req.verb, self.state
         if verb == "status":
             req.reply(True, json.dumps(self.status()))
-        elif verb == "start" and self.handover is not None:
+        elif verb == "start" and self.ground.handover is not None:
             req.reply(False, "--handover: AUTO starts each segment, not `start`")
         elif verb == "start":
             if state is State.READY:
@@ -875,16 +883,16 @@ class Runner:
 
     def _hand_back(self, time_boot_ms: int) -> None:
         self.link.send_stop(time_boot_ms)
-        segment = self.handover.hand_back()
+        segment = self.ground.handover.hand_back()
         self.handover_ended(f"handed back to AUTO at item {segment.resume_seq}", True)
 
     def handover_ended(self, why: str, handed_back: bool) -> None:
         """The segment is over (done, or AUTO took it back): silent until the next one."""
         from .handover import SegmentResult
         st = self.stats
-        seg = self.handover.handing_back if handed_back else None
-        items = (seg.enable_seq, seg.resume_seq) if seg else (self.handover.current, -1)
-        self.handover.results.append(SegmentResult(items[0], items[1], self.clock.time,
+        seg = self.ground.handover.handing_back if handed_back else None
+        items = (seg.enable_seq, seg.resume_seq) if seg else (self.ground.handover.current, -1)
+        self.ground.handover.results.append(SegmentResult(items[0], items[1], self.clock.time,
                                                    st.steady_rms, st.f_cost, why))
         if self.state in (State.TRACKING, State.PAUSED):
             self.state = State.READY
