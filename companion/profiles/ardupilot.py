@@ -225,4 +225,5 @@ PROFILE = AutopilotProfile(
         arm_texts=("Throttle armed", "Throttle disarmed"),
         tick_aligned=True,              # 40 Hz on a 50 Hz scheduler: 20 / 20 / 20 / 40 ms
         params=plant_params),
+    presets={"ardupilot-skid": skid.PROFILE.name},   # stock rover-skid (its [source] says so)
 )

@@ -24,7 +24,7 @@ pymavlink's by ``tests/test_profiles.py``).
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Callable, Mapping
 
 from .priors import Priors
@@ -96,6 +96,8 @@ class ServoFrame:
     class_param: str
     classes: Mapping[int, str]          # accepted frame classes -> what they are
     type_param: str
+    # the output-function parameters (ArduPilot: SERVO1_FUNCTION ... SERVO16_FUNCTION)
+    function_params: tuple[str, ...] = tuple(f"SERVO{n}_FUNCTION" for n in range(1, 17))
 
 
 @dataclass(frozen=True)
@@ -222,6 +224,11 @@ class AutopilotProfile:
     preflight: PreflightFacts
     ident: IdentFacts
     plant: PlantFacts
+    # Bundled vehicle files (companion/sim/vehicles/) identified on this autopilot -> the
+    # steering kind of the vehicle each was identified on. ``run`` without a vehicle file flies
+    # one whose recorded parameters (its ``[source]`` values of ``ident.params``) and steering
+    # kind the vehicle has (companion.live.presets); () : none.
+    presets: Mapping[str, str] = field(default_factory=dict)
 
     def modes_for(self, mav_type: int) -> ModeTable:
         """The mode table for a vehicle of this MAV_TYPE (empty for a type it does not cover)."""
