@@ -62,6 +62,13 @@ def test_calibrate_identifies_tunes_and_says_how_to_fly(tmp_path):
     assert refine["check_speed_rms_m_s"] < 0.1 and refine["track_speed_rms_m_s"] < 0.1
     assert Path(refine["tlog"]).exists() and not (out / "vehicle-refit.toml").exists()
     assert r["next"].startswith("companion run --connect") and "--vehicle" in r["next"]
+    # where the time went, step by step; the refining flight's quick gains are gone (run
+    # --vehicle must only find the gains tuned for the model kept)
+    t = r["timings_s"]
+    assert set(t) == {"manoeuvre_flight", "fit", "refine_tune", "refine_flight", "joint_fit",
+                      "tune", "total"}
+    assert sum(v for k, v in t.items() if k != "total") <= t["total"] + 1e-6
+    assert not (out / "gains-refine.toml").exists()
 
     # The printed command flies, with the gains calibrate stored (not a new tune).
     argv = shlex.split(r["next"])[1:]
