@@ -95,7 +95,7 @@ def wait_ready(url: str, logs: Path) -> float:
 
 
 def one(name: str, params: dict[str, float], frame: str, speeds: list[float], work: Path,
-        native: bool) -> dict:
+        native: bool, kanayama: bool = True) -> dict:
     from ardupilot_harness import ArduPilotSITL
     from companion import mission as missions
     from native_follow import follow
@@ -124,7 +124,9 @@ def one(name: str, params: dict[str, float], frame: str, speeds: list[float], wo
             mission = str(ROOT / "missions" / MISSIONS[f_r])
             base = ["run", "--connect", url, "--vehicle", vehicle, "--mission", mission, "--arm",
                     "--json", "--no-zenoh", "--log-dir", str(logs), "-q"]
-            for label, extra in (("pzc", []), ("kanayama", ["--controller", "kanayama"])):
+            flown = [("pzc", [])] + ([("kanayama", ["--controller", "kanayama"])] if kanayama
+                                     else [])
+            for label, extra in flown:
                 r, _, err = companion(base + extra, 600)
                 row["runs"][f"{label}@{f_r:g}"] = {
                     "steady_rms": r.get("steady_rms"), "exit_code": r.get("exit_code"),
@@ -191,7 +193,10 @@ def main() -> int:
     p.add_argument("--frame", choices=tuple(MODELS), default="skid")
     p.add_argument("--f-r", default="0.04,0.08")
     p.add_argument("--repeat", type=int, default=1, help="calibrations per configuration")
-    p.add_argument("--no-native", dest="native", action="store_false")
+    p.add_argument("--no-native", dest="native", action="store_false",
+                   help="skip ArduPilot's own following")
+    p.add_argument("--no-kanayama", dest="kanayama", action="store_false",
+                   help="skip the Kanayama law flown live")
     p.add_argument("--table", action="store_true", help="only print the table of --out's rows")
     args = p.parse_args()
     out = Path(args.out)
@@ -206,7 +211,8 @@ def main() -> int:
             for k in range(args.repeat):
                 label = f"{name}-{args.frame}" + (f"-{k + 1}" if args.repeat > 1 else "")
                 work = Path(tempfile.mkdtemp(prefix=f"matrix-{label}-", dir=out))
-                row = one(name, CONFIGS[name], args.frame, speeds, work, args.native)
+                row = one(name, CONFIGS[name], args.frame, speeds, work, args.native,
+                          args.kanayama)
                 row.update(label=label, date=datetime.date.today().isoformat(),
                            command=shlex.join(["python", "benchmarks/vehicle_matrix.py",
                                                *sys.argv[1:]]))

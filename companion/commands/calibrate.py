@@ -91,10 +91,20 @@ REFINE_SEARCH = {"population": 48, "rounds": 2}
 FINAL_SEARCH = {"population": 128, "rounds": 4}
 
 
+NOTHING_ROBUST = ("calibrate: the tuner found no gains that hold on every neighbour of {vehicle} "
+                  "(each limit-cycled or diverged on one): widen the search (--population 256 "
+                  "--rounds 6), or check the identified limits in {vehicle} against the "
+                  "autopilot's (a turn-rate or acceleration limit far below its parameter)")
+
+
 def _tune(vehicle: Path, rate: float, command: str, args, log):
+    from ..sim.vehicle_gains import NothingRobust
     from .flight import gains_for_vehicle
-    return gains_for_vehicle(vehicle, rate, command, not args.quiet and not args.json, log,
-                             population=args.population, rounds=args.rounds)
+    try:
+        return gains_for_vehicle(vehicle, rate, command, not args.quiet and not args.json, log,
+                                 population=args.population, rounds=args.rounds)
+    except NothingRobust:
+        raise UserError(NOTHING_ROBUST.format(vehicle=vehicle)) from None
 
 
 def _quick_gains(vehicle: Path, rate: float, command: str, log) -> Path:
@@ -105,8 +115,8 @@ def _quick_gains(vehicle: Path, rate: float, command: str, log) -> Path:
     cfg = vehicle_gains.config_for(vehicle, rate, **REFINE_SEARCH)
     try:
         result = tune(cfg)
-    except RuntimeError as exc:
-        raise UserError(f"{vehicle}: {exc}") from None
+    except RuntimeError:
+        raise UserError(NOTHING_ROBUST.format(vehicle=vehicle)) from None
     out = vehicle.with_name(REFINE_GAINS)
     vehicle_gains.record(result, cfg, vehicle, command + " (the refining flight's quick search)"
                          ).save(out)
@@ -166,6 +176,30 @@ def _refine(options, args, vehicle: Path, report, log, gains_file: Path,
     return {**out, "refined": True}
 
 
+def check_identified(report, space: float) -> None:
+    """A manoeuvre that did not excite a channel, or a model that does not explain it: one
+    line saying which and what to do (UserError, exit 2), before anything is tuned."""
+    from .. import profiles
+    from ..ident.fit import FITTED
+    from ..ident.priors import SPEED_FIELDS, YAW_FIELDS
+    f = report.fit
+    hints = profiles.from_setpoints(report.series.vector).ident.model_hints
+    for channel, fields in (("turn rate", YAW_FIELDS), ("speed", SPEED_FIELDS)):
+        if not any(f.status.get(name) == FITTED for name in fields):
+            raise UserError(
+                f"calibrate: the manoeuvre did not excite the {channel} channel (no parameter "
+                f"of it determined by {report.log}): give it more room (--space, now "
+                f"{space:g} m) or check that the vehicle follows GUIDED {channel} setpoints")
+    for channel, value, limit, unit in (("speed", f.speed_rms, CHECK_LIMIT[0], "m/s"),
+                                        ("turn rate", f.yaw_rate_rms, CHECK_LIMIT[1], "rad/s")):
+        if value > limit:
+            raise UserError(
+                f"calibrate: the model does not explain the manoeuvre's {channel} (RMS "
+                f"{value:.3f} {unit}, more than {limit:g}): the vehicle does something the "
+                f"model lacks; check {hints.get(channel, 'its inner-loop tuning')}, or fly "
+                f"another manoeuvre (companion identify --connect ...) and look at --plot")
+
+
 def run(args) -> int:
     from ..live.policy import DEFAULT_RATE
     from .flight import logger
@@ -192,6 +226,7 @@ def run(args) -> int:
         log("not tuned: the manoeuvre did not end normally")
         return code or ExitCode.FAULT
     timings["fit"] = report.fit_time_s
+    check_identified(report, args.space)
     timings["manoeuvre_flight"] = time.monotonic() - t_start - report.fit_time_s
     rate = args.rate or DEFAULT_RATE
     command = "companion " + shlex.join(sys.argv[1:]) if sys.argv[1:2] == ["calibrate"] \

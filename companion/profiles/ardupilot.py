@@ -215,7 +215,11 @@ PROFILE = AutopilotProfile(
         estimator_messages=("EKF_STATUS_REPORT",),
         prearm_command=True),
     ident=IdentFacts(params=PRIOR_PARAMS, priors=priors, headroom=1.2,
-                     params_label="autopilot"),
+                     params_label="autopilot",
+                     model_hints={"speed": "ATC_SPEED_P / ATC_SPEED_I and CRUISE_SPEED / "
+                                           "CRUISE_THROTTLE (the throttle feed-forward)",
+                                  "turn rate": "ATC_STR_RAT_FF / ATC_STR_RAT_P / ATC_STR_RAT_I "
+                                               "and MOT_STR_THR_MIX"}),
     plant=PlantFacts(
         modes=("MANUAL", "ACRO", "STEERING", "HOLD", "LOITER", "FOLLOW", "SIMPLE", "AUTO", "RTL",
                "SMART_RTL", "GUIDED", "INITIALISING"),

@@ -181,6 +181,9 @@ class IdentFacts:
     priors: Callable[[Mapping[str, float]], Priors]  # {name: value} (any subset) -> priors
     headroom: float                                 # setpoints up to this x the limits
     params_label: str                               # for the log line naming what was read
+    # per channel ("speed", "turn rate"): the parameters to check when the model does not
+    # explain a manoeuvre (companion calibrate's one line)
+    model_hints: Mapping[str, str] = field(default_factory=dict)
 
 
 # --------------------------------------------------------------------------- the plant
