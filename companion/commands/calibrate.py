@@ -128,7 +128,7 @@ REFINE_GAINS = "gains-refine.toml"
 
 
 def _refine(options, args, vehicle: Path, report, log, gains_file: Path,
-            timings: dict[str, float]) -> dict:
+            timings: dict[str, float], cpu: dict[str, float]) -> dict:
     """Fly the refining track with ``gains_file`` and fit one model to the manoeuvre and the
     track together (see the module docstring). Returns what happened; on success ``vehicle``
     holds the joint fit. ``options``: the manoeuvre's flight options."""
@@ -149,9 +149,10 @@ def _refine(options, args, vehicle: Path, report, log, gains_file: Path,
         return {"refined": False, "why": f"the tracking flight ended: {result.reason}"}
     refit = folder / "vehicle-refit.toml"
     joint_fit = FitOptions(out=str(refit))
-    t0 = time.monotonic()
+    t0, c0 = time.monotonic(), time.process_time()
     joint = identify_log([report.log, paths.tlog], joint_fit, dict(report.autopilot), log)
     timings["joint_fit"] = time.monotonic() - t0
+    cpu["joint_fit"] = time.process_time() - c0
     manoeuvre, track = joint.parts
     on_manoeuvre = rms(joint.fit.params, manoeuvre)
     on_track = rms(joint.fit.params, track)
@@ -218,7 +219,8 @@ def run(args) -> int:
     log = logger("companion calibrate", args.quiet)
     options = live_options(args)
     timings: dict[str, float] = {}      # s of wall time per step (docs/calibrate-and-identify.md)
-    t_start = time.monotonic()
+    cpu: dict[str, float] = {}          # s of this process's CPU (what a busy machine stretches)
+    t_start, cpu_start = time.monotonic(), time.process_time()
     code, report, flight = fly_and_fit(options, FitOptions(out=str(vehicle)), args.space)
     if report is None or code != ExitCode.OK:
         if report is not None:
@@ -233,21 +235,25 @@ def run(args) -> int:
         else f"companion calibrate --connect {args.connect} --out {args.out}"
     refined = {"refined": False, "why": "--no-refine" if not args.refine else "--no-log"}
     if args.refine and args.log:
-        t0 = time.monotonic()
+        t0, c0 = time.monotonic(), time.process_time()
         quick = _quick_gains(vehicle, rate, command, log)
         timings["refine_tune"] = time.monotonic() - t0
+        cpu["refine_tune"] = time.process_time() - c0
         log(f"refining: {REFINE_S:g} s of the paper's ellipse at {REFINE_F_R:g} Hz")
         try:
-            refined = _refine(options, args, vehicle, report, log, quick, timings)
+            refined = _refine(options, args, vehicle, report, log, quick, timings, cpu)
         finally:
             quick.unlink(missing_ok=True)
         log("refined: " + ("one model fitted to both flights" if refined["refined"]
                            else f"kept the manoeuvre's model ({refined['why']})"))
-    t0 = time.monotonic()
+    t0, c0 = time.monotonic(), time.process_time()
     gains = _tune(vehicle, rate, command, args, log)
     timings["tune"] = time.monotonic() - t0
+    cpu["tune"] = time.process_time() - c0
     timings["total"] = time.monotonic() - t_start
-    log("wall time: " + ", ".join(f"{k.replace('_', ' ')} {v:.0f} s" for k, v in timings.items()))
+    cpu["total"] = time.process_time() - cpu_start
+    log("wall time: " + ", ".join(f"{k.replace('_', ' ')} {v:.0f} s" for k, v in timings.items())
+        + "; CPU: " + ", ".join(f"{k.replace('_', ' ')} {v:.0f} s" for k, v in cpu.items()))
     if Path(gains.source) != gains_path:
         raise UserError(f"{gains_path}: could not be written ({gains.source})")
     next_run = shlex.join(["companion", "run", "--connect", args.connect, "--vehicle",
@@ -256,7 +262,7 @@ def run(args) -> int:
         from ..ident.record import as_dict
         print(json.dumps({"vehicle": str(vehicle), "gains": str(gains_path),
                           "identify": {**as_dict(report), "flight": flight},
-                          "refine": refined, "timings_s": timings,
+                          "refine": refined, "timings_s": timings, "cpu_s": cpu,
                           "gains_header": gains.header.splitlines(), "next": next_run}))
         return ExitCode.OK
     _print(report, False, flight)
