@@ -136,3 +136,22 @@ def test_a_tuner_that_finds_nothing_robust_is_one_line_saying_what_to_do(tmp_pat
                                         r"--population 256 --rounds 6"):
         _tune(path, 40.0, "companion calibrate", args, lambda text: None)
     assert not (tmp_path / "gains.toml").exists()
+
+
+def test_a_vehicle_overshooting_its_autopilots_limit_is_named_as_such():
+    # ATC_STR_RAT_FF 0.5 on SITL rover-skid (2026-12-02): the turn rate identified at 3.6
+    # rad/s against ATC_STR_RAT_MAX 120 deg/s, RMS 0.27 rad/s
+    import numpy as np
+    from companion.commands.calibrate import check_identified
+    from companion.errors import UserError
+    from companion.ident.fit import Fit, Series
+    from companion.ident.record import Report
+    from companion.profiles import ardupilot
+    priors = ardupilot.priors({"ATC_STR_RAT_MAX": 120.0, "ATC_STR_ACC_MAX": 120.0})
+    t = np.linspace(0.0, 1.0, 11)
+    fit = Fit(priors.params.with_(max_yaw_rate=3.64), 0.07, 0.27, {"yaw_delay": "fitted",
+                                                                    "speed_delay": "fitted"})
+    report = Report(fit, priors, Series(t, t, t, t, t), "m.tlog", 1.0)
+    with pytest.raises(UserError, match=r"turn rate reaches 3\.64, 74 % above ATC_STR_RAT_MAX "
+                                        r"120 deg/s: it overshoots .*ATC_STR_RAT_FF"):
+        check_identified(report, 10.0)

@@ -87,7 +87,7 @@ def recognise(link: Any, rate: float, calibrate_hint: str,
     values = read(link, names) if presets else {}
     name, why = match(profile, values, presets)
     warning = (f"WARNING: the gains are not tuned for this vehicle ({why}); calibrate it: "
-               f"{calibrate_hint}, then run --vehicle DIR/vehicle.toml")
+               f"{calibrate_hint}, then companion run --vehicle DIR/vehicle.toml")
     if name is None:
         return Recognised(None, KnownVehicle(), warning)
     path = vehicle_file.preset_path(name)
