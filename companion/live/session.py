@@ -1,6 +1,7 @@
 """One companion session: settings in, RunResult out (what every flying command shares).
 
-Connect, wait for the vehicle, negotiate the telemetry rate, resolve gains and limits for the
+Connect, wait for the vehicle, negotiate the telemetry rate, recognise a bundled vehicle when
+nothing says what it is (:mod:`companion.live.presets`), resolve gains and limits for the
 rate the vehicle actually accepted (:mod:`companion.live.policy`, the one policy), build the
 tracker ``--controller`` names (:mod:`companion.core.controllers`: pzc flies the policy's gains,
 pid and kanayama their own defaults, all within the policy's limits), run the loop
@@ -108,8 +109,6 @@ def fly(s: RunSettings, sinks: Sequence[Sink] = (), control: ControlChannel | No
         for note in notes:
             log(note)
         log(f"telemetry at {accepted:g} Hz" if accepted else "telemetry rate not confirmed")
-        limits_text = (f"limits: speed {limits.max_speed:g} m/s, "
-                       f"yaw rate {limits.max_yaw_rate:g} rad/s")
         known, preset = s.vehicle, None
         if make_tracker is None and policy.wants_preset(mission, s.gains, s.vehicle):
             # no vehicle file, no gains: the bundled vehicle it is, or a warning (presets.py)
@@ -122,10 +121,10 @@ def fly(s: RunSettings, sinks: Sequence[Sink] = (), control: ControlChannel | No
             known, preset = found.vehicle, found.preset
             if preset is not None:
                 limits = policy.choose_limits(mission, s.gains, known)
-                limits_text = (f"limits: speed {limits.max_speed:g} m/s, "
-                               f"yaw rate {limits.max_yaw_rate:g} rad/s")
             else:
                 vehicle_warning = found.note
+        limits_text = (f"limits: speed {limits.max_speed:g} m/s, "
+                       f"yaw rate {limits.max_yaw_rate:g} rad/s")
         choice = policy.choose_gains(mission, s.gains, known, accepted or rate)
         if make_tracker is None:
             tracker, gains, gains_source = policy.build_tracker(s.controller, choice, limits)
