@@ -69,8 +69,12 @@ MODELS = {"skid": "rover-skid", "ackermann": "rover"}     # --frame -> SITL --mo
 def companion(argv: list[str], timeout: float) -> tuple[dict, float, str]:
     """(its JSON result or {exit_code, reason}, wall s, the tail of stderr)."""
     t0 = time.monotonic()
-    p = subprocess.run([sys.executable, "-m", "companion", *argv], capture_output=True,
-                       text=True, timeout=timeout, cwd=ROOT)
+    try:
+        p = subprocess.run([sys.executable, "-m", "companion", *argv], capture_output=True,
+                           text=True, timeout=timeout, cwd=ROOT)
+    except subprocess.TimeoutExpired:     # (subprocess.run kills it) a row, not a crash
+        return ({"exit_code": None, "reason": f"companion {argv[0]}: still running after "
+                                              f"{timeout:g} s"}, time.monotonic() - t0, "")
     wall = time.monotonic() - t0
     lines = [ln for ln in p.stdout.strip().splitlines() if ln.startswith("{")]
     try:
