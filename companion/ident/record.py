@@ -10,8 +10,8 @@ file's own section / key names and units).
 from __future__ import annotations
 
 import math
-from pathlib import Path
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 from ..sim.plant import RoverParams

@@ -19,8 +19,9 @@ preset files: set-up only, before the control loop.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
-from typing import Any, Callable, Mapping
+from typing import Any
 
 from .. import profiles
 from ..profiles.autopilot import AutopilotProfile
