@@ -6,8 +6,10 @@ flies ``companion run --controller C`` for every controller of :mod:`companion.c
 on the paper's ellipse (``missions/paper_ellipse_0xx.toml``: 60 s, anchored at the rover's start
 pose) at each ``--f-r``, 40 Hz telemetry, in two configurations:
 
-* ``defaults``: no vehicle file, what a new user gets (pzc: the shipped gains for 40 Hz and the
-  mission's w_c; the default limits 6 m/s, 6 rad/s);
+* ``defaults``: no vehicle file, what a new user gets (pzc: the bundled vehicle the SITL's
+  parameters match, on stock ``rover-skid`` the ``ardupilot-skid`` preset's gains and limits;
+  with ``--param`` changing one of them, the shipped gains for 40 Hz and the mission's w_c, the
+  default limits 6 m/s, 6 rad/s, and a warning: docs/flying.md);
 * ``calibrated``: ``--vehicle companion/sim/vehicles/ardupilot_skid.toml``, the vehicle
   ``companion calibrate`` identified on this very SITL model (pzc: the gains file beside it; the
   vehicle's own limits).

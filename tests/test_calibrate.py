@@ -62,6 +62,13 @@ def test_calibrate_identifies_tunes_and_says_how_to_fly(tmp_path):
     assert refine["check_speed_rms_m_s"] < 0.1 and refine["track_speed_rms_m_s"] < 0.1
     assert Path(refine["tlog"]).exists() and not (out / "vehicle-refit.toml").exists()
     assert r["next"].startswith("companion run --connect") and "--vehicle" in r["next"]
+    # where the time went, step by step; the refining flight's quick gains are gone (run
+    # --vehicle must only find the gains tuned for the model kept)
+    t = r["timings_s"]
+    assert set(t) == {"manoeuvre_flight", "fit", "refine_tune", "refine_flight", "joint_fit",
+                      "tune", "total"}
+    assert sum(v for k, v in t.items() if k != "total") <= t["total"] + 1e-6
+    assert not (out / "gains-refine.toml").exists()
 
     # The printed command flies, with the gains calibrate stored (not a new tune).
     argv = shlex.split(r["next"])[1:]
@@ -81,3 +88,70 @@ def test_calibrate_errors_are_one_line(tmp_path):
                          (["--out", str(tmp_path / "d")], "--connect")):
         p = companion("calibrate", *argv, timeout=30)
         assert p.returncode == 2 and needle in p.stderr and "Traceback" not in p.stderr
+
+
+def _report(status: dict, speed_rms: float = 0.05, yaw_rate_rms: float = 0.04):
+    import numpy as np
+    from companion.ident.fit import Fit, Series
+    from companion.ident.priors import Priors
+    from companion.ident.record import Report
+    from companion.profiles.priors import defaults
+    t = np.linspace(0.0, 1.0, 11)
+    series = Series(t, t, t, t, t)
+    return Report(Fit(defaults(), speed_rms, yaw_rate_rms, status), Priors(defaults(), {}),
+                  series, "m.tlog", 1.0)
+
+
+def test_a_channel_the_manoeuvre_did_not_excite_is_one_line_saying_what_to_do():
+    from companion.commands.calibrate import check_identified
+    from companion.errors import UserError
+    from companion.ident.priors import SPEED_FIELDS, YAW_FIELDS
+    status = {**{n: "prior" for n in YAW_FIELDS}, **{n: "fitted" for n in SPEED_FIELDS}}
+    with pytest.raises(UserError, match=r"did not excite the turn rate channel .*--space, now 6 m"):
+        check_identified(_report(status), 6.0)
+    check_identified(_report({**status, "max_yaw_accel": "fitted"}), 6.0)     # one is enough
+
+
+def test_a_model_that_does_not_explain_the_manoeuvre_names_what_to_check():
+    from companion.commands.calibrate import check_identified
+    from companion.errors import UserError
+    fitted = {n: "fitted" for n in ("yaw_delay", "speed_delay")}
+    with pytest.raises(UserError, match=r"does not explain the manoeuvre's turn rate \(RMS "
+                                        r"0\.200 rad/s.*ATC_STR_RAT_FF"):
+        check_identified(_report(fitted, yaw_rate_rms=0.2), 10.0)
+    with pytest.raises(UserError, match=r"manoeuvre's speed .*CRUISE_SPEED / CRUISE_THROTTLE"):
+        check_identified(_report(fitted, speed_rms=0.3), 10.0)
+
+
+def test_a_tuner_that_finds_nothing_robust_is_one_line_saying_what_to_do(tmp_path):
+    import argparse
+    from companion.commands.calibrate import _tune
+    from companion.errors import UserError
+    # a turn-rate clamp of 0.02 rad/s: no gain set follows any ellipse without pinning it
+    hopeless = TRUE.with_(max_yaw_rate=0.02, max_yaw_accel=0.02)
+    path = tmp_path / "vehicle.toml"
+    vehicle_file.save(vehicle_file.VehicleFile(hopeless, name="hopeless"), path)
+    args = argparse.Namespace(population=8, rounds=1, quiet=True, json=True)
+    with pytest.raises(UserError, match=r"found no gains that hold on every neighbour .*"
+                                        r"--population 256 --rounds 6"):
+        _tune(path, 40.0, "companion calibrate", args, lambda text: None)
+    assert not (tmp_path / "gains.toml").exists()
+
+
+def test_a_vehicle_overshooting_its_autopilots_limit_is_named_as_such():
+    # ATC_STR_RAT_FF 0.5 on SITL rover-skid (2026-12-02): the turn rate identified at 3.6
+    # rad/s against ATC_STR_RAT_MAX 120 deg/s, RMS 0.27 rad/s
+    import numpy as np
+    from companion.commands.calibrate import check_identified
+    from companion.errors import UserError
+    from companion.ident.fit import Fit, Series
+    from companion.ident.record import Report
+    from companion.profiles import ardupilot
+    priors = ardupilot.priors({"ATC_STR_RAT_MAX": 120.0, "ATC_STR_ACC_MAX": 120.0})
+    t = np.linspace(0.0, 1.0, 11)
+    fit = Fit(priors.params.with_(max_yaw_rate=3.64), 0.07, 0.27, {"yaw_delay": "fitted",
+                                                                    "speed_delay": "fitted"})
+    report = Report(fit, priors, Series(t, t, t, t, t), "m.tlog", 1.0)
+    with pytest.raises(UserError, match=r"turn rate reaches 3\.64, 74 % above ATC_STR_RAT_MAX "
+                                        r"120 deg/s: it overshoots .*ATC_STR_RAT_FF"):
+        check_identified(report, 10.0)

@@ -5,6 +5,7 @@ and a bad log is one line with exit code 2. Real processes over loopback UDP, re
 
 from __future__ import annotations
 
+import functools
 import json
 import math
 import signal
@@ -434,3 +435,43 @@ def test_live_identify_on_ardupilot_sitl_finds_its_own_limits(ardupilot, tmp_pat
     assert within(r["params"]["turn_rate"]["accel_max_rad_s2"], math.radians(120.0), 0.15)
     assert r["rms"]["speed_m_s"] < 0.1 and r["rms"]["yaw_rate_rad_s"] < 0.1
     assert load(out).source["ATC_STR_ACC_MAX"] == 120.0
+
+
+@functools.lru_cache(maxsize=1)
+def turning_and_driving():
+    """A flight turning on the spot and one driving straight, fitted together (two tests)."""
+    turning = synthetic(TRUE, 33.0, speed_amp=0.0, rate_amp=2.6, seed=3, stop=3.0)
+    driving = synthetic(TRUE, 33.0, speed_amp=4.5, rate_amp=0.0, seed=4, stop=3.0)
+    series = join([turning, driving])
+    return turning, driving, series, fit(series, defaults())
+
+
+def test_each_fitted_parameter_says_how_tightly_and_by_which_log_it_is_determined():
+    # joined: the turning flight alone determines the turn-rate limits, the driving flight
+    # the speed limits; each range holds the truth's neighbourhood and is finite where the
+    # log bounds both sides (a rate limit the log reaches over and over)
+    _, _, _, result = turning_and_driving()
+    det = result.determined
+    assert set(det) == {n for n, s in result.status.items() if s == FITTED}
+    for name, log in (("max_yaw_accel", 0), ("max_accel", 1)):
+        d, value = det[name], getattr(result.params, name)
+        assert d.logs == (log,), (name, d)
+        assert d.lo <= value <= d.hi and math.isfinite(d.lo) and math.isfinite(d.hi)
+        assert d.hi / d.lo < 1.3                      # pinned to within tens of percent
+        assert d.lo <= getattr(TRUE, name) * 1.05 and d.hi >= getattr(TRUE, name) * 0.95
+
+
+def test_the_vehicle_file_records_what_each_log_determined(tmp_path):
+    from companion.ident.priors import Priors
+    from companion.ident.record import Report, determined, vehicle_file as to_file
+    turning, driving, series, result = turning_and_driving()
+    report = Report(result, Priors(defaults(), {}), series, "/logs/turn.tlog + /logs/drive.tlog",
+                    1.0, parts=[turning, driving])
+    table = determined(report)
+    assert table["speed.accel_max_m_s2"]["logs"] == ["drive.tlog"]
+    assert table["turn_rate.accel_max_rad_s2"]["logs"] == ["turn.tlog"]
+    save(to_file(report, "t"), tmp_path / "v.toml")
+    back = load(tmp_path / "v.toml").determined
+    assert back["speed_accel_max_m_s2"].startswith("fitted ")
+    assert "by drive.tlog" in back["speed_accel_max_m_s2"]
+    assert " to " in back["turn_rate_accel_max_rad_s2"]

@@ -4,17 +4,19 @@
 
 1. flies ``companion identify``'s excitation manoeuvre (within ``--space`` metres, at most 90 s,
    every failsafe of ``run``) and fits the vehicle model: ``DIR/vehicle.toml``;
-2. tunes gains for that vehicle and its neighbours (``companion tune --vehicle``, about a minute
-   on two cores): ``DIR/gains.toml``, recorded with the vehicle file's SHA-256;
-3. refines: flies the paper's ellipse at 0.08 Hz (shrunk to ``--space``) for 30 s with those
-   gains, fits one model to the manoeuvre and that track together, and keeps it (then
-   re-tunes) when it explains both flights within 0.15 m/s and 0.15 rad/s and predicts the
-   track better than the manoeuvre's model did. Why: on ArduPilot SITL the manoeuvre alone
-   reads the speed loop's delay long (0.22 s against 0.15 s from tracking: its speed steps
-   start from rest) and its gains track the 0.08 Hz ellipse less well, while a model fitted to
-   tracking alone misreads what tracking does not exercise (the turn/speed coupling) and
-   mispredicts a faster track; the joint fit predicted held-out tracks at every speed as well as
-   or better than either (``--no-refine`` skips this step; it needs the flight logs);
+2. refines: tunes quick gains for the refining flight only (a 32 x 1 robust search, a few
+   seconds), flies the paper's ellipse at 0.08 Hz (shrunk to ``--space``) for 30 s with them,
+   fits one model to the manoeuvre and that track together, and keeps it when it explains both
+   flights within 0.15 m/s and 0.15 rad/s and predicts the track better than the manoeuvre's
+   model did. Why: on ArduPilot SITL the manoeuvre alone reads the speed loop's delay long
+   (0.22 s against 0.15 s from tracking: its speed steps start from rest) and its gains track
+   the 0.08 Hz ellipse less well, while a model fitted to tracking alone misreads what tracking
+   does not exercise (the turn/speed coupling) and mispredicts a faster track; the joint fit
+   predicted held-out tracks at every speed as well as or better than either (``--no-refine``
+   skips this step; it needs the flight logs);
+3. tunes gains for the model kept, on it and its neighbours (``companion tune --vehicle``,
+   128 x 4 unless ``--population`` / ``--rounds`` say otherwise): ``DIR/gains.toml``, recorded
+   with the vehicle file's SHA-256;
 4. prints the ``companion run --vehicle DIR/vehicle.toml`` command that flies with them.
 """
 
@@ -24,6 +26,7 @@ import argparse
 import json
 import shlex
 import sys
+import time
 from dataclasses import replace
 from pathlib import Path
 
@@ -41,9 +44,9 @@ def register(subparsers) -> None:
     t = p.add_argument_group("tuning")
     # (defaults resolved when calibrate runs: the tuner's module is not imported to build the CLI)
     t.add_argument("--population", type=int, metavar="N",
-                   help="gain sets simulated per round (default: the robust tuner's)")
+                   help="gain sets simulated per round (default 128)")
     t.add_argument("--rounds", type=int, metavar="N",
-                   help="search rounds (default: the robust tuner's)")
+                   help="search rounds (default 4)")
     t.add_argument("--mission", metavar="FILE", default="missions/paper_ellipse_004.toml",
                    help="the mission named in the printed run command")
     t.add_argument("--no-refine", dest="refine", action="store_false",
@@ -79,14 +82,56 @@ def _refine_mission(space: float):
     return missions.loads(text, "<calibrate>")
 
 
+# The refining flight's gains: a quick robust search (the tuner's 21 seeds and 11 random sets,
+# one round; 48 x 2 took 11 s of CPU), enough to fly 30 s of the 0.08 Hz ellipse without a limit
+# cycle (the tuner rejects those on every neighbour); the gains kept are tuned once, at the end,
+# on the model kept (2026-12-02: the two full tunes were 457 of calibrate's 692 s).
+REFINE_SEARCH = {"population": 32, "rounds": 1}
+# The final search: 128 x 4 instead of the tuner's 256 x 6 (77 s of CPU; 128 x 3: 24 s); on the
+# bundled ardupilot-skid model 128 x 3 ended at 0.0021 / 0.054 m (0.04 / 0.08 Hz) in simulation
+# against 256 x 6's 0.0018 / 0.051 m.
+FINAL_SEARCH = {"population": 128, "rounds": 4}
+
+
+NOTHING_ROBUST = ("calibrate: the tuner found no gains that hold on every neighbour of {vehicle} "
+                  "(each limit-cycled or diverged on one): widen the search (--population 256 "
+                  "--rounds 6), or check the identified limits in {vehicle} against the "
+                  "autopilot's (a turn-rate or acceleration limit far below its parameter)")
+
+
 def _tune(vehicle: Path, rate: float, command: str, args, log):
+    from ..sim.vehicle_gains import NothingRobust
     from .flight import gains_for_vehicle
-    return gains_for_vehicle(vehicle, rate, command, not args.quiet and not args.json, log,
-                             population=args.population, rounds=args.rounds)
+    try:
+        return gains_for_vehicle(vehicle, rate, command, not args.quiet and not args.json, log,
+                                 population=args.population, rounds=args.rounds)
+    except NothingRobust:
+        raise UserError(NOTHING_ROBUST.format(vehicle=vehicle)) from None
 
 
-def _refine(options, args, vehicle: Path, report, log) -> dict:
-    """Fly the refining track with the tuned gains and fit one model to the manoeuvre and the
+def _quick_gains(vehicle: Path, rate: float, command: str, log) -> Path:
+    """Gains for the refining flight only (REFINE_SEARCH), in ``gains-refine.toml`` beside the
+    vehicle file (removed before calibrate ends: ``run --vehicle`` must never find them)."""
+    from ..sim import vehicle_gains
+    from ..sim.robust import tune
+    cfg = vehicle_gains.config_for(vehicle, rate, **REFINE_SEARCH)
+    try:
+        result = tune(cfg)
+    except RuntimeError:
+        raise UserError(NOTHING_ROBUST.format(vehicle=vehicle)) from None
+    out = vehicle.with_name(REFINE_GAINS)
+    vehicle_gains.record(result, cfg, vehicle, command + " (the refining flight's quick search)"
+                         ).save(out)
+    log(f"quick gains for the refining flight: {out}")
+    return out
+
+
+REFINE_GAINS = "gains-refine.toml"
+
+
+def _refine(options, args, vehicle: Path, report, log, gains_file: Path,
+            timings: dict[str, float], cpu: dict[str, float]) -> dict:
+    """Fly the refining track with ``gains_file`` and fit one model to the manoeuvre and the
     track together (see the module docstring). Returns what happened; on success ``vehicle``
     holds the joint fit. ``options``: the manoeuvre's flight options."""
     from ..ident.fit import rms
@@ -96,14 +141,20 @@ def _refine(options, args, vehicle: Path, report, log) -> dict:
     from .flight import fly_mission
     folder = vehicle.parent
     # The vehicle's own gains and limits (no manoeuvre limits), at the manoeuvre's rate.
-    flown = replace(options, vehicle_file=str(vehicle), gains=GainOptions(rate=args.rate),
+    flown = replace(options, vehicle_file=str(vehicle),
+                    gains=GainOptions(rate=args.rate, gains_file=str(gains_file)),
                     output=OutputOptions(quiet=options.output.quiet))
+    t0 = time.monotonic()
     result, paths = fly_mission(flown, _refine_mission(args.space))
+    timings["refine_flight"] = time.monotonic() - t0
     if result.exit_code != ExitCode.OK or paths is None:
         return {"refined": False, "why": f"the tracking flight ended: {result.reason}"}
     refit = folder / "vehicle-refit.toml"
     joint_fit = FitOptions(out=str(refit))
+    t0, c0 = time.monotonic(), time.process_time()
     joint = identify_log([report.log, paths.tlog], joint_fit, dict(report.autopilot), log)
+    timings["joint_fit"] = time.monotonic() - t0
+    cpu["joint_fit"] = time.process_time() - c0
     manoeuvre, track = joint.parts
     on_manoeuvre = rms(joint.fit.params, manoeuvre)
     on_track = rms(joint.fit.params, track)
@@ -128,42 +179,105 @@ def _refine(options, args, vehicle: Path, report, log) -> dict:
     return {**out, "refined": True}
 
 
+def check_identified(report, space: float) -> None:
+    """A manoeuvre that did not excite a channel, or a model that does not explain it: one
+    line saying which and what to do (UserError, exit 2), before anything is tuned."""
+    from .. import profiles
+    from ..ident.fit import FITTED
+    from ..ident.priors import SPEED_FIELDS, YAW_FIELDS
+    f = report.fit
+    hints = profiles.from_setpoints(report.series.vector).ident.model_hints
+    for channel, fields in (("turn rate", YAW_FIELDS), ("speed", SPEED_FIELDS)):
+        if not any(f.status.get(name) == FITTED for name in fields):
+            raise UserError(
+                f"calibrate: the manoeuvre did not excite the {channel} channel (no parameter "
+                f"of it determined by {report.log}): give it more room (--space, now "
+                f"{space:g} m) or check that the vehicle follows GUIDED {channel} setpoints")
+    for channel, value, limit, unit in (("speed", f.speed_rms, CHECK_LIMIT[0], "m/s"),
+                                        ("turn rate", f.yaw_rate_rms, CHECK_LIMIT[1], "rad/s")):
+        if value > limit:
+            raise UserError(
+                f"calibrate: the model does not explain the manoeuvre's {channel} (RMS "
+                f"{value:.3f} {unit}, more than {limit:g}){_overshoot(report, channel)}: the "
+                f"vehicle does something the model lacks; check "
+                f"{hints.get(channel, 'its inner-loop tuning')}, or fly another manoeuvre "
+                f"(companion identify --connect ...) and look at --plot")
+
+
+OVERSHOOT = 1.25        # a limit identified this far above the autopilot's own: it overshoots
+CHANNEL_LIMITS = {"speed": ("max_speed", "max_accel"), "turn rate": ("max_yaw_rate",
+                                                                     "max_yaw_accel")}
+
+
+def _overshoot(report, channel: str) -> str:
+    """What shows the vehicle overshooting its autopilot's own limits (measured 2026-12-02 on
+    ArduPilot SITL rover-skid with ATC_STR_RAT_FF 0.5: a turn rate of 3.6 rad/s identified
+    against ATC_STR_RAT_MAX's 2.09, RMS 0.27 rad/s: the feed-forward overdrives the rate
+    loop, which P and I then pull back; the model's channel has no overshoot), or ''."""
+    f, priors = report.fit, report.priors
+    for name in CHANNEL_LIMITS[channel]:
+        fitted, prior = float(getattr(f.params, name)), getattr(priors.params, name)
+        if prior is None or name not in priors.source or not 0 < float(prior) < float("inf"):
+            continue
+        if fitted > OVERSHOOT * float(prior):
+            return (f"; its {channel} reaches {fitted:.3g}, {100 * (fitted / float(prior) - 1):.0f}"
+                    f" % above {priors.describe(name)}: it overshoots the autopilot's own target")
+    return ""
+
+
 def run(args) -> int:
     from ..live.policy import DEFAULT_RATE
     from .flight import logger
     from .identify import FitOptions, _print, fly_and_fit, live_options
 
-    from ..sim.robust import RobustConfig
-    args.population = RobustConfig.population if args.population is None else args.population
-    args.rounds = RobustConfig.rounds if args.rounds is None else args.rounds
+    args.population = FINAL_SEARCH["population"] if args.population is None else args.population
+    args.rounds = FINAL_SEARCH["rounds"] if args.rounds is None else args.rounds
     if args.population < 8 or args.rounds < 1:
         raise UserError("--population must be at least 8 and --rounds at least 1")
     folder = _folder(args.out)
     vehicle = folder / "vehicle.toml"
     gains_path = folder / "gains.toml"
-    if gains_path.exists():      # an old gains file would no longer match the new vehicle
-        gains_path.unlink()
+    for old in (gains_path, folder / REFINE_GAINS):   # would no longer match the new vehicle
+        if old.exists():
+            old.unlink()
     log = logger("companion calibrate", args.quiet)
     options = live_options(args)
+    timings: dict[str, float] = {}      # s of wall time per step (docs/calibrate-and-identify.md)
+    cpu: dict[str, float] = {}          # s of this process's CPU (what a busy machine stretches)
+    t_start, cpu_start = time.monotonic(), time.process_time()
     code, report, flight = fly_and_fit(options, FitOptions(out=str(vehicle)), args.space)
     if report is None or code != ExitCode.OK:
         if report is not None:
             _print(report, args.json, flight)
         log("not tuned: the manoeuvre did not end normally")
         return code or ExitCode.FAULT
+    timings["fit"] = report.fit_time_s
+    check_identified(report, args.space)
+    timings["manoeuvre_flight"] = time.monotonic() - t_start - report.fit_time_s
     rate = args.rate or DEFAULT_RATE
     command = "companion " + shlex.join(sys.argv[1:]) if sys.argv[1:2] == ["calibrate"] \
         else f"companion calibrate --connect {args.connect} --out {args.out}"
-    gains = _tune(vehicle, rate, command, args, log)
     refined = {"refined": False, "why": "--no-refine" if not args.refine else "--no-log"}
     if args.refine and args.log:
-        log(f"refining: {REFINE_S:g} s of the paper's ellipse at {REFINE_F_R:g} Hz with these gains")
-        refined = _refine(options, args, vehicle, report, log)
-        log("refined: " + ("one model fitted to both flights, re-tuned" if refined["refined"]
+        t0, c0 = time.monotonic(), time.process_time()
+        quick = _quick_gains(vehicle, rate, command, log)
+        timings["refine_tune"] = time.monotonic() - t0
+        cpu["refine_tune"] = time.process_time() - c0
+        log(f"refining: {REFINE_S:g} s of the paper's ellipse at {REFINE_F_R:g} Hz")
+        try:
+            refined = _refine(options, args, vehicle, report, log, quick, timings, cpu)
+        finally:
+            quick.unlink(missing_ok=True)
+        log("refined: " + ("one model fitted to both flights" if refined["refined"]
                            else f"kept the manoeuvre's model ({refined['why']})"))
-        if refined["refined"]:
-            gains_path.unlink()
-            gains = _tune(vehicle, rate, command, args, log)
+    t0, c0 = time.monotonic(), time.process_time()
+    gains = _tune(vehicle, rate, command, args, log)
+    timings["tune"] = time.monotonic() - t0
+    cpu["tune"] = time.process_time() - c0
+    timings["total"] = time.monotonic() - t_start
+    cpu["total"] = time.process_time() - cpu_start
+    log("wall time: " + ", ".join(f"{k.replace('_', ' ')} {v:.0f} s" for k, v in timings.items())
+        + "; CPU: " + ", ".join(f"{k.replace('_', ' ')} {v:.0f} s" for k, v in cpu.items()))
     if Path(gains.source) != gains_path:
         raise UserError(f"{gains_path}: could not be written ({gains.source})")
     next_run = shlex.join(["companion", "run", "--connect", args.connect, "--vehicle",
@@ -172,7 +286,7 @@ def run(args) -> int:
         from ..ident.record import as_dict
         print(json.dumps({"vehicle": str(vehicle), "gains": str(gains_path),
                           "identify": {**as_dict(report), "flight": flight},
-                          "refine": refined,
+                          "refine": refined, "timings_s": timings, "cpu_s": cpu,
                           "gains_header": gains.header.splitlines(), "next": next_run}))
         return ExitCode.OK
     _print(report, False, flight)

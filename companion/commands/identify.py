@@ -314,9 +314,16 @@ def fly_and_fit(options, fit: FitOptions, space: float):
                     + ("" if scratch else f" (the log is {paths.tlog})"))
                 return result.exit_code, None, flight_summary
             flight.close_logs()          # the CSV complete before anything reads the logs
-            report = identify_log(paths.tlog, fit, read, log,
-                                  "the manoeuvre flown (--no-log: log not kept)" if scratch
-                                  else None)
+            try:
+                report = identify_log(paths.tlog, fit, read, log,
+                                      "the manoeuvre flown (--no-log: log not kept)" if scratch
+                                      else None)
+            except UserError as exc:
+                if result.exit_code == ExitCode.OK:
+                    raise
+                # the true reason first: a log cut short by a takeover or a failsafe
+                raise UserError(f"the manoeuvre ended early ({result.reason}): {exc}",
+                                result.exit_code) from None
     finally:
         if scratch is not None:
             scratch.cleanup()

@@ -163,12 +163,26 @@ class Search:
 
 
 @dataclass(frozen=True)
+class Determined:
+    """How tightly the logs pin one fitted parameter: the range of values (``lo``, ``hi``, in
+    RoverParams' units; -inf / inf: the scan's end reached, the log bounds it on one side only)
+    over which every log's RMS stays within ``tol`` of its own with the other parameters held,
+    and which logs (indices into the joined series' parts) move by more than ``tol`` within
+    the scan: the logs that determine it."""
+
+    lo: float
+    hi: float
+    logs: tuple[int, ...]
+
+
+@dataclass(frozen=True)
 class Fit:
     params: RoverParams
     speed_rms: float               # m/s, simulated minus measured, over the series
     yaw_rate_rms: float            # rad/s
     status: dict[str, str] = field(default_factory=dict)    # field -> FITTED / PRIOR / BOUND
     evaluations: int = 0           # model runs (one per parameter set)
+    determined: dict[str, Determined] = field(default_factory=dict)   # FITTED fields only
 
     @property
     def undetermined(self) -> tuple[str, ...]:
@@ -396,6 +410,56 @@ def _settle(channel: _Channel, dims: list[_Dim], best: dict[str, float], prior: 
     return values, status
 
 
+# The scan around each fitted value (:func:`_determined`): up to x2 and /2 for lags and limits,
+# +-0.1 s for delays, +-0.3 for the couplings, in this many steps each way (quadratically
+# spaced: the first 1 % of the span).
+SCAN_STEPS = 10
+
+
+def _scan(dim: _Dim, value: float) -> np.ndarray:
+    """Values around ``value``, from the lowest to the highest, ``value`` itself in the middle."""
+    k = np.linspace(-1.0, 1.0, 2 * SCAN_STEPS + 1)
+    k = np.sign(k) * k * k            # fine near the value (1 % of the span), coarse far off
+    if dim.name in DELAYS:
+        return np.maximum(value + 0.1 * k, 0.0)
+    if dim.name in COUPLINGS:
+        return np.clip(value + 0.3 * k, 0.0, 1.0)
+    return value * 2.0 ** k
+
+
+def _determined(channel: _Channel, dims: list[_Dim], values: dict[str, float],
+                status: dict[str, str], cfg: Search) -> dict[str, Determined]:
+    """:class:`Determined` for each fitted parameter of the channel, from one batch of model
+    runs: each parameter alone scanned (:func:`_scan`), every log held to ``tol`` of its RMS."""
+    fitted = [dim for dim in dims if status[dim.name] == FITTED]
+    if not fitted:
+        return {}
+    keys = list(values)
+    rows = [dict(values)]
+    for dim in fitted:
+        rows += [{**values, dim.name: float(v)} for v in _scan(dim, values[dim.name])]
+    cost = channel.cost({k: np.array([row[k] for row in rows]) for k in keys}, len(rows),
+                        cfg.check_dt, per_log=True)            # (logs, rows)
+    limit = cost[:, :1] * (1.0 + cfg.tol) + 1e-9
+    out = {}
+    width = 2 * SCAN_STEPS + 1
+    for i, dim in enumerate(fitted):
+        block = cost[:, 1 + i * width: 1 + (i + 1) * width]
+        scanned = _scan(dim, values[dim.name])
+        ok = np.all(block <= limit, axis=0)
+        lo_i = hi_i = SCAN_STEPS
+        while lo_i > 0 and ok[lo_i - 1]:
+            lo_i -= 1
+        while hi_i < width - 1 and ok[hi_i + 1]:
+            hi_i += 1
+        lo = -math.inf if lo_i == 0 and scanned[0] < values[dim.name] else float(scanned[lo_i])
+        hi = math.inf if hi_i == width - 1 and scanned[-1] > values[dim.name] \
+            else float(scanned[hi_i])
+        seen = tuple(int(k) for k in np.flatnonzero(np.any(block > limit, axis=1)))
+        out[dim.name] = Determined(lo, hi, seen)
+    return out
+
+
 def _prior_value(prior: RoverParams, name: str, values: dict[str, float]) -> float:
     """A field's prior as a number; a decel limit left at "as accel" (None) takes the accel
     value in ``values`` (ArduPilot's ATC_DECEL_MAX 0 means the same limit both ways)."""
@@ -420,7 +484,7 @@ def _speed_scale(series: Series, prior: RoverParams) -> float:
 def _fit_channel(series: Series, base: RoverParams, prior: RoverParams, fields: tuple[str, ...],
                  which: int, cfg: Search, rng: np.random.Generator,
                  extra: tuple[str, ...] = (),
-                 ) -> tuple[dict[str, float], dict[str, str], int]:
+                 ) -> tuple[dict[str, float], dict[str, str], int, dict[str, Determined]]:
     """One channel's search over ``fields``; then, with ``extra``, a second search over all
     of them from the first's best (the extras at their priors), kept only when it explains
     the log better by more than ``tol`` (so a vehicle without what the extras describe fits
@@ -432,7 +496,7 @@ def _fit_channel(series: Series, base: RoverParams, prior: RoverParams, fields: 
         start[name] = _prior_value(prior, name, start)
     if float(np.max(np.abs(commands))) < MIN_COMMAND:
         # Never driven: nothing in the log speaks to this channel.
-        return start, {name: PRIOR for name in fields + extra}, 0
+        return start, {name: PRIOR for name in fields + extra}, 0, {}
     dims = _dims(fields, series)
     u0 = np.array([dim.unit(start[dim.name]) for dim in dims])
     u_best, cost = _search(channel, dims, u0, cfg, rng)
@@ -453,7 +517,8 @@ def _fit_channel(series: Series, base: RoverParams, prior: RoverParams, fields: 
         # only under a low clamp the search had found): look at those once more.
         values, again = _settle(channel, still, values, prior, cfg)
         status.update(again)
-    return values, status, channel.evaluations
+    determined = _determined(channel, dims, values, status, cfg)
+    return values, status, channel.evaluations, determined
 
 
 # The second search of a channel with extra fields: from the first's best, narrower each round
@@ -549,7 +614,7 @@ def fit(series: Series, prior: RoverParams, search: Search = Search(),
         params = second.params.with_(**course)
         speed_rms, yaw_rms = rms(params, series, search.dt)
         return Fit(params, speed_rms, yaw_rms, {**second.status, **course_status},
-                   first.evaluations + second.evaluations)
+                   first.evaluations + second.evaluations, second.determined)
     return _fit_channels(series, prior, search, progress)
 
 
@@ -562,12 +627,15 @@ def _fit_channels(series: Series, prior: RoverParams, search: Search,
         # A car driven by turn-rate setpoints (ArduPilot's Ackermann rover): its turning radius
         # clamps the turn rate by the measured speed, so the turn-rate channel fits it.
         yaw_fields = YAW_FIELDS + (TURN_RADIUS,)
-    yaw, yaw_status, n_yaw = _fit_channel(series, prior, prior, yaw_fields, 1, search, rng)
+    yaw, yaw_status, n_yaw, yaw_det = _fit_channel(series, prior, prior, yaw_fields, 1,
+                                                    search, rng)
     progress("speed channel")
     base = prior.with_(**yaw)
     # the speed loop's overshoot: searched only once the usual fields are (the second search)
-    speed, speed_status, n_speed = _fit_channel(series, base, prior, SPEED_FIELDS[:-2], 0, search,
-                                                rng, extra=SPEED_FIELDS[-2:] if overshoot else ())
+    speed, speed_status, n_speed, speed_det = _fit_channel(
+        series, base, prior, SPEED_FIELDS[:-2], 0, search, rng,
+        extra=SPEED_FIELDS[-2:] if overshoot else ())
+    determined = {**yaw_det, **speed_det}
     params = base.with_(**speed)
     if yaw_status[TURN_COUPLING] != PRIOR:
         # The share was of the search's speed scale; the model's is of the fitted top speed.
@@ -576,5 +644,10 @@ def _fit_channels(series: Series, prior: RoverParams, search: Search,
         if math.isfinite(top) and top != scale:
             share = float(np.clip(yaw[TURN_COUPLING] * top / scale, 0.0, 1.0))
             params = params.with_(**{TURN_COUPLING: share})
+            if TURN_COUPLING in determined:
+                d = determined[TURN_COUPLING]
+                determined[TURN_COUPLING] = replace(d, lo=d.lo * top / scale,
+                                                    hi=d.hi * top / scale)
     speed_rms, yaw_rms = rms(params, series, search.dt)
-    return Fit(params, speed_rms, yaw_rms, {**yaw_status, **speed_status}, n_yaw + n_speed + 1)
+    return Fit(params, speed_rms, yaw_rms, {**yaw_status, **speed_status}, n_yaw + n_speed + 1,
+               determined)

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 from ..sim.plant import RoverParams
@@ -80,6 +81,49 @@ def undetermined(report: Report) -> list[str]:
     return lines
 
 
+def _log_names(report: Report) -> list[str]:
+    return [Path(p).name for p in report.log.split(" + ")]
+
+
+def _file_range(name: str, lo: float, hi: float) -> tuple[float, float]:
+    """A RoverParams range in the vehicle file's unit (a bandwidth range as time constants)."""
+    if name in ("w_c", "w_c_yaw"):
+        return (1.0 / hi if 0 < hi < math.inf else -math.inf), (1.0 / lo if lo > 0 else math.inf)
+    return lo, hi
+
+
+def determined(report: Report) -> dict[str, dict[str, Any]]:
+    """Per parameter (vehicle-file names): how it was set (fitted / prior / bound), its value,
+    and for a fitted one the range every log allows (within 2 % of its RMS, the others held;
+    None: the scan's end, only bounded on that side) and the logs that determine it."""
+    f, names = report.fit, _log_names(report)
+    out: dict[str, dict[str, Any]] = {}
+    for name, status in f.status.items():
+        entry: dict[str, Any] = {"status": status,
+                                 "value": _number(file_value(f.params, name))}
+        d = f.determined.get(name)
+        if d is not None:
+            lo, hi = _file_range(name, d.lo, d.hi)
+            entry.update(low=_number(lo), high=_number(hi),
+                         logs=[names[k] if k < len(names) else str(k) for k in d.logs])
+        out[FILE_NAMES[name]] = entry
+    return out
+
+
+def _determined_line(entry: dict[str, Any]) -> str:
+    """``fitted 1.05, 1.01 to 1.09, by LOG, LOG`` (``at most`` / ``at least`` for a range the
+    scan did not close on one side); ``prior 3`` or ``bound 3`` for what no log determined."""
+    text = f"{entry['status']} " + (f"{entry['value']:.4g}" if entry["value"] is not None
+                                   else "none")
+    if "low" in entry:
+        lo, hi = entry["low"], entry["high"]
+        span = (f"at most {hi:.4g}" if lo is None and hi is not None else
+                f"at least {lo:.4g}" if hi is None and lo is not None else
+                "unbounded" if lo is None else f"{lo:.4g} to {hi:.4g}")
+        text += f", {span}, by {', '.join(entry['logs']) or 'no single log'}"
+    return text
+
+
 def as_dict(report: Report) -> dict[str, Any]:
     """The ``--json`` object (without the live flight's part)."""
     f = report.fit
@@ -98,6 +142,7 @@ def as_dict(report: Report) -> dict[str, Any]:
                    "yaw_rate_rad_s": report.check_rms[1]}),
         "undetermined": [FILE_NAMES[name] for name in f.undetermined],
         "status": {FILE_NAMES[name]: s for name, s in f.status.items()},
+        "determined": determined(report),
         "priors": {FILE_NAMES[name]: {"value": _number(file_value(report.priors.params, name))
                                       if getattr(report.priors.params, name) is not None
                                       else None,
@@ -138,5 +183,7 @@ def vehicle_file(report: Report, name: str) -> VehicleFile:
     if report.command:
         source["command"] = report.command
     source.update(report.autopilot)
+    record = {key.replace(".", "_"): _determined_line(entry)
+              for key, entry in determined(report).items()}
     return VehicleFile(params=f.params, name=name, header="\n".join(header), fit=fit_record,
-                       source=source)
+                       source=source, determined=record)

@@ -9,7 +9,9 @@ and reads no more than the ``--gains`` file named. First found wins:
 * gains, the filter (k_df, lambda_f) and the PZC law separately: ``--k-df/--lambda-f/--k-dc/
   --lambda-c`` field by field over ``--gains FILE``; the mission's gains; the vehicle file's
   tuned gains; the shipped tuned gains for the rate, the vehicle's w_c and d_cen
-  (:func:`companion.sim.gains.find_tuned`); the paper's gains (k_df 1000, lambda_f 120, k_dc 5,
+  (:func:`companion.sim.gains.find_tuned`) — ``run`` without any of the above first looks for
+  a bundled vehicle the live one matches (:func:`wants_preset`, :mod:`companion.live.presets`)
+  and flies its gains as the vehicle's; the paper's gains (k_df 1000, lambda_f 120, k_dc 5,
   lambda_c 12).
 * limits, speed and turn rate separately: ``--max-speed/--max-yaw-rate``; the lower of the
   mission's ``[limits]`` and the vehicle's own (its vehicle file, or the plant ``demo`` runs);
@@ -107,6 +109,15 @@ def vehicle_keys(mission: Any, options: GainOptions,
     d_cen = next(x for x in (options.d_cen, v.d_cen if v is not None else None, vehicle.d_cen,
                              0.0) if x is not None)
     return float(w_c), float(d_cen)
+
+
+def wants_preset(mission: Any, options: GainOptions, vehicle: KnownVehicle) -> bool:
+    """Nothing says what the vehicle is or which gains to fly: no vehicle file (flag or the
+    mission's), no ``--gains``, no mission gains. Then ``run`` looks for a bundled vehicle the
+    live vehicle matches (:mod:`companion.live.presets`) and warns when there is none."""
+    return (vehicle.gains is None and vehicle.limits is None and options.gains_file is None
+            and mission.vehicle_file is None and mission.filter_gains is None
+            and mission.pzc_gains is None)
 
 
 def choose_gains(mission: Any, options: GainOptions, vehicle: KnownVehicle,

@@ -1,6 +1,7 @@
 """One companion session: settings in, RunResult out (what every flying command shares).
 
-Connect, wait for the vehicle, negotiate the telemetry rate, resolve gains and limits for the
+Connect, wait for the vehicle, negotiate the telemetry rate, recognise a bundled vehicle when
+nothing says what it is (:mod:`companion.live.presets`), resolve gains and limits for the
 rate the vehicle actually accepted (:mod:`companion.live.policy`, the one policy), build the
 tracker ``--controller`` names (:mod:`companion.core.controllers`: pzc flies the policy's gains,
 pid and kanayama their own defaults, all within the policy's limits), run the loop
@@ -98,6 +99,7 @@ def fly(s: RunSettings, sinks: Sequence[Sink] = (), control: ControlChannel | No
     from .link import Link
 
     wall0 = time.perf_counter()
+    vehicle_warning: str | None = None
     policy.check_controller(s.controller, s.gains)
     # Before anything connects: a bad --gains file or limit is a user error.
     asked = policy.resolve(s.mission, s.gains, s.vehicle)
@@ -123,9 +125,23 @@ def fly(s: RunSettings, sinks: Sequence[Sink] = (), control: ControlChannel | No
             log(note)
         log(f"telemetry at {accepted:g} Hz" if accepted else "telemetry rate not confirmed")
         watch_estimate(link, vehicle.profile.estimate, log)
+        known, preset = s.vehicle, None
+        if make_tracker is None and policy.wants_preset(mission, s.gains, s.vehicle):
+            # no vehicle file, no gains: the bundled vehicle it is, or a warning (presets.py)
+            from .params import read_values
+            from .presets import recognise
+            found = recognise(link, accepted or rate,
+                              f"companion calibrate --connect {s.link.url} --out DIR --arm",
+                              read_values)
+            log(found.note)
+            known, preset = found.vehicle, found.preset
+            if preset is not None:
+                limits = policy.choose_limits(mission, s.gains, known)
+            else:
+                vehicle_warning = found.note
         limits_text = (f"limits: speed {limits.max_speed:g} m/s, "
                        f"yaw rate {limits.max_yaw_rate:g} rad/s")
-        choice = policy.choose_gains(mission, s.gains, s.vehicle, accepted or rate)
+        choice = policy.choose_gains(mission, s.gains, known, accepted or rate)
         if make_tracker is None:
             tracker, gains, gains_source = policy.build_tracker(s.controller, choice, limits)
             log(f"controller {tracker.name}; gains: {gains_source}; {limits_text}")
@@ -174,6 +190,8 @@ def fly(s: RunSettings, sinks: Sequence[Sink] = (), control: ControlChannel | No
         failsafes=outcome.failsafes, hold_confirmed=outcome.hold_confirmed,
         mission=runner.mission.name,
         extra={"controller": tracker.name, "stop_cause": stop_cause(outcome.exit_code),
+               **({"vehicle_preset": preset} if preset is not None else {}),
+               **({"vehicle_warning": vehicle_warning} if vehicle_warning else {}),
                **({"ekf_origin": origin.as_dict()} if origin is not None else {}),
                "missed_gaps": st.gaps, "backlog": st.backlog,
                "sink_errors": runner.sink_errors, "signing_rejected": link.signing_rejected,

@@ -6,7 +6,7 @@ May import: ``core``, ``sim`` (rover parameters, for priors), ``errors``; no I/O
 from __future__ import annotations
 
 from . import ackermann, ardupilot, px4, skid, steering
-from .autopilot import AutopilotProfile
+from .autopilot import AirframeFrame, AutopilotProfile, ServoFrame
 from .steering import SteeringProfile
 
 # Adding one: a module beside these with its PROFILE, and one line here (docs/design/profiles.md).
@@ -68,6 +68,26 @@ def steering_by_servos(functions: set[int] | frozenset[int]) -> SteeringProfile 
                  if all(f in functions for f in s.servo_functions)), None)
 
 
+def steering_params(profile: AutopilotProfile) -> tuple[str, ...]:
+    """The parameters that tell this autopilot's steering kind (its frame's)."""
+    frame = profile.preflight.frame
+    if isinstance(frame, ServoFrame):
+        return frame.function_params
+    return (frame.param,)
+
+
+def steering_from_params(profile: AutopilotProfile,
+                         values: dict[str, float]) -> SteeringProfile | None:
+    """The steering kind the parameters ``values`` (``{name: value}``) show, None if none."""
+    frame = profile.preflight.frame
+    if isinstance(frame, AirframeFrame):
+        value = values.get(frame.param)
+        return steering_by_airframe(int(value)) if value is not None else None
+    functions = {int(v) for k, v in values.items() if k in frame.function_params and v == v}
+    return steering_by_servos(functions)
+
+
 __all__ = ["AUTOPILOTS", "STEERING", "DEFAULT_AUTOPILOT", "AutopilotProfile", "SteeringProfile",
            "autopilot_named", "from_heartbeat", "from_setpoints", "prior_params", "model_steering",
-           "steering_of_model", "steering_by_airframe", "steering_by_servos"]
+           "steering_of_model", "steering_by_airframe", "steering_by_servos", "steering_params",
+           "steering_from_params"]

@@ -262,7 +262,11 @@ PROFILE = AutopilotProfile(
         estimator_messages=("EKF_STATUS_REPORT",),
         prearm_command=True),
     ident=IdentFacts(params=PRIOR_PARAMS, priors=priors, headroom=1.2,
-                     params_label="autopilot"),
+                     params_label="autopilot",
+                     model_hints={"speed": "ATC_SPEED_P / ATC_SPEED_I and CRUISE_SPEED / "
+                                           "CRUISE_THROTTLE (the throttle feed-forward)",
+                                  "turn rate": "ATC_STR_RAT_FF / ATC_STR_RAT_P / ATC_STR_RAT_I "
+                                               "and MOT_STR_THR_MIX"}),
     plant=PlantFacts(
         modes=("MANUAL", "ACRO", "STEERING", "HOLD", "LOITER", "FOLLOW", "SIMPLE", "AUTO", "RTL",
                "SMART_RTL", "GUIDED", "INITIALISING"),
@@ -275,4 +279,5 @@ PROFILE = AutopilotProfile(
     failsafe=FAILSAFE,
     estimate=ESTIMATE,
     mission_home_item=True, auto_mode="AUTO",
+    presets={"ardupilot-skid": skid.PROFILE.name},   # stock rover-skid (its [source] says so)
 )

@@ -26,7 +26,7 @@ pymavlink's by ``tests/test_profiles.py``).
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Callable, Mapping
 
 from .priors import Priors
@@ -98,6 +98,8 @@ class ServoFrame:
     class_param: str
     classes: Mapping[int, str]          # accepted frame classes -> what they are
     type_param: str
+    # the output-function parameters (ArduPilot: SERVO1_FUNCTION ... SERVO16_FUNCTION)
+    function_params: tuple[str, ...] = tuple(f"SERVO{n}_FUNCTION" for n in range(1, 17))
 
 
 @dataclass(frozen=True)
@@ -181,6 +183,9 @@ class IdentFacts:
     priors: Callable[[Mapping[str, float]], Priors]  # {name: value} (any subset) -> priors
     headroom: float                                 # setpoints up to this x the limits
     params_label: str                               # for the log line naming what was read
+    # per channel ("speed", "turn rate"): the parameters to check when the model does not
+    # explain a manoeuvre (companion calibrate's one line)
+    model_hints: Mapping[str, str] = field(default_factory=dict)
 
 
 # --------------------------------------------------------------------------- the plant
@@ -276,6 +281,11 @@ class AutopilotProfile:
     # the guided sub-mode inside the mission (ArduPilot Rover's MAV_CMD_NAV_GUIDED_ENABLE):
     # companion run --handover; None: the autopilot has none
     auto_mode: str | None = None
+    # Bundled vehicle files (companion/sim/vehicles/) identified on this autopilot -> the
+    # steering kind of the vehicle each was identified on. ``run`` without a vehicle file flies
+    # one whose recorded parameters (its ``[source]`` values of ``ident.params``) and steering
+    # kind the vehicle has (companion.live.presets); () : none.
+    presets: Mapping[str, str] = field(default_factory=dict)
 
     def modes_for(self, mav_type: int) -> ModeTable:
         """The mode table for a vehicle of this MAV_TYPE (empty for a type it does not cover)."""

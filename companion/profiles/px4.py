@@ -214,7 +214,10 @@ PROFILE = AutopilotProfile(
                       "vehicle (companion identify) for its model",
         estimator_messages=("EKF_STATUS_REPORT", "ESTIMATOR_STATUS"),
         prearm_command=False),
-    ident=IdentFacts(params=PRIOR_PARAMS, priors=priors, headroom=1.0, params_label="PX4"),
+    ident=IdentFacts(params=PRIOR_PARAMS, priors=priors, headroom=1.0, params_label="PX4",
+                     model_hints={"speed": "RO_SPEED_P / RO_SPEED_I and RO_MAX_THR_SPEED",
+                                  "turn rate": "RO_YAW_RATE_P / RO_YAW_RATE_I and "
+                                               "RO_YAW_P"}),
     plant=PlantFacts(
         modes=("MANUAL", "POSCTL", "LOITER", "OFFBOARD"),
         unsettable=(),

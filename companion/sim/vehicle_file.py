@@ -36,14 +36,17 @@ A small TOML file, units in the key names, a header saying how it was made::
     speed_rms_m_s = 0.05
     yaw_rate_rms_rad_s = 0.04
 
+    [determined]                  # optional: per parameter, how it was set and how tightly
+    speed_accel_max_m_s2 = "fitted 1.05, 1.01 to 1.09, by manoeuvre.tlog, track.tlog"
+
 ``[course]`` is written only when set; a gain there makes it a PX4 vehicle (a turning radius
-alone is a car driven by speed / turn-rate setpoints: ArduPilot's Ackermann rover): the companion's velocity vector u_p
-is the input, |u_p| through the speed channel and the course atan2(u_p) through PX4's
+alone is a car driven by speed / turn-rate setpoints: ArduPilot's Ackermann rover): the
+companion's velocity vector u_p is the input, |u_p| through the speed channel and the course atan2(u_p) through PX4's
 proportional course loop into the turn-rate channel, which an Ackermann rover's minimum turning
 radius also clamps (:class:`companion.sim.plant.RoverParams`, ``course_gain`` and
 ``min_turn_radius``). Every key but ``schema`` has a default (the paper's plant: no delay, 0.05 s lag, no limits), so
-the paper's rover is the file with nothing in it. ``[fit]`` and ``[source]`` are free-form
-records (numbers and strings) kept for people. :class:`companion.sim.plant.RoverParams` is what
+the paper's rover is the file with nothing in it. ``[fit]``, ``[determined]`` and ``[source]`` are
+free-form records (numbers and strings) kept for people. :class:`companion.sim.plant.RoverParams` is what
 the simulation uses; :func:`to_params` / :func:`from_params` convert.
 """
 
@@ -80,7 +83,7 @@ _CHANNELS: dict[str, dict[str, tuple[str, str]]] = {
                "min_turn_radius_m": ("min_turn_radius", "nonneg")},
 }
 _OPTIONAL = ("course",)       # written only when one of its values is set
-_RECORDS = ("fit", "source")
+_RECORDS = ("fit", "determined", "source")
 
 
 @dataclass(frozen=True)
@@ -91,6 +94,7 @@ class VehicleFile:
     fit: dict[str, Any] = field(default_factory=dict)
     source: dict[str, Any] = field(default_factory=dict)
     path: str = ""
+    determined: dict[str, Any] = field(default_factory=dict)
 
 
 def _value(where: str, key: str, value: Any, kind: str) -> float:
@@ -137,7 +141,8 @@ def parse(data: dict[str, Any], where: str) -> VehicleFile:
         raise UserError(f"{where}: name: must be a string, not {name!r}")
     defaults = RoverParams(w_c=1.0 / 0.05)
     return VehicleFile(params=defaults.with_(**kwargs), name=name, fit=dict(data.get("fit", {})),
-                       source=dict(data.get("source", {})), path=where)
+                       source=dict(data.get("source", {})), path=where,
+                       determined=dict(data.get("determined", {})))
 
 
 def load(path: str | Path) -> VehicleFile:

@@ -23,6 +23,10 @@ from . import vehicle_file
 from .gains import TunedGains
 from .robust import RobustConfig, RobustResult, tune
 
+class NothingRobust(UserError):
+    """The robust tuner found no gain set that held on every neighbour (exit 2)."""
+
+
 PX4_MIN_PROGRESS = 0.3  # share of the reference speed u_p keeps along it on a PX4 vehicle
 
 
@@ -123,7 +127,7 @@ def gains_for(vehicle_path: str | Path, rate: float, command: str,
     try:
         result = tune(cfg, progress)
     except RuntimeError as exc:
-        raise UserError(f"{vehicle_path}: {exc}") from None
+        raise NothingRobust(f"{vehicle_path}: {exc}") from None
     tuned = record(result, cfg, vehicle_path, command)
     out = path_beside(vehicle_path, rate)
     try:
