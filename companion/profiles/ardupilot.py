@@ -25,6 +25,7 @@ from __future__ import annotations
 import math
 from typing import TYPE_CHECKING, Mapping
 
+from . import skid
 from .autopilot import (FLAG_CUSTOM_MODE_ENABLED, FLAG_GUIDED_ENABLED, FLAG_MANUAL_INPUT_ENABLED,
                         MAV_AUTOPILOT_ARDUPILOTMEGA, MAV_FRAME_BODY_NED, MAV_RESULT_FAILED,
                         MAV_TYPE_GROUND_ROVER, MAV_TYPE_SURFACE_BOAT, PARAM_INT8, PARAM_INT16,
