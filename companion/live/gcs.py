@@ -109,6 +109,7 @@ class GcsReporter:
         self.texts_sent = 0
         self.values_sent = 0
         self.last_state = ""
+        self.turn = 0                     # the value sent next (idle sends one at a time)
 
     def watch(self, status_of: Callable[[], dict[str, Any]]) -> None:
         """Where the values come from (the runner's ``status``), once the runner exists."""
@@ -134,13 +135,16 @@ class GcsReporter:
             self.send_values()          # the final state, at once
 
     def idle(self) -> None:
-        """Called before each sleep of the loop: the values when they are due."""
+        """Called before each sleep of the loop: the next value when it is due. One value at a
+        time, spread over the period: a burst of four ahead of a setpoint on a 115200 baud
+        serial link delayed it enough to cost cycles (seen 2026-12-02)."""
         now = self.clock()
         if now >= self.next_values:
-            self.next_values = now + self.period
-            self.send_values()
+            self.next_values = now + self.period / len(VALUE_NAMES)
+            self.send_values(one=True)
 
-    def send_values(self) -> None:
+    def send_values(self, one: bool = False) -> None:
+        """The values (all of them, or with ``one`` the next in turn)."""
         if self.status_of is None:
             return
         status = self.status_of()
@@ -153,7 +157,11 @@ class GcsReporter:
             if said is not None:
                 self.say(INFO, PREFIX + said.format(mode=status.get("track_mode", "")))
         ms = int((self.clock() - self.t0) * 1e3) & 0xFFFFFFFF
-        for name, value in values(status, self.err):
+        named = values(status, self.err)
+        if one:
+            named = (named[self.turn % len(named)],)
+            self.turn += 1
+        for name, value in named:
             self.mav.named_value_float_send(ms, name.encode("ascii"), value)
             self.values_sent += 1
 
