@@ -57,6 +57,7 @@ _EVENT_TEXT = {
     ev.MISSION_LOADED: (INFO, "loaded"),
     ev.FAILSAFE: (CRITICAL, "FAILSAFE"),
     ev.PILOT_OVERRIDE: (WARNING, "pilot took over"),
+    ev.AUTOPILOT_FAILSAFE: (CRITICAL, "autopilot failsafe"),
     ev.HANDED_BACK: (NOTICE, "hand-back"),
 }
 
