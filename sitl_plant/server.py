@@ -170,7 +170,7 @@ class PlantServer:
             ready, _, _ = select.select(fds, [], [], timeout)
         except (OSError, ValueError):
             return
-        if wake_fd is not None and wake_fd in ready:
+        if wake_fd is not None and self.wake is not None and wake_fd in ready:
             try:
                 self.wake.recv(64)
             except OSError:

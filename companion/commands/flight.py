@@ -17,11 +17,15 @@ import signal
 import sys
 from dataclasses import replace
 from pathlib import Path
-from typing import Any, Callable, Sequence
+from typing import TYPE_CHECKING, Any, Callable, Sequence
 
 from ..core import controllers
 from ..errors import UserError
 from .options import FlightOptions, LogOptions
+
+if TYPE_CHECKING:   # for the hints only: the bus and the logs load when a flight opens them
+    from ..bus import Bus
+    from ..live.flightlog import LogPaths
 
 Log = Callable[[str], None]
 
@@ -89,10 +93,15 @@ def install_signals(switch) -> Callable[[], None]:
         switch.trigger(signal.Signals(signum).name)
 
     old = {sig: signal.signal(sig, handler) for sig in (signal.SIGTERM, signal.SIGINT)}
-    return lambda: [signal.signal(sig, h) for sig, h in old.items()]
+
+    def restore() -> None:
+        for sig, h in old.items():
+            signal.signal(sig, h)
+    return restore
 
 
-def open_flight_log(options: LogOptions, label: str, log: Log):
+def open_flight_log(options: LogOptions, label: str,
+                    log: Log) -> tuple[LogPaths | None, list[Any]]:
     """(paths or None, [CSV sink]) for ``--log-dir`` / ``--no-log``; the paths are logged."""
     if not options.enabled:
         return None, []
@@ -115,9 +124,9 @@ class Flight:
     def __init__(self, options: FlightOptions, label: str, log: Log):
         self.options, self.label, self.log = options, label, log
         self.key = signing_key(options.signing_key_file)   # a bad key fails before anything
-        self.paths = None
+        self.paths: LogPaths | None = None
         self.log_sinks: list[Any] = []
-        self.bus = None
+        self.bus: Bus | None = None
         self._restore: Callable[[], None] | None = None
         from ..live.session import StopSwitch
         self.switch = StopSwitch()

@@ -298,6 +298,7 @@ def fly_and_fit(options, fit: FitOptions, space: float):
             result = flight.fly(_mission(space), make_tracker=make_tracker)
             refuse_user_error(result)
             paths = flight.paths
+            assert paths is not None   # the log is on: the user's or the scratch one
             tracker = made[-1] if made else None
             flight_summary = {
                 "reason": result.reason, "exit_code": result.exit_code,

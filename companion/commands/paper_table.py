@@ -106,8 +106,9 @@ def compute(config, tuned, source, jobs: int, bar=None):
     ctx = mp.get_context("fork" if sys.platform.startswith("linux") else "spawn")
     shared = [ctx.Value("d", 0.0, lock=False) for _ in parts]
     pipes = [ctx.Pipe(duplex=False) for _ in parts]
-    procs = [ctx.Process(target=_worker, args=(config, tuned, source, part, value, send),
-                         daemon=True)
+    # typeshed types get_context(str) as BaseContext, whose subclasses (fork, spawn) have Process
+    procs = [ctx.Process(target=_worker,  # type: ignore[attr-defined]
+                         args=(config, tuned, source, part, value, send), daemon=True)
              for part, value, (_, send) in zip(parts, shared, pipes)]
     try:
         for proc in procs:

@@ -20,6 +20,7 @@ import math
 import sys
 from pathlib import Path
 
+from ..core.trajectory import Trajectory
 from ..errors import UserError, require_positive
 from ..progress import progress_bar
 
@@ -188,12 +189,13 @@ def _print_gains(d: dict) -> None:
     print(f"        turning preview {turn}; braking curves: {brakes or 'off'}")
 
 
-def mission_references(paths: list[str]) -> tuple[list[tuple[str, object]], float]:
+def mission_references(paths: list[str]) -> tuple[list[tuple[str, Trajectory]], float]:
     """Missions as the robust tuner's references (``start`` frame at the simulated rover's
     pose; other frames moved so the path begins there) and the duration to simulate."""
     from .. import mission as missions_mod
     from ..mission.paths import Placed
-    refs, durations = [], []
+    refs: list[tuple[str, Trajectory]] = []
+    durations: list[float] = []
     for path in paths:
         m = missions_mod.load(path)
         traj = m.trajectory

@@ -103,7 +103,7 @@ def with_course_loop(series: Series, course_gain: float, min_turn_radius: float,
     (:meth:`companion.sim.plant.RoverModel.step_vector`), on the *measured* heading and speed:
     ``clip(K wrap(course - yaw), +-max_yaw_rate, +-|v| / R_min)``. The turn-rate channel is
     then fitted as ArduPilot's (series-parallel: the loop closed on what was measured)."""
-    if not series.vector:
+    if series.course_cmd is None:   # (not series.vector)
         return series
     err = np.remainder(series.course_cmd - series.yaw + math.pi, 2.0 * math.pi) - math.pi
     cmd = np.clip(course_gain * err, -max_yaw_rate, max_yaw_rate)
@@ -122,7 +122,8 @@ def join(parts: Sequence[Series]) -> Series:
     setpoint and ends at rest after its stop: the model's state carries nothing across a seam."""
     if len(parts) == 1:
         return parts[0]
-    times, offset = [], 0.0
+    times: list[np.ndarray] = []
+    offset = 0.0
     for i, part in enumerate(parts):
         step = float(np.median(np.diff(part.t)))
         if i > 0:
@@ -494,9 +495,9 @@ def _fit_course(series: Series, params: RoverParams, prior: RoverParams, cfg: Se
                 if (kk if name == "course_gain" else rr) in values
                 and (rr == r if name == "course_gain" else kk == k)]
         status[name] = FITTED if near and min(near) > limit else PRIOR
-    values = {"course_gain": k if status["course_gain"] == FITTED else k0,
+    fitted = {"course_gain": k if status["course_gain"] == FITTED else k0,
               "min_turn_radius": r if status["min_turn_radius"] == FITTED else r0}
-    return values, status
+    return fitted, status
 
 
 def fit(series: Series, prior: RoverParams, search: Search = Search(),

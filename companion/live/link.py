@@ -83,7 +83,7 @@ class Link:
             self.tlog = open_tlog(config.tlog)
             self.tlog.attach(self.master)
             self.on_idle.append(self.tlog.idle)
-        self.vehicle: VehicleInfo | None = None
+        self._vehicle: VehicleInfo | None = None   # found by wait_vehicle (see vehicle)
         # Mode and arming as the vehicle's own heartbeats say (is_vehicle_heartbeat), not
         # pymavlink's per-system state, which any frame carrying our vehicle's system id
         # rewrites (a stranger's heartbeat, a corrupted one claiming another vehicle type).
@@ -105,6 +105,14 @@ class Link:
             self.tlog.close()
 
     @property
+    def vehicle(self) -> VehicleInfo:
+        """The vehicle followed, once :meth:`wait_vehicle` has found it (reading it before is a
+        programming error)."""
+        if self._vehicle is None:
+            raise RuntimeError("Link.vehicle read before wait_vehicle() found a vehicle")
+        return self._vehicle
+
+    @property
     def signing_rejected(self) -> int:
         """Incoming frames refused for their signature (0 without signing)."""
         return signing.rejected(self.master) if self.config.signing_key is not None else 0
@@ -118,7 +126,7 @@ class Link:
             self._recv_failed = True
             return None
         self._recv_failed = False
-        if (msg is not None and msg.get_type() == "HEARTBEAT" and self.vehicle is not None
+        if (msg is not None and msg.get_type() == "HEARTBEAT" and self._vehicle is not None
                 and self.is_vehicle_heartbeat(msg)):
             self._note_heartbeat(msg)
         return msg
@@ -138,7 +146,7 @@ class Link:
 
     def is_vehicle(self, msg: Any) -> bool:
         """True for a message from the vehicle we follow (its system and component)."""
-        v = self.vehicle
+        v = self._vehicle
         return v is not None and msg.get_srcSystem() == v.sysid and msg.get_srcComponent() == v.compid
 
     def is_for_us(self, msg: Any) -> bool:
@@ -166,7 +174,7 @@ class Link:
         return self._armed
 
     # --- connection set-up (blocking; before the control loop) ------------------------------
-    def wait_vehicle(self, should_stop=lambda: False) -> VehicleInfo:
+    def wait_vehicle(self, should_stop: Callable[[], bool] = lambda: False) -> VehicleInfo:
         """Wait for the first heartbeat of a vehicle (of ``config.sysid`` if given)."""
         cfg = self.config
         deadline = time.monotonic() + cfg.heartbeat_timeout
@@ -185,7 +193,7 @@ class Link:
                 raise UserError(f"system {msg.get_srcSystem()} runs an autopilot this companion "
                                 f"does not drive (MAV_AUTOPILOT {msg.autopilot}); "
                                 f"{known} are supported")
-            self.vehicle = VehicleInfo(msg.get_srcSystem(), msg.get_srcComponent(), profile,
+            self._vehicle = VehicleInfo(msg.get_srcSystem(), msg.get_srcComponent(), profile,
                                        msg.type)
             self.master.target_system = self.vehicle.sysid
             self.master.target_component = self.vehicle.compid
@@ -233,7 +241,7 @@ class Link:
         Returns (accepted rate, notes). ``None`` means the vehicle never answered (an autopilot
         without MAV_CMD_SET_MESSAGE_INTERVAL): the loop then runs at whatever rate arrives.
         """
-        notes = []
+        notes: list[str] = []
         candidates = [hz] + [r for r in FALLBACK_RATES if r < hz]
         for rate in candidates:
             results = [self.set_message_rate(mid, rate) for mid in

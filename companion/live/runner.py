@@ -44,10 +44,11 @@ from ..errors import ExitCode, UserError
 from .events import ControlChannel, ControlRequest, LoopRecord, Sink, StatusEvent
 from ..core.limits import Limits
 from .link import Link
-from ..core.signals import Command, Measurement
+from ..core.signals import Command, Measurement, Reference
+from ..core.trajectory import Trajectory
 from .config import RunnerConfig
 from .stats import TrackingStats
-from .telemetry import TelemetryCheck
+from .telemetry import Sample, TelemetryCheck
 
 _finite = math.isfinite
 TIMER_EVERY = 0.02     # wall s: timers run at least this often even while messages pour in
@@ -161,7 +162,7 @@ class Runner:
         self.telemetry = TelemetryCheck(v.sysid, v.compid, max_attitude_age=config.stale_timeout)
         self.stats = TrackingStats(mission.duration, config.period)
         self.state = State.WAITING
-        self.trajectory = None            # anchored at the first tracking sample
+        self.trajectory: Trajectory | None = None   # anchored at the first tracking sample
         self.outcome: Outcome | None = None
         self.heard = Heard()
         # A gap this long between tracked samples resets the tracker (at least 5 periods).
@@ -229,6 +230,7 @@ class Runner:
         finally:
             gc.unfreeze()
         self._wait_for_hold()
+        assert self.outcome is not None   # the loop ends only through _finish
         self._emit(ev.STOPPED, self.outcome.reason,
                    {"exit_code": self.outcome.exit_code,
                     "hold_confirmed": self.stopping.hold_confirmed})
@@ -237,7 +239,8 @@ class Runner:
             self._safely(sink.close)
         return self.outcome
 
-    def _loop(self, recv, on_position, attitude, clock) -> None:
+    def _loop(self, recv: Callable[[], Any], on_position: Callable[[Any, float], None],
+              attitude: Callable[[Any], None], clock: Callable[[], float]) -> None:
         link = self.link
         while self.state is not State.DONE:
             if self.stopping.requested is not None:
@@ -337,7 +340,7 @@ class Runner:
             self.counters.refusals_logged = counts
             self.log(f"refused telemetry so far (never used): {counts}")
 
-    def _track(self, s, t_read: float) -> None:
+    def _track(self, s: Sample, t_read: float) -> None:
         clock = self.clock
         if clock.segment_t0 is None:
             if self.trajectory is None:
@@ -351,6 +354,7 @@ class Runner:
             self._emit(ev.MISSION_DONE, f"{self.mission.duration:g} s of mission tracked")
             self._finish("mission_done", ExitCode.OK, s.time_boot_ms)
             return
+        assert self.trajectory is not None   # anchored when tracking began
         ref = self.trajectory.sample(mt)
         cmd = self.tracker.step(s.t, Measurement(s.x, s.y, s.yaw, s.vx, s.vy, s.yaw_rate), ref)
         problem = self._check(cmd)
@@ -379,7 +383,7 @@ class Runner:
                     f"{rate:.3f} rad/s): stopping the rover")
         return None
 
-    def _record(self, s, mt: float, ref, cmd: Command, e2: float) -> None:
+    def _record(self, s: Sample, mt: float, ref: Reference, cmd: Command, e2: float) -> None:
         est = self.tracker.estimate
         yaw_ref = math.atan2(cmd.uy, cmd.ux)
         err_yaw = math.remainder(yaw_ref - est.yaw, 2 * math.pi)
@@ -685,7 +689,7 @@ class Runner:
         for sink in self.sinks:
             self._safely(sink.status, event)
 
-    def _safely(self, fn, *args) -> None:
+    def _safely(self, fn: Callable[..., object], *args: Any) -> None:
         """A failing sink (a full disk, a dead network) must never stop the control loop."""
         try:
             fn(*args)

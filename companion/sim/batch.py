@@ -23,12 +23,12 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Callable, Sequence
+from typing import Any, Callable, Sequence
 
 import numpy as np
 
 from .plant import RoverModel, RoverParams, RoverState
-from ..core.signals import Num
+from ..core.signals import Measurement, Num, Reference
 from ..core.tracker import Tracker
 from ..core.trajectory import Trajectory
 
@@ -46,7 +46,7 @@ class SimConfig:
     tick: float | None = None       # s, scheduler tick the samples are aligned to (ArduPilot: 0.02)
     yaw_rate_limit: float | None = None   # rad/s for yaw_at_limit; None: the vehicle's max_yaw_rate
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         for name in ("duration", "control_rate", "max_plant_dt"):
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0):
@@ -87,7 +87,7 @@ class SimResult:
     yaw_at_limit: Num = 0.0         # share of the second half's control steps at the limit
 
 
-def _take(obj, sl):
+def _take(obj: Any, sl: slice | None) -> Any:
     """The slice ``sl`` of every field of a signal dataclass."""
     return type(obj)(*[getattr(obj, name)[sl] for name in obj.__slots__])
 
@@ -101,7 +101,8 @@ def simulate(trackers: Tracker | Sequence[tuple[Tracker, slice]], params: RoverP
     ``n`` vehicles between several trackers (each built with ``n = slice length``).
     ``progress(fraction)`` is called about a hundred times.
     """
-    groups = [(trackers, None)] if not isinstance(trackers, (list, tuple)) else list(trackers)
+    groups: list[tuple[Tracker, slice | None]] = (
+        list(trackers) if isinstance(trackers, Sequence) else [(trackers, None)])
     for tracker, _ in groups:
         tracker.reset()
     model = RoverModel(params, n)
@@ -128,7 +129,8 @@ def simulate(trackers: Tracker | Sequence[tuple[Tracker, slice]], params: RoverP
     step_index = 0
     # PX4's interface: the vehicle gets the velocity vector u_p, not (speed, turn rate)
     vector = params.velocity_vector
-    ux = uy = zero
+    ux: Any = zero   # Num: a float for one vehicle, filled slice by slice for groups
+    uy: Any = zero
 
     for k in range(n_control):
         t = times[k]
@@ -146,6 +148,7 @@ def simulate(trackers: Tracker | Sequence[tuple[Tracker, slice]], params: RoverP
             if vector:
                 ux, uy = cmd.ux, cmd.uy
         else:
+            assert n is not None   # the groups split n vehicles
             speed_cmd, yaw_rate_cmd = np.empty(n), np.empty(n)
             if vector:
                 ux, uy = np.empty(n), np.empty(n)
@@ -191,12 +194,14 @@ def simulate(trackers: Tracker | Sequence[tuple[Tracker, slice]], params: RoverP
     return result
 
 
-def _ops_finite(value) -> bool:
+def _ops_finite(value: Num) -> bool:
     return bool(np.all(np.isfinite(value)))
 
 
-def _record(trace, t, state, ref, speed_cmd, yaw_rate_cmd, meas, groups, n):
-    def put(key, value):
+def _record(trace: dict[str, list[np.ndarray]], t: float, state: RoverState, ref: Reference,
+            speed_cmd: Num, yaw_rate_cmd: Num, meas: Measurement,
+            groups: Sequence[tuple[Tracker, slice | None]], n: int | None) -> None:
+    def put(key: str, value: Num) -> None:
         trace.setdefault(key, []).append(np.array(value, dtype=float, copy=True))
 
     put("t", t)

@@ -53,6 +53,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, replace
+from typing import Any
 
 import numpy as np
 
@@ -122,15 +123,15 @@ class RoverParams:
         return cls(d_cen=d_cen, w_c=1.2, w_c_yaw=1.2, max_speed=4.0,
                    max_yaw_rate=math.radians(120.0), max_accel=1.0)
 
-    def with_(self, **changes) -> "RoverParams":
+    def with_(self, **changes: Any) -> RoverParams:
         return replace(self, **changes)
 
 
-def _any_finite(value) -> bool:
+def _any_finite(value: Num) -> bool:
     return bool(np.any(np.isfinite(value)))
 
 
-def _any_positive(value) -> bool:
+def _any_positive(value: Num) -> bool:
     return bool(np.any(np.asarray(value) > 0))
 
 
@@ -158,11 +159,11 @@ class RoverModel:
         self._turn_coupled = _any_positive(params.speed_turn_coupling)
         self._curvature = _any_positive(params.min_turn_radius)
         self.delay = CommandDelay(params.speed_delay, params.yaw_delay, n) if params.has_delay else None
-        self._trig_yaw = None
-        self._trig_cs = None
-        self._decay_h = None
+        self._trig_yaw: Num = None                           # no heading is None: no hit yet
+        self._trig_cs: tuple[Num, Num] = (1.0, 0.0)
+        self._decay_h: float | None = None
 
-    def _trig(self, yaw):
+    def _trig(self, yaw: Num) -> tuple[Num, Num]:
         """cos and sin of a heading; the last step's end heading is remembered, so the next step and
         ``measure`` reuse it (trig dominates the cost of a batch step)."""
         if yaw is self._trig_yaw:
@@ -181,7 +182,8 @@ class RoverModel:
         vx, vy = self.velocity(s)
         return Measurement(s.x, s.y, s.yaw, vx, vy, s.omega)
 
-    def _deriv(self, yaw, v, omega, v_cmd, w_cmd):
+    def _deriv(self, yaw: Num, v: Num, omega: Num, v_cmd: Num,
+               w_cmd: Num) -> tuple[Num, Num, Num, Num, Num]:
         """The right-hand side (for the RK4 reference integrator the tests hold the steps to)."""
         m, p = self._m, self.params
         c, sn = m.cos(yaw), m.sin(yaw)
@@ -240,7 +242,7 @@ class RoverModel:
                                               p.yaw_decel, h)
         return self._simpson(s, s.yaw + i_mid, s.yaw + i_end, v_mid, v_end, w_mid, w_end, h)
 
-    def _decays(self, h: float):
+    def _decays(self, h: float) -> tuple[Num, Num, Num, Num]:
         """e^{-w_c h/2}, e^{-w_c h} and the yaw-loop equivalents, cached for the step size."""
         if self._decay_h != h:
             m, a, b = self._m, self.params.w_c, self.params.yaw_bandwidth
@@ -260,8 +262,8 @@ class RoverModel:
         yaw_end = s.yaw + w * h + dw * ((1.0 - eb) / b)
         return self._simpson(s, yaw_mid, yaw_end, v_mid, v_end, w_mid, w_end, h)
 
-    def _simpson(self, s: RoverState, yaw_mid, yaw_end, v_mid, v_end, w_mid, w_end,
-                 h: float) -> RoverState:
+    def _simpson(self, s: RoverState, yaw_mid: Num, yaw_end: Num, v_mid: Num, v_end: Num,
+                 w_mid: Num, w_end: Num, h: float) -> RoverState:
         """x, y by Simpson's rule over the step from the heading, speed and turn rate at its
         start, middle and end (each exact); eq. (1) with the d_cen term."""
         m = self._m
@@ -292,7 +294,7 @@ class RoverModel:
         )
 
 
-def _rate_bounds(m, x, up, down):
+def _rate_bounds(m: _ops.Ops, x: Num, up: Num, down: Num) -> tuple[Num, Num]:
     """(lowest, highest) rate of change for a channel at ``x``: ``up`` while |x| grows, ``down``
     while it shrinks (at x = 0 both directions grow)."""
     lo = m.where(x > 0, -down, -up)
@@ -300,7 +302,8 @@ def _rate_bounds(m, x, up, down):
     return lo, hi
 
 
-def _channel(m, x0, u, b, up, down, h, both=True, integrals=True):
+def _channel(m: _ops.Ops, x0: Num, u: Num, b: Num, up: Num, down: Num, h: float,
+             both: bool = True, integrals: bool = True) -> tuple[Num, Num, Num, Num]:
     """One channel over a step with its input ``u`` held: x' = clip(b (u - x), rate bounds).
 
     Exact: x ramps at the limit L (``up`` or ``down``, by the direction of travel at the start)

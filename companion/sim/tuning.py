@@ -134,7 +134,8 @@ def perturb(rng: np.random.Generator, parents: Candidates, n: int, sigma: float)
 
 
 def evaluate(cands: Candidates, cfg: TuneConfig,
-             progress: Callable[[float], None] | None = None) -> tuple[np.ndarray, np.ndarray]:
+             progress: Callable[[float], None] | None = None
+             ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Simulate every candidate on every reference at once.
 
     Returns (objective per candidate, f_cost and steady RMS per candidate and reference).
@@ -184,7 +185,7 @@ def tune(cfg: TuneConfig, progress: Callable[[float], None] | None = None) -> Tu
     best_obj = np.array([])
     evaluated = 0
     for r in range(cfg.rounds):
-        def round_progress(frac, r=r):
+        def round_progress(frac: float, r: int = r) -> None:
             if progress is not None:
                 progress((r + frac) / cfg.rounds)
         obj, _, _ = evaluate(population, cfg, round_progress)
@@ -197,6 +198,7 @@ def tune(cfg: TuneConfig, progress: Callable[[float], None] | None = None) -> Tu
         population = perturb(rng, best, cfg.population, sigma)
 
     # Re-evaluate the winner alone to report its per-reference figures.
+    assert best is not None   # cfg.rounds >= 1 (the command refuses fewer)
     winner = best.take(np.array([0]))
     obj, cost, rms = evaluate(winner, cfg)
     fg, pg = winner.gains(0)

@@ -13,7 +13,7 @@ import hashlib
 import math
 from dataclasses import replace
 from pathlib import Path
-from typing import Callable, Sequence
+from typing import Any, Callable, Sequence
 
 from ..core.limits import DEFAULT_LIMITS, Limits
 from ..core.trajectory import Trajectory
@@ -21,6 +21,7 @@ from ..errors import UserError
 from . import gains as gains_mod
 from . import vehicle_file
 from .gains import TunedGains
+from .plant import RoverParams
 from .robust import RobustConfig, RobustResult, tune
 
 PX4_MIN_PROGRESS = 0.3  # share of the reference speed u_p keeps along it on a PX4 vehicle
@@ -33,7 +34,7 @@ def digest(vehicle_path: str | Path) -> str:
         raise UserError(f"{vehicle_path}: cannot read: {exc}") from None
 
 
-def vehicle_limits(vehicle, max_speed: float | None = None,
+def vehicle_limits(vehicle: RoverParams, max_speed: float | None = None,
                    max_yaw_rate: float | None = None) -> Limits:
     """The companion's setpoint limits for a vehicle: what it can do (or the flags, if lower)."""
     def pick(flag: float | None, own: float, ceiling: float) -> float:
@@ -46,7 +47,7 @@ def vehicle_limits(vehicle, max_speed: float | None = None,
 
 def config_for(vehicle_path: str | Path, rate: float,
                references: Sequence[tuple[str, Trajectory]] = (), duration: float = 60.0,
-               **search) -> RobustConfig:
+               **search: Any) -> RobustConfig:
     """The robust tuner's configuration for a vehicle file at a loop rate (ArduPilot's 50 Hz
     scheduler ticks below 50 Hz), on the references given or the paper's ellipses."""
     vehicle = vehicle_file.load(vehicle_path).params
@@ -111,7 +112,7 @@ def path_beside(vehicle_path: str | Path, rate: float) -> Path:
 
 def gains_for(vehicle_path: str | Path, rate: float, command: str,
               progress: Callable[[float], None] | None = None,
-              log: Callable[[str], None] = lambda text: None, **search) -> TunedGains:
+              log: Callable[[str], None] = lambda text: None, **search: Any) -> TunedGains:
     """The vehicle's gains at ``rate``: found beside it, else tuned now (``search``: the
     tuner's population, rounds, ...) and stored there."""
     found = find_beside(vehicle_path, rate)
