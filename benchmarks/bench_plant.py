@@ -44,7 +44,7 @@ def bench_lockstep(hz: int, ticks: int = 1000) -> None:
         assert pilot.set_rate(32, hz) == 0 and pilot.set_mode(15) == 0 and pilot.arm() == 0
         first = None
         t0 = time.perf_counter()
-        for k in range(ticks):
+        for _ in range(ticks):
             m = pilot.wait("LOCAL_POSITION_NED")
             if first is None:
                 first, t0 = m, time.perf_counter()

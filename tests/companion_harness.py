@@ -63,7 +63,7 @@ class Companion:
         except subprocess.TimeoutExpired:
             self.proc.kill()
             self.stdout, self.stderr = self.proc.communicate()
-            raise AssertionError(f"companion still running after {timeout} s:\n{self.stderr}")
+            raise AssertionError(f"companion still running after {timeout} s:\n{self.stderr}") from None
         return self.proc.returncode
 
     def result(self) -> dict[str, Any]:

@@ -81,7 +81,7 @@ def test_px4_gets_velocity_vectors_in_offboard(tmp_path):
     mission = ellipse_mission(tmp_path / "m.toml", 5.0)
     with Proxy() as proxy, \
             PlantProcess("--lockstep", "--autopilot", "px4", "--d-cen", "0.3",
-                         port=proxy.plant_port) as plant, \
+                         port=proxy.plant_port), \
             Companion(proxy.companion_port, "--arm", "--json", "-q", "--mission",
                       str(mission)) as comp:
         assert comp.wait(60.0) == 0, comp.stderr
@@ -99,7 +99,7 @@ def test_px4_gets_velocity_vectors_in_offboard(tmp_path):
 def test_ardupilot_setpoints_are_body_speed_and_yaw_rate(tmp_path):
     mission = ellipse_mission(tmp_path / "m.toml", 3.0)
     with Proxy() as proxy, \
-            PlantProcess("--lockstep", "--d-cen", "0.3", port=proxy.plant_port) as plant, \
+            PlantProcess("--lockstep", "--d-cen", "0.3", port=proxy.plant_port), \
             Companion(proxy.companion_port, "--arm", "--json", "-q", "--mission", str(mission),
                       "--max-speed", "2", "--max-yaw-rate", "1.5") as comp:
         assert comp.wait(60.0) == 0, comp.stderr

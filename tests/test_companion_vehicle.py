@@ -5,9 +5,7 @@ it), its limits on every setpoint, and the mission's ``[vehicle] file`` doing th
 from __future__ import annotations
 
 import csv
-import math
 
-import pytest
 
 from companion.core.filter import FilterGains
 from companion.core.pzc import PZCGains

@@ -156,7 +156,7 @@ def test_batch_vehicle_model_equals_one_vehicle_each():
     for k in range(3000):
         u, w = 3.0 * math.sin(0.002 * k) + 1.0, 2.0 * math.cos(0.003 * k)
         sb = batch.step(sb, u + z, w + z, 1e-3)
-        ss = [m.step(s, u, w, 1e-3) for m, s in zip(singles, ss)]
+        ss = [m.step(s, u, w, 1e-3) for m, s in zip(singles, ss, strict=True)]
     for key in ("x", "y", "yaw", "v", "omega"):
         assert getattr(sb, key) == pytest.approx([getattr(s, key) for s in ss], abs=1e-12)
 

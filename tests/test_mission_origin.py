@@ -76,7 +76,7 @@ def test_the_shipped_example_plan_passes_its_waypoints_on_the_plant(tmp_path):
     approaches = closest_approaches([s.msg for s in proxy.plant_sent("GLOBAL_POSITION_INT")],
                                     waypoints)
     rounded = path_distances(plan, waypoints)
-    for got, by_design in zip(approaches, rounded):
+    for got, by_design in zip(approaches, rounded, strict=True):
         assert got < max(1.0, by_design + 0.3), (approaches, rounded)
 
 

@@ -49,7 +49,7 @@ def test_every_shipped_mission_passes_check():
     assert proc.stderr == ""
     lines = proc.stdout.strip().splitlines()
     assert len(lines) == len(SHIPPED)
-    for name, line in zip(SHIPPED, lines):
+    for name, line in zip(SHIPPED, lines, strict=True):
         assert line.startswith(f"{name}: ok: ") and "peak speed" in line and "turn rate" in line
 
 

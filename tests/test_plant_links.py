@@ -30,7 +30,7 @@ def wait_listening(port: int, timeout: float = 5.0) -> None:
 
 def test_udpin_replies_to_whoever_talks_to_it():
     port = free_udp_port()
-    with PlantProcess("--connect", f"udpin:127.0.0.1:{port}", "--speedup", "4") as plant, \
+    with PlantProcess("--connect", f"udpin:127.0.0.1:{port}", "--speedup", "4"), \
             Pilot(port, url=f"udpout:127.0.0.1:{port}") as pilot:
         hb = None
         for _ in range(20):                    # the plant only knows us once we have spoken

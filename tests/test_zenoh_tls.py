@@ -123,7 +123,7 @@ def test_a_tls_fleet_admits_only_its_certificates_each_in_its_role(tmp_path):
             for verb, event in (("pause", "paused"), ("resume", "resumed")):
                 out = _companion("control", "rover1", verb, "--secret", str(secret), *as_op)
                 assert out.returncode == 0 and json.loads(out.stdout)["ok"], out
-                heard.wait(lambda: event in heard.statuses("rover1"), 5.0, event)
+                heard.wait(lambda event=event: event in heard.statuses("rover1"), 5.0, event)
             with session(config("client", connect=[router_ep], tls=(d, "op"))) as op:
                 wrong = control_request(op, "rover1", "pause", secret="not the secret",
                                         timeout=3.0)

@@ -165,7 +165,7 @@ def run(args) -> int:
           f"limits {cfg.limits.max_speed:g} m/s, {cfg.limits.max_yaw_rate:g} rad/s "
           f"({result.evaluated} gain sets simulated)")
     _print_gains(d)
-    for fr, cost, rms in zip(d["f_r"], d["f_cost"], d["steady_rms"]):
+    for fr, cost, rms in zip(d["f_r"], d["f_cost"], d["steady_rms"], strict=True):
         print(f"  f_r {fr:5.2f} Hz: f_cost {cost:7.3f}  steady RMS {rms:6.3f} m")
     print(f"cost (mean f_cost) {d['cost']:.4f}")
     if args.out:
@@ -245,7 +245,7 @@ def run_robust(args) -> int:
           f"({result.rejected['limit cycle']} limit-cycled, {result.rejected['diverged']} diverged)")
     _print_gains(d)
     for label, a, b, c in zip(result.references, result.nominal_steady_rms,
-                              result.worst_steady_rms, result.nominal_f_cost):
+                              result.worst_steady_rms, result.nominal_f_cost, strict=True):
         print(f"  {label:24s} steady RMS {a:6.3f} m (worst neighbour {b:6.3f})  f_cost {c:7.3f}")
     if args.out:
         print(f"written to {args.out}")

@@ -85,7 +85,7 @@ class Series:
     def segments(self) -> list[slice]:
         """Each joined log's samples (one slice for a single log)."""
         ends = self.starts[1:] + (len(self.t),)
-        return [slice(a, b) for a, b in zip(self.starts, ends)]
+        return [slice(a, b) for a, b in zip(self.starts, ends, strict=True)]
 
     @property
     def duration(self) -> float:
@@ -316,7 +316,7 @@ def _search(channel: _Channel, dims: list[_Dim], u0: np.ndarray, cfg: Search,
     us, costs = np.split(u, chains), np.split(evaluate(u, dt), chains)
     for r, (population, dt) in enumerate(rounds):
         width = max(0.3 * cfg.shrink ** r, 0.003)
-        us = [_next_population(uc, cc, population, width, rng) for uc, cc in zip(us, costs)]
+        us = [_next_population(uc, cc, population, width, rng) for uc, cc in zip(us, costs, strict=True)]
         costs = np.split(evaluate(np.vstack(us), dt), chains)
     best_chain = int(np.argmin([c.min() for c in costs]))
     k = int(np.argmin(costs[best_chain]))

@@ -55,7 +55,7 @@ TIMER_EVERY = 0.02     # wall s: timers run at least this often even while messa
 MAX_WAIT = 0.05        # wall s: the longest sleep (so stop requests are seen promptly)
 
 
-class State(str, Enum):
+class State(str, Enum):  # noqa: UP042  (StrEnum changes str(): a behaviour change, not a lint fix)
     WAITING = "waiting"
     ENGAGING = "engaging"
     READY = "ready"

@@ -186,7 +186,7 @@ def _parse_wpl(text: str, source: str):
         names = ("INDEX", "CURRENT", "FRAME", "COMMAND", "P1", "P2", "P3", "P4", "LAT", "LON",
                  "ALT", "AUTOCONTINUE")
         values = []
-        for name, field in zip(names, fields):
+        for name, field in zip(names, fields, strict=True):
             try:
                 value = float(field)
             except ValueError:

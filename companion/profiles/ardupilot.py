@@ -69,9 +69,9 @@ def requested_mode(param2: float, param3: float) -> int | None:
 def mode_name(table: ModeTable, base_mode: int, custom_mode: int) -> str:
     """The mode a heartbeat reports, named as pymavlink's ``mode_string_v10`` names it."""
     if not base_mode & FLAG_CUSTOM_MODE_ENABLED:
-        return "Mode(0x%08x)" % base_mode
+        return f"Mode(0x{base_mode:08x})"
     mode = table.by_number(custom_mode)
-    return mode.name if mode is not None else "Mode(%u)" % custom_mode
+    return mode.name if mode is not None else f"Mode({custom_mode:d})"
 
 
 # --------------------------------------------------------------------------- priors

@@ -73,7 +73,7 @@ class SimConfig:
         sent = sorted({-(-d // tick_us) * tick_us for d in due_us})
         end_us = int(round(self.duration * 1e6))
         sent = [u for u in sent if u < end_us]
-        ticks = [(b - a) // tick_us for a, b in zip(sent, sent[1:] + [end_us])]
+        ticks = [(b - a) // tick_us for a, b in zip(sent, sent[1:] + [end_us], strict=True)]
         return [u * 1e-6 for u in sent], [per_tick * t for t in ticks], self.tick / per_tick
 
 

@@ -55,7 +55,7 @@ def _label(result: TableResult, col: int) -> str:
 
 def _paths(result: TableResult, cols: list[int], title: str, path: Path) -> Path:
     fig, axes = _figure(len(cols), title)
-    for ax, col in zip(axes, cols):
+    for ax, col in zip(axes, cols, strict=True):
         tr = result.traces["pzc"]
         for name in result.traces:
             t = result.traces[name]
@@ -74,7 +74,7 @@ def _paths(result: TableResult, cols: list[int], title: str, path: Path) -> Path
 def _series(result: TableResult, cols: list[int], key: str, ref_key: str | None, ylabel: str,
             title: str, path: Path, names: tuple[str, ...] = ("pzc", "pid")) -> Path:
     fig, axes = _figure(len(cols), title)
-    for ax, col in zip(axes, cols):
+    for ax, col in zip(axes, cols, strict=True):
         for name in names:
             if name not in result.traces:
                 continue
@@ -93,7 +93,7 @@ def _series(result: TableResult, cols: list[int], key: str, ref_key: str | None,
 def _filter_errors(result: TableResult, cols: list[int], title: str, path: Path) -> Path:
     fig, axes = _figure(len(cols), title)
     tr = result.traces["pzc"]
-    for ax, col in zip(axes, cols):
+    for ax, col in zip(axes, cols, strict=True):
         for key, label in (("ex", "x - x_hat [m]"), ("ey", "y - y_hat [m]"),
                            ("eyaw", "phi - phi_hat [rad]")):
             ax.plot(tr["t"], tr[key][:, col], lw=0.9, label=label)

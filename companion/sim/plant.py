@@ -366,7 +366,7 @@ class CommandDelay:
         self._k = k + 1
         out = []
         for buf, flat, lag, uniform, value in zip(self._buf, self._flat, self._lag, self._uniform,
-                                                  (speed, yaw_rate)):
+                                                  (speed, yaw_rate), strict=True):
             buf[k % size] = value
             if uniform is not None:
                 row = buf[(k - uniform) % size]

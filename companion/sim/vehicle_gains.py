@@ -74,7 +74,7 @@ def record(result: RobustResult, cfg: RobustConfig, vehicle_path: str | Path,
              f"{cfg.seed}",
              "steady RMS (m) on the vehicle / worst neighbour: " + ", ".join(
                  f"{a:.3f}/{b:.3f}" for a, b in zip(result.nominal_steady_rms,
-                                                    result.worst_steady_rms))]
+                                                    result.worst_steady_rms, strict=True))]
     return replace(result.gains, header="\n".join(lines), vehicle_file=Path(vehicle_path).name,
                    vehicle_sha256=sha)
 
