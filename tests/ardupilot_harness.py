@@ -29,7 +29,8 @@ import contextlib
 import os
 import socket
 from pathlib import Path
-from typing import Any, Callable, Iterator
+from typing import Any
+from collections.abc import Callable, Iterator
 
 import pytest
 
@@ -130,7 +131,7 @@ class ArduPilotSITL(SITLProcess):
                 *(["--home", ",".join(f"{v:.8f}" for v in self.home)] if self.home else []),
                 "--defaults", ",".join(defaults)]
 
-    def start(self, timeout: float = 10.0) -> "ArduPilotSITL":
+    def start(self, timeout: float = 10.0) -> ArduPilotSITL:
         self.workdir.mkdir(parents=True, exist_ok=True)
         # SERIAL0 is listening (SITL says so); nobody connects yet (a client starts the boot)
         if self._start_claimed(_claim_instance, lambda: self._spawn(self.argv(), self.workdir),

@@ -37,7 +37,7 @@ import re
 import shutil
 import socket
 from pathlib import Path
-from typing import Callable, Iterator
+from collections.abc import Callable, Iterator
 
 import pytest
 
@@ -166,7 +166,7 @@ class PX4SITL(SITLProcess):
         env.update({f"PX4_PARAM_{k}": f"{v:g}" for k, v in self.params.items()})
         return env
 
-    def start(self, timeout: float = 30.0) -> "PX4SITL":
+    def start(self, timeout: float = 30.0) -> PX4SITL:
         if self._start_claimed(_claim_instance, self._launch,
                                "Startup script returned successfully", timeout):
             return self

@@ -34,7 +34,8 @@ import re
 import sys
 import tomllib
 from contextlib import contextmanager
-from typing import Any, Iterator, Sequence
+from typing import Any
+from collections.abc import Iterator, Sequence
 
 from ..errors import UserError
 

@@ -17,7 +17,8 @@ import signal
 import sys
 from dataclasses import replace
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Callable, Sequence
+from typing import TYPE_CHECKING, Any
+from collections.abc import Callable, Sequence
 
 from ..core import controllers
 from ..errors import UserError
@@ -131,7 +132,7 @@ class Flight:
         from ..live.session import StopSwitch
         self.switch = StopSwitch()
 
-    def __enter__(self) -> "Flight":
+    def __enter__(self) -> Flight:
         from ..bus import open_bus
         self._restore = install_signals(self.switch)
         try:

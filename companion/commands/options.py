@@ -59,7 +59,7 @@ class FlightOptions:
     bus: Any = field(default_factory=_no_bus)   # companion.bus.BusOptions
 
     @classmethod
-    def from_args(cls, args: argparse.Namespace) -> "FlightOptions":
+    def from_args(cls, args: argparse.Namespace) -> FlightOptions:
         """``companion run``'s flags: every group."""
         return cls(link=link_config(args),
                    runner=runner_config(args, max_start_distance=start_limit(

@@ -46,7 +46,7 @@ class Ellipse:
     duration: float | None = None
 
     @classmethod
-    def paper(cls, f_r: Num = 0.12, duration: float | None = None) -> "Ellipse":
+    def paper(cls, f_r: Num = 0.12, duration: float | None = None) -> Ellipse:
         return cls(f_r=f_r, duration=duration)
 
     def __post_init__(self) -> None:

@@ -22,7 +22,8 @@ import math
 import struct
 import time
 from dataclasses import dataclass
-from typing import Any, Callable, Iterable
+from typing import Any
+from collections.abc import Callable, Iterable
 
 from .link import Link, mavlink
 

@@ -13,7 +13,8 @@ import math
 import os
 import time
 from dataclasses import dataclass, replace
-from typing import Any, Callable, Sequence
+from typing import Any
+from collections.abc import Callable, Sequence
 
 from ..core import controllers
 from ..core.limits import Limits

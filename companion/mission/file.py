@@ -41,7 +41,8 @@ import tomllib
 from dataclasses import dataclass, field, replace
 from functools import partial
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
+from collections.abc import Callable
 
 from ..sim import gains as _gains
 from ..sim import vehicle_file as _vehicle_file
@@ -92,9 +93,9 @@ class Mission:
     # around another origin with ArduPilot's exact maths (`at_origin`).
     geodetic: bool = False
     datum: tuple[float, float] | None = None
-    placer: Callable[..., "Mission"] | None = field(default=None, compare=False, repr=False)
+    placer: Callable[..., Mission] | None = field(default=None, compare=False, repr=False)
 
-    def at_origin(self, origin: tuple[float, float]) -> "Mission":
+    def at_origin(self, origin: tuple[float, float]) -> Mission:
         """The same mission placed around the EKF origin ``origin`` = (lat, lon) (a local or
         start-frame mission is returned as it is). Files are read again: a file changed or gone
         since is a UserError, still before anything moves."""

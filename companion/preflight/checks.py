@@ -31,7 +31,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Mapping
+from collections.abc import Mapping
 
 from .. import profiles
 from ..profiles.autopilot import (AirframeFrame, AutopilotProfile, GcsFailsafe, OffboardFailsafe,

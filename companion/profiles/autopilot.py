@@ -25,7 +25,7 @@ pymavlink's by ``tests/test_profiles.py``).
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Callable, Mapping
+from collections.abc import Callable, Mapping
 
 from .priors import Priors
 

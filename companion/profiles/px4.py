@@ -20,7 +20,8 @@
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING, Mapping
+from typing import TYPE_CHECKING
+from collections.abc import Mapping
 
 from . import skid
 from .autopilot import (FLAG_AUTO_ENABLED, FLAG_CUSTOM_MODE_ENABLED, FLAG_GUIDED_ENABLED,

@@ -63,7 +63,7 @@ class CertInfo:
 
 
 def utcnow() -> dt.datetime:
-    return dt.datetime.now(dt.timezone.utc)
+    return dt.datetime.now(dt.UTC)
 
 
 def stamp(t: dt.datetime) -> str:

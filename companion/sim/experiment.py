@@ -25,7 +25,7 @@ owns a slice of 6 vehicles, its tracker built by :func:`companion.core.controlle
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Callable, Sequence
+from collections.abc import Callable, Sequence
 
 import numpy as np
 

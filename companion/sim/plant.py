@@ -112,12 +112,12 @@ class RoverParams:
         return _any_positive(self.speed_delay) or _any_positive(self.yaw_delay)
 
     @classmethod
-    def paper(cls, d_cen: float = 0.0, w_c: float = 20.0) -> "RoverParams":
+    def paper(cls, d_cen: float = 0.0, w_c: float = 20.0) -> RoverParams:
         """Section 5's plant; the paper does not state w_c, we use 20 rad/s."""
         return cls(d_cen=d_cen, w_c=w_c)
 
     @classmethod
-    def stock_rover(cls, d_cen: float = 0.0) -> "RoverParams":
+    def stock_rover(cls, d_cen: float = 0.0) -> RoverParams:
         """A stock ArduPilot skid-steer Rover as seen in SITL: about 1.9 s to 90 % of a 1 m/s speed
         step (ln 10 / 1.2 s), top speed 4 m/s, 1 m/s^2 acceleration, 120 deg/s turn rate."""
         return cls(d_cen=d_cen, w_c=1.2, w_c_yaw=1.2, max_speed=4.0,

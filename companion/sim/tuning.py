@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Callable
+from collections.abc import Callable
 
 import numpy as np
 
@@ -89,12 +89,12 @@ class Candidates:
                          lead_tau=p["lead_tau"] if f["use_lead"] else 0.0,
                          lead_max_gain=p["lead_max_gain"] if f["use_lead"] else 1.0))
 
-    def take(self, index: np.ndarray) -> "Candidates":
+    def take(self, index: np.ndarray) -> Candidates:
         return Candidates({k: v[index] for k, v in self.params.items()},
                           {k: v[index] for k, v in self.flags.items()})
 
     @staticmethod
-    def concat(parts: list["Candidates"]) -> "Candidates":
+    def concat(parts: list[Candidates]) -> Candidates:
         return Candidates({k: np.concatenate([p.params[k] for p in parts]) for k in parts[0].params},
                           {k: np.concatenate([p.flags[k] for p in parts]) for k in parts[0].flags})
 

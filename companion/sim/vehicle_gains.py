@@ -13,7 +13,8 @@ import hashlib
 import math
 from dataclasses import replace
 from pathlib import Path
-from typing import Any, Callable, Sequence
+from typing import Any
+from collections.abc import Callable, Sequence
 
 from ..core.limits import DEFAULT_LIMITS, Limits
 from ..core.trajectory import Trajectory
