@@ -28,12 +28,12 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 import numpy as np  # noqa: E402
 
 from companion.core.baselines import KanayamaGains, KanayamaTracker, PIDGains, PIDTracker  # noqa: E402
-from companion.sim.batch import SimConfig, simulate  # noqa: E402
 from companion.core.filter import FilterGains  # noqa: E402
 from companion.core.limits import Limits  # noqa: E402
-from companion.sim.plant import RoverModel, RoverParams, RoverState  # noqa: E402
 from companion.core.pzc import PZCGains, PZCTracker  # noqa: E402
 from companion.core.trajectory import Ellipse  # noqa: E402
+from companion.sim.batch import SimConfig, simulate  # noqa: E402
+from companion.sim.plant import RoverModel, RoverParams, RoverState  # noqa: E402
 
 
 def step_time_us(tracker, blocks: int, per_block: int = 2000) -> tuple[float, float, float]:

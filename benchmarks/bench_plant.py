@@ -19,7 +19,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from companion.sim.plant import RoverParams  # noqa: E402
 from sitl_plant import modes, setpoint  # noqa: E402
-from sitl_plant.testing import PlantProcess, Pilot  # noqa: E402
+from sitl_plant.testing import Pilot, PlantProcess  # noqa: E402
 from sitl_plant.vehicle import Vehicle, VehicleConfig  # noqa: E402
 
 

@@ -65,14 +65,14 @@ import re
 import signal
 import threading
 import time
+from collections.abc import Callable
 from contextlib import contextmanager
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
-from collections.abc import Callable
 
-from .live import events as ev
 from .errors import UserError
+from .live import events as ev
 from .live.events import ControlChannel, LoopRecord, StatusEvent
 from .secretfile import read_private
 
@@ -203,13 +203,15 @@ def _secure(config, opts: BusOptions, file: str | None) -> Identity | None:
     Zenoh does the TLS and the access control; this writes its settings, after checking
     what Zenoh would only report as a failed handshake."""
     import zenoh
+
     from .security import tls
     own = _get(config, tls.TLS_KEY) or {}
     cert = own.get("connect_certificate") or own.get("listen_certificate")
     key = own.get("connect_private_key") or own.get("listen_private_key")
     if opts.tls is None and not (own.get("root_ca_certificate") and cert and key):
         return None
-    from .security import acl, identity as ids
+    from .security import acl
+    from .security import identity as ids
     if opts.tls is not None:
         me = ids.from_spec(opts.tls, opts.roles)
     else:

@@ -24,7 +24,6 @@ from .telemetry import TelemetryConfig
 from .vehicle import VehicleConfig
 
 
-
 class _Parser(argparse.ArgumentParser):
     """argparse whose usage errors are a single line (and exit code 2)."""
 

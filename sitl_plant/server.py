@@ -18,8 +18,8 @@ import math
 import select
 import socket
 import time
-from typing import Any
 from collections.abc import Callable
+from typing import Any
 
 from . import params, status, streams
 from .clock import LockstepGate, Pacer

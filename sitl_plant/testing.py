@@ -17,8 +17,8 @@ import socket
 import subprocess
 import sys
 import time
-from typing import Any
 from collections.abc import Callable
+from typing import Any
 
 MASK_SPEED_TURN_RATE = 1511   # 0x05E7: vx, vy, yaw_rate used (ArduPilot speed + turn rate)
 MASK_VELOCITY = 3559          # vx, vy used

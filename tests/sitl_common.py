@@ -24,9 +24,9 @@ import sys
 import tempfile
 import threading
 import time
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any, TypeVar
-from collections.abc import Callable, Iterator
 
 os.environ["MAVLINK20"] = "1"
 from pymavlink import mavutil  # noqa: E402

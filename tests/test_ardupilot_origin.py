@@ -15,8 +15,15 @@ import time
 import pytest
 
 from ardupilot_harness import GUIDED, HOLD, ROOT, CompanionProcess, GroundStation
-from origin_harness import (CMAC, closest_approaches, metres_between, moved, path_distances,
-                            plan_waypoints, write_plan)
+from origin_harness import (
+    CMAC,
+    closest_approaches,
+    metres_between,
+    moved,
+    path_distances,
+    plan_waypoints,
+    write_plan,
+)
 
 SPEEDUP = 5
 BOOT_WALL = 120.0 / SPEEDUP + 20.0     # wall s: boot to armable, with margin

@@ -8,8 +8,15 @@ import os
 import signal
 import time
 
-from companion_harness import (Companion, FakeVehicle, Proxy, ellipse_mission, finite_setpoint,
-                               is_mode_command, is_zero)
+from companion_harness import (
+    Companion,
+    FakeVehicle,
+    Proxy,
+    ellipse_mission,
+    finite_setpoint,
+    is_mode_command,
+    is_zero,
+)
 from sitl_plant.testing import PlantProcess, free_udp_port
 
 HOLD, GUIDED = 4, 15

@@ -9,12 +9,12 @@ import math
 
 import pytest
 
-from companion.sim.batch import SimConfig, simulate
 from companion.core.filter import FilterGains
 from companion.core.limits import Limits
-from companion.sim.plant import RoverParams
 from companion.core.pzc import PZCGains, PZCTracker
 from companion.core.trajectory import Ellipse
+from companion.sim.batch import SimConfig, simulate
+from companion.sim.plant import RoverParams
 from companion_harness import Companion, Proxy, ellipse_mission, is_mode_command, is_zero
 from sitl_plant.testing import PlantProcess
 

@@ -363,6 +363,7 @@ def _fly(lanes: list[PZCGains], f_r: float, vehicle: RoverParams = ARDUPILOT_SKI
     """Each gain set on the vehicle at 40 Hz on ArduPilot's ticks with EKF-like noise, one
     batch: (steady RMS, share of the second half at the yaw-rate limit) per lane."""
     from dataclasses import fields
+
     from companion.core.filter import FilterGains
     from companion.core.pzc import PZCTracker
     from companion.core.trajectory import Ellipse

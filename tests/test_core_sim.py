@@ -12,13 +12,13 @@ import numpy as np
 import pytest
 
 from companion.core.baselines import KanayamaGains, KanayamaTracker, PIDGains, PIDTracker
-from companion.sim.batch import SimConfig, simulate
-from companion.sim.experiment import TableConfig, run_table
 from companion.core.filter import FilterGains
 from companion.core.limits import Limits
-from companion.sim.plant import RoverModel, RoverParams, RoverState
 from companion.core.pzc import PZCGains, PZCTracker
 from companion.core.trajectory import Ellipse
+from companion.sim.batch import SimConfig, simulate
+from companion.sim.experiment import TableConfig, run_table
+from companion.sim.plant import RoverModel, RoverParams, RoverState
 
 
 def test_exact_plant_step_agrees_with_fine_rk4():

@@ -26,7 +26,6 @@ import re
 from dataclasses import dataclass
 from pathlib import Path
 
-
 from companion import cli
 from companion.errors import ExitCode
 from sitl_plant import cli as plant_cli

@@ -21,9 +21,9 @@ from companion.core.signals import Reference
 from companion.ident import channels
 from companion.ident.excite import Excitation, Plan
 from companion.ident.fit import BOUND, FITTED, PRIOR, Series, fit, join, rms
+from companion.live.flightlog import CSV_FIELDS
 from companion.profiles import ardupilot
 from companion.profiles.priors import defaults
-from companion.live.flightlog import CSV_FIELDS
 from companion.sim.plant import RoverModel, RoverParams, RoverState
 from companion.sim.response import respond
 from companion.sim.vehicle_file import VehicleFile, load, save

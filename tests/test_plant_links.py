@@ -9,7 +9,7 @@ import time
 
 import pytest
 
-from sitl_plant.testing import PlantProcess, Pilot, free_udp_port, speed_of
+from sitl_plant.testing import Pilot, PlantProcess, free_udp_port, speed_of
 
 
 def free_tcp_port() -> int:

@@ -24,8 +24,8 @@ from companion.core.trajectory import Ellipse
 from companion.errors import UserError
 from companion.ident.excite import Home, Plan, VectorExcitation
 from companion.ident.fit import FITTED, Series, fit, rms
-from companion.profiles import px4
 from companion.mission.feasibility import check
+from companion.profiles import px4
 from companion.sim import vehicle_file
 from companion.sim.batch import SimConfig, simulate
 from companion.sim.plant import RoverModel, RoverParams, RoverState

@@ -25,8 +25,21 @@ from companion.bus import BusOptions, control_request, encode, prepare, state_pa
 from companion.cli import main
 from companion.live.events import LoopRecord
 from companion.security import pki
-from zenoh_harness import (ROOT, Collector, Proc, WireRecorder, config, endpoint, free_tcp_port,
-                           make_pki, mission_file, secret_file, session, tls_endpoint, tls_isolated)
+from zenoh_harness import (
+    ROOT,
+    Collector,
+    Proc,
+    WireRecorder,
+    config,
+    endpoint,
+    free_tcp_port,
+    make_pki,
+    mission_file,
+    secret_file,
+    session,
+    tls_endpoint,
+    tls_isolated,
+)
 
 SECRET = "correct horse battery staple"
 FLEET = {"router": "router", "rover1": "rover", "rover2": "rover", "rover3": "rover",

@@ -91,9 +91,9 @@ def _refine(options, args, vehicle: Path, report, log) -> dict:
     holds the joint fit. ``options``: the manoeuvre's flight options."""
     from ..ident.fit import rms
     from ..live.policy import GainOptions
+    from .flight import fly_mission
     from .identify import FitOptions, identify_log
     from .options import OutputOptions
-    from .flight import fly_mission
     folder = vehicle.parent
     # The vehicle's own gains and limits (no manoeuvre limits), at the manoeuvre's rate.
     flown = replace(options, vehicle_file=str(vehicle), gains=GainOptions(rate=args.rate),
@@ -130,10 +130,9 @@ def _refine(options, args, vehicle: Path, report, log) -> dict:
 
 def run(args) -> int:
     from ..live.policy import DEFAULT_RATE
+    from ..sim.robust import RobustConfig
     from .flight import logger
     from .identify import FitOptions, _print, fly_and_fit, live_options
-
-    from ..sim.robust import RobustConfig
     args.population = RobustConfig.population if args.population is None else args.population
     args.rounds = RobustConfig.rounds if args.rounds is None else args.rounds
     if args.population < 8 or args.rounds < 1:

@@ -33,9 +33,9 @@ import os
 import re
 import sys
 import tomllib
+from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 from typing import Any
-from collections.abc import Iterator, Sequence
 
 from ..errors import UserError
 

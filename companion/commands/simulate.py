@@ -42,7 +42,7 @@ def register(subparsers) -> None:
                    help="speed limit of every command (m/s)")
     p.add_argument("--max-yaw-rate", type=float, dest="max_yaw_rate", metavar="RAD_S",
                    help="turn-rate limit of every command (rad/s)")
-    from ..core.controllers import DEFAULT, NAMES      # names only: no numpy to build the CLI
+    from ..core.controllers import DEFAULT, NAMES  # names only: no numpy to build the CLI
     p.add_argument("--controller", choices=NAMES, default=DEFAULT,
                    help=f"the tracker to fly (default {DEFAULT}); pid and kanayama fly their "
                         "own default gains within the same limits")

@@ -208,7 +208,8 @@ def mission_references(paths: list[str]) -> tuple[list[tuple[str, Trajectory]], 
 
 
 def run_robust(args) -> int:
-    from ..sim.robust import RobustConfig, tune as robust_tune
+    from ..sim.robust import RobustConfig
+    from ..sim.robust import tune as robust_tune
     args.population = RobustConfig.population if args.population is None else args.population
     args.rounds = RobustConfig.rounds if args.rounds is None else args.rounds
     rate = 40.0 if args.rate is None else args.rate

@@ -29,10 +29,10 @@ import dataclasses
 import os
 import struct
 import time
-from datetime import datetime, timezone, UTC
+from collections.abc import Callable
+from datetime import UTC, datetime, timezone
 from pathlib import Path
 from typing import Any, BinaryIO
-from collections.abc import Callable
 
 from ..errors import UserError
 from .events import LoopRecord, StatusEvent

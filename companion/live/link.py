@@ -23,9 +23,9 @@ from __future__ import annotations
 
 import os
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
-from collections.abc import Callable
 
 os.environ["MAVLINK20"] = "1"   # before pymavlink.mavutil is imported: MAVLink 2 frames
 # Every connection here says dialect="ardupilotmega"; without this mavutil would first load
@@ -33,14 +33,14 @@ os.environ["MAVLINK20"] = "1"   # before pymavlink.mavutil is imported: MAVLink 
 os.environ.setdefault("MAVLINK_DIALECT", "ardupilotmega")
 from pymavlink import mavutil  # noqa: E402
 
+from .. import profiles  # noqa: E402
+from ..core.signals import Command  # noqa: E402
+from ..errors import UserError  # noqa: E402
 from ..mav import signing  # noqa: E402
 from ..mav.connection import open_connection  # noqa: E402
 from ..mav.sockets import size_receive_buffer  # noqa: E402
-from ..errors import UserError  # noqa: E402
-from ..core.signals import Command  # noqa: E402
-from .config import LinkConfig  # noqa: E402,F401  (its home; imported from here too)
-from .. import profiles  # noqa: E402
 from ..profiles.autopilot import AutopilotProfile, ModeTable  # noqa: E402
+from .config import LinkConfig  # noqa: E402,F401  (its home; imported from here too)
 
 mavlink = mavutil.mavlink
 

@@ -34,20 +34,20 @@ import gc
 import json
 import math
 import time
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from enum import Enum
 from pathlib import Path
 from typing import Any
-from collections.abc import Callable, Sequence
 
-from . import events as ev
-from ..errors import ExitCode, UserError
-from .events import ControlChannel, ControlRequest, LoopRecord, Sink, StatusEvent
 from ..core.limits import Limits
-from .link import Link
 from ..core.signals import Command, Measurement, Reference
 from ..core.trajectory import Trajectory
+from ..errors import ExitCode, UserError
+from . import events as ev
 from .config import RunnerConfig
+from .events import ControlChannel, ControlRequest, LoopRecord, Sink, StatusEvent
+from .link import Link
 from .stats import TrackingStats
 from .telemetry import Sample, TelemetryCheck
 

@@ -12,9 +12,9 @@ from __future__ import annotations
 import math
 import os
 import time
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
 from typing import Any
-from collections.abc import Callable, Sequence
 
 from ..core import controllers
 from ..core.limits import Limits

@@ -15,8 +15,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .logread import Flight
 from ..mission.plot import _pyplot
+from .logread import Flight
 
 
 def plot_flight(flight: Flight, out_dir: str | Path, title: str) -> list[str]:

@@ -38,25 +38,25 @@ from __future__ import annotations
 
 import math
 import tomllib
+from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from functools import partial
 from pathlib import Path
 from typing import Any
-from collections.abc import Callable
 
-from ..sim import gains as _gains
-from ..sim import vehicle_file as _vehicle_file
-from . import paths
-from ..errors import UserError
 from ..core.filter import FilterGains
 from ..core.limits import Limits
+from ..core.pzc import PZCGains
+from ..core.trajectory import Ellipse, Trajectory
+from ..errors import UserError
+from ..sim import gains as _gains
+from ..sim import vehicle_file as _vehicle_file
 from ..sim.plant import RoverParams
+from . import paths
 from .polyline import Polyline
 from .profile import MotionProfile, limit_problem, measure
-from ..core.pzc import PZCGains
 from .schema import Table, check_rows, short
 from .spline import TimedWaypoints
-from ..core.trajectory import Ellipse, Trajectory
 
 FRAMES = ("start", "local", "geodetic")
 KINDS = ("ellipse", "circle", "figure8", "line", "polyline", "waypoints", "plan")

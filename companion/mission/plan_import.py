@@ -23,8 +23,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from . import geo
 from ..errors import UserError
+from . import geo
 from .schema import check_number, fail, short
 
 NAV_WAYPOINT = 16

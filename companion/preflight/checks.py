@@ -30,12 +30,18 @@ ArduPilot Rover, PX4 sources):
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
 from collections.abc import Mapping
+from dataclasses import dataclass, field
 
 from .. import profiles
-from ..profiles.autopilot import (AirframeFrame, AutopilotProfile, GcsFailsafe, OffboardFailsafe,
-                                  ServoFrame, TopSpeedParams)
+from ..profiles.autopilot import (
+    AirframeFrame,
+    AutopilotProfile,
+    GcsFailsafe,
+    OffboardFailsafe,
+    ServoFrame,
+    TopSpeedParams,
+)
 
 OK, WARN, FAIL = "ok", "warn", "fail"
 MAV_TYPE_GROUND_ROVER, MAV_TYPE_SURFACE_BOAT = 10, 11

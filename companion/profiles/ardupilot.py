@@ -17,16 +17,34 @@
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING
 from collections.abc import Mapping
+from typing import TYPE_CHECKING
 
 from . import skid
-from .autopilot import (FLAG_CUSTOM_MODE_ENABLED, FLAG_GUIDED_ENABLED, FLAG_MANUAL_INPUT_ENABLED,
-                        MAV_AUTOPILOT_ARDUPILOTMEGA, MAV_FRAME_BODY_NED, MAV_RESULT_FAILED,
-                        MAV_TYPE_GROUND_ROVER, MAV_TYPE_SURFACE_BOAT, PARAM_INT8, PARAM_INT16,
-                        PARAM_REAL32, AutopilotProfile, GcsFailsafe, IdentFacts, LimitParam, Mode,
-                        ModeTable, PlantFacts, PreflightFacts, ServoFrame, SetpointEncoding,
-                        TopSpeedParams)
+from .autopilot import (
+    FLAG_CUSTOM_MODE_ENABLED,
+    FLAG_GUIDED_ENABLED,
+    FLAG_MANUAL_INPUT_ENABLED,
+    MAV_AUTOPILOT_ARDUPILOTMEGA,
+    MAV_FRAME_BODY_NED,
+    MAV_RESULT_FAILED,
+    MAV_TYPE_GROUND_ROVER,
+    MAV_TYPE_SURFACE_BOAT,
+    PARAM_INT8,
+    PARAM_INT16,
+    PARAM_REAL32,
+    AutopilotProfile,
+    GcsFailsafe,
+    IdentFacts,
+    LimitParam,
+    Mode,
+    ModeTable,
+    PlantFacts,
+    PreflightFacts,
+    ServoFrame,
+    SetpointEncoding,
+    TopSpeedParams,
+)
 from .priors import Priors, defaults, finite
 
 if TYPE_CHECKING:

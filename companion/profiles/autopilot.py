@@ -24,8 +24,8 @@ pymavlink's by ``tests/test_profiles.py``).
 
 from __future__ import annotations
 
-from dataclasses import dataclass
 from collections.abc import Callable, Mapping
+from dataclasses import dataclass
 
 from .priors import Priors
 

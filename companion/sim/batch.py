@@ -22,16 +22,16 @@ first scheduler tick at or after its due time, so 40 Hz on ArduPilot's 50 Hz loo
 from __future__ import annotations
 
 import math
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
-from collections.abc import Callable, Sequence
 
 import numpy as np
 
-from .plant import RoverModel, RoverParams, RoverState
 from ..core.signals import Measurement, Num, Reference
 from ..core.tracker import Tracker
 from ..core.trajectory import Trajectory
+from .plant import RoverModel, RoverParams, RoverState
 
 
 @dataclass(frozen=True)

@@ -24,20 +24,20 @@ owns a slice of 6 vehicles, its tracker built by :func:`companion.core.controlle
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
 from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
 
 import numpy as np
 
 from ..core import controllers
-from .batch import SimConfig, simulate
 from ..core.filter import FilterGains
 from ..core.limits import Limits
-from .plant import RoverParams
 from ..core.pzc import PZCGains
 from ..core.signals import Num
 from ..core.tracker import Tracker
 from ..core.trajectory import Ellipse
+from .batch import SimConfig, simulate
+from .plant import RoverParams
 
 SCENARIOS: tuple[tuple[float, float], ...] = (
     (0.04, 0.0), (0.08, 0.0), (0.12, 0.0),      # Section 5.1: reference speed

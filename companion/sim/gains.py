@@ -36,9 +36,9 @@ from dataclasses import dataclass, fields
 from pathlib import Path
 from typing import Any
 
-from ..errors import UserError
 from ..core.filter import FilterGains
 from ..core.pzc import PZCGains
+from ..errors import UserError
 
 TUNED_DIR = Path(__file__).parent / "tuned"
 

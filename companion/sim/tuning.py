@@ -18,18 +18,18 @@ acceleration feed-forward, actuator lead) per candidate, so their worth is measu
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
 from collections.abc import Callable
+from dataclasses import dataclass, field
 
 import numpy as np
 
-from .batch import SimConfig, simulate
 from ..core.filter import FilterGains
-from .gains import TunedGains
 from ..core.limits import Limits
-from .plant import RoverParams
 from ..core.pzc import PZCGains, PZCTracker
 from ..core.trajectory import Ellipse
+from .batch import SimConfig, simulate
+from .gains import TunedGains
+from .plant import RoverParams
 
 # log-uniform search ranges: (low, high)
 RANGES = {

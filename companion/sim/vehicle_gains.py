@@ -11,10 +11,10 @@ from __future__ import annotations
 
 import hashlib
 import math
+from collections.abc import Callable, Sequence
 from dataclasses import replace
 from pathlib import Path
 from typing import Any
-from collections.abc import Callable, Sequence
 
 from ..core.limits import DEFAULT_LIMITS, Limits
 from ..core.trajectory import Trajectory
