@@ -47,7 +47,7 @@ from sitl_common import (  # noqa: F401  (the tests use them)
     started_under,
 )
 from sitl_common import LIVE as _LIVE  # noqa: F401  (the tests use them)
-from sitl_common import stop_all as _stop_all
+from sitl_common import stop_all as _stop_all  # noqa: F401  (the tests use it)
 
 SKIP_REASON = ("ArduPilot SITL not configured: set ARDUPILOT_SITL (the ardurover binary) or "
                "ARDUPILOT_DIR (an ArduPilot tree with build/sitl/bin/ardurover)")

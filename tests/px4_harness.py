@@ -54,7 +54,7 @@ from sitl_common import (  # noqa: F401  (the tests use them)
     started_under,
 )
 from sitl_common import LIVE as _LIVE  # noqa: F401  (the tests use them)
-from sitl_common import stop_all as _stop_all
+from sitl_common import stop_all as _stop_all  # noqa: F401  (the tests use it)
 from sitl_plant.testing import free_udp_port
 
 SKIP_REASON = ("PX4 SITL not configured: set PX4_SITL (the px4 binary of a posix SITL build) or "
