@@ -17,6 +17,7 @@ import json
 import math
 import sys
 
+from ..core.tracker import Tracker
 from ..errors import ExitCode, UserError, require_positive
 from ..live.config import DEFAULT_RATE
 
@@ -55,7 +56,7 @@ def register(subparsers) -> None:
 class _Recorder:
     """Wraps a tracker and keeps what it saw at each control step (for --plot)."""
 
-    def __init__(self, tracker):
+    def __init__(self, tracker: Tracker) -> None:
         self.tracker = tracker
         self.name = tracker.name
         self.log: dict[str, list[float]] = {k: [] for k in ("t", "x", "y", "x_ref", "y_ref")}

@@ -19,10 +19,13 @@ import json
 import math
 import sys
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-from ..core.trajectory import Trajectory
 from ..errors import UserError, require_positive
 from ..progress import progress_bar
+
+if TYPE_CHECKING:   # a hint only: the command loads numpy when it runs, not to build the CLI
+    from ..core.trajectory import Trajectory
 
 
 def register(subparsers) -> None:
