@@ -23,7 +23,7 @@ demo: $(BIN)/.installed
 	@$(BIN)/companion demo $(ARGS)
 
 test: $(BIN)/.installed
-	$(BIN)/python -m pytest -n $(WORKERS) $(ARGS)
+	$(BIN)/python -m pytest -n $(WORKERS) --dist loadgroup $(ARGS)
 
 # The linter and the type checker, both configured in pyproject.toml (docs/development.md)
 check: $(BIN)/.installed

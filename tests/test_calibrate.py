@@ -28,6 +28,7 @@ def companion(*args: str, timeout: float = 300.0) -> subprocess.CompletedProcess
                           text=True, timeout=timeout, cwd=ROOT)
 
 
+@pytest.mark.slow   # long: started first under workers (conftest.py)
 def test_calibrate_identifies_tunes_and_says_how_to_fly(tmp_path):
     truth = tmp_path / "truth.toml"
     vehicle_file.save(vehicle_file.VehicleFile(TRUE, name="truth"), truth)

@@ -270,6 +270,7 @@ def test_identify_a_companion_run_log_end_to_end(vehicle_file, tmp_path):
     check_recovered(j["params"])
 
 
+@pytest.mark.slow   # long: started first under workers (conftest.py)
 def test_live_identify_stays_within_space_ends_in_hold_and_writes_the_file(vehicle_file,
                                                                          tmp_path):
     out, logs = tmp_path / "live.toml", tmp_path / "logs"

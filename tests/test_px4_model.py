@@ -166,6 +166,7 @@ def _manoeuvre(params: RoverParams, seconds: float = 60.0, rate: float = 40.0) -
                   yaw=np.remainder(a[:, 5] + math.pi, 2 * math.pi) - math.pi)
 
 
+@pytest.mark.slow   # long: started first under workers (conftest.py)
 def test_the_velocity_vector_fit_finds_the_course_gain_and_the_turning_radius():
     truth = PX4_ROVER.with_(course_gain=4.0, min_turn_radius=0.7)
     series = _manoeuvre(truth)

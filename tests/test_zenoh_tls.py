@@ -68,6 +68,7 @@ def _demo(d: Path, name: str, cfg: Path, connect: str, secret: Path, tmp: Path,
 
 # --------------------------------------------------------------------------- the fleet
 
+@pytest.mark.slow   # long: started first under workers (conftest.py)
 def test_a_tls_fleet_admits_only_its_certificates_each_in_its_role(tmp_path):
     d = make_pki(tmp_path / "pki", FLEET)
     other = make_pki(tmp_path / "other", {"mon": "monitor", "op": "operator"})
