@@ -3,9 +3,9 @@ PYTHON ?= python3
 VENV ?= .venv
 BIN = $(VENV)/bin
 
-# pytest-xdist workers for `make test` (0: one process). The tests mostly wait on processes and
-# sockets, so more workers than the 2 cores pay (docs/development.md has the measurements).
-WORKERS ?= 4
+# pytest-xdist workers for `make test`: 0 is one process (the default, until parallel runs are
+# measured to pass and pay on a quiet machine: docs/development.md); `make test WORKERS=4`.
+WORKERS ?= 0
 # The linter's paths; the type checker's are in pyproject.toml ([tool.mypy] files)
 LINT_PATHS = companion sitl_plant tests benchmarks
 
