@@ -56,4 +56,4 @@ lock:
 	@echo "constraints.txt: $$(grep -c '==' constraints.txt) pinned" >&2
 
 clean:
-	rm -rf $(VENV) build *.egg-info .pytest_cache
+	rm -rf $(VENV) .lock-venv build *.egg-info .pytest_cache .mypy_cache .ruff_cache
