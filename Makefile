@@ -3,20 +3,32 @@ PYTHON ?= python3
 VENV ?= .venv
 BIN = $(VENV)/bin
 
-.PHONY: demo test sitl-test bench paper-table clean
+# pytest-xdist workers for `make test`: 0 is one process (the default, until parallel runs are
+# measured to pass and pay on a quiet machine: docs/development.md); `make test WORKERS=4`.
+WORKERS ?= 0
+# The linter's paths; the type checker's are in pyproject.toml ([tool.mypy] files)
+LINT_PATHS = companion sitl_plant tests benchmarks
 
-$(BIN)/.installed: pyproject.toml
-	@echo "setting up $(VENV) (first run, or pyproject.toml changed)" >&2
+.PHONY: demo test check sitl-test bench paper-table lock clean
+
+# The tested versions (constraints.txt) of everything pyproject.toml's ranges admit.
+$(BIN)/.installed: pyproject.toml constraints.txt
+	@echo "setting up $(VENV) (first run, or pyproject.toml / constraints.txt changed)" >&2
 	@$(PYTHON) -m venv $(VENV)
 	@$(BIN)/python -m pip install -q --upgrade pip >&2
-	@$(BIN)/python -m pip install -q -e '.[test]' >&2
+	@$(BIN)/python -m pip install -q -c constraints.txt -e '.[test,check]' >&2
 	@touch $@
 
 demo: $(BIN)/.installed
 	@$(BIN)/companion demo $(ARGS)
 
 test: $(BIN)/.installed
-	$(BIN)/python -m pytest $(ARGS)
+	$(BIN)/python -m pytest -n $(WORKERS) --dist loadgroup $(ARGS)
+
+# The linter and the type checker, both configured in pyproject.toml (docs/development.md)
+check: $(BIN)/.installed
+	$(BIN)/ruff check $(LINT_PATHS)
+	$(BIN)/mypy
 
 # Only the tests against ArduPilot Rover SITL and PX4 SITL (each skipped unless ARDUPILOT_SITL or
 # ARDUPILOT_DIR, PX4_SITL or PX4_DIR is set)
@@ -29,5 +41,19 @@ paper-table: $(BIN)/.installed
 bench: $(BIN)/.installed
 	$(BIN)/python benchmarks/bench_core.py
 
+# Re-resolve the newest versions pyproject.toml admits into constraints.txt (in a scratch venv,
+# so the project's own stays as tested until the next `make`); then run `make check test`.
+lock:
+	@rm -rf .lock-venv
+	@$(PYTHON) -m venv .lock-venv
+	@.lock-venv/bin/python -m pip install -q --upgrade pip >&2
+	@.lock-venv/bin/python -m pip install -q -e '.[test,check]' >&2
+	@{ echo "# The tested versions: \`make\` and .ci/run install with -c constraints.txt."; \
+	   echo "# Made by \`make lock\` (pip freeze of a fresh venv, the project itself left out);"; \
+	   echo "# pyproject.toml keeps the ranges. tests/test_checks.py holds the two together."; \
+	   .lock-venv/bin/python -m pip freeze --exclude-editable; } > constraints.txt
+	@rm -rf .lock-venv
+	@echo "constraints.txt: $$(grep -c '==' constraints.txt) pinned" >&2
+
 clean:
-	rm -rf $(VENV) build *.egg-info .pytest_cache
+	rm -rf $(VENV) .lock-venv build *.egg-info .pytest_cache .mypy_cache .ruff_cache

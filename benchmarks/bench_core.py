@@ -28,12 +28,12 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 import numpy as np  # noqa: E402
 
 from companion.core.baselines import KanayamaGains, KanayamaTracker, PIDGains, PIDTracker  # noqa: E402
-from companion.sim.batch import SimConfig, simulate  # noqa: E402
 from companion.core.filter import FilterGains  # noqa: E402
 from companion.core.limits import Limits  # noqa: E402
-from companion.sim.plant import RoverModel, RoverParams, RoverState  # noqa: E402
 from companion.core.pzc import PZCGains, PZCTracker  # noqa: E402
 from companion.core.trajectory import Ellipse  # noqa: E402
+from companion.sim.batch import SimConfig, simulate  # noqa: E402
+from companion.sim.plant import RoverModel, RoverParams, RoverState  # noqa: E402
 
 
 def step_time_us(tracker, blocks: int, per_block: int = 2000) -> tuple[float, float, float]:
@@ -44,13 +44,13 @@ def step_time_us(tracker, blocks: int, per_block: int = 2000) -> tuple[float, fl
     # Pre-compute inputs so the timing is the tracker alone.
     refs = [ref_traj.sample(k * 1e-3) for k in range(per_block)]
     meas = []
-    for k in range(per_block):
+    for _ in range(per_block):
         meas.append(model.measure(state))
         state = model.step(state, 1.0, 0.2, 1e-3)
     tracker.reset()
     t0 = 0.0
     means = []
-    for b in range(blocks):
+    for _ in range(blocks):
         step = tracker.step
         start = time.perf_counter_ns()
         for k in range(per_block):

@@ -37,8 +37,8 @@ os.environ["MAVLINK20"] = "1"
 from companion import mission as missions  # noqa: E402
 from companion.live.events import LoopRecord, StatusEvent  # noqa: E402
 from companion.live.link import LinkConfig  # noqa: E402
-from companion.live.runner import RunnerConfig  # noqa: E402
 from companion.live.policy import GainOptions  # noqa: E402
+from companion.live.runner import RunnerConfig  # noqa: E402
 from companion.live.session import RunSettings, fly  # noqa: E402
 
 

@@ -19,7 +19,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from companion.sim.plant import RoverParams  # noqa: E402
 from sitl_plant import modes, setpoint  # noqa: E402
-from sitl_plant.testing import PlantProcess, Pilot  # noqa: E402
+from sitl_plant.testing import Pilot, PlantProcess  # noqa: E402
 from sitl_plant.vehicle import Vehicle, VehicleConfig  # noqa: E402
 
 
@@ -44,7 +44,7 @@ def bench_lockstep(hz: int, ticks: int = 1000) -> None:
         assert pilot.set_rate(32, hz) == 0 and pilot.set_mode(15) == 0 and pilot.arm() == 0
         first = None
         t0 = time.perf_counter()
-        for k in range(ticks):
+        for _ in range(ticks):
             m = pilot.wait("LOCAL_POSITION_NED")
             if first is None:
                 first, t0 = m, time.perf_counter()

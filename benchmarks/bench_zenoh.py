@@ -49,8 +49,16 @@ import zenoh  # noqa: E402
 
 from companion.bus import Bus, BusOptions, decode, prepare  # noqa: E402
 from companion.live.events import LoopRecord, StatusEvent  # noqa: E402
-from zenoh_harness import (config, endpoint, free_tcp_port, make_pki, mission_file,  # noqa: E402
-                           run_fleet, tls_endpoint, tls_isolated)
+from zenoh_harness import (  # noqa: E402
+    config,
+    endpoint,
+    free_tcp_port,
+    make_pki,
+    mission_file,
+    run_fleet,
+    tls_endpoint,
+    tls_isolated,
+)
 
 FLEET_CERTS = {"mon": "monitor", "rover1": "rover", "bench": "rover"}
 

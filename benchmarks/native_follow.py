@@ -27,6 +27,7 @@ import math
 import os
 import sys
 import time
+from itertools import pairwise
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
@@ -138,7 +139,7 @@ def follow(url: str, mission, rate: float = 40.0, arm: bool = True, velocity: bo
     finally:
         conn.close()
     cost = math.sqrt(sum(0.5 * (a ** 2 + b ** 2) * (tb - ta)
-                         for (ta, a), (tb, b) in zip(errors, errors[1:])))
+                         for (ta, a), (tb, b) in pairwise(errors)))
     steady = [e for t, e in errors if t >= mission.duration / 2]
     return {"mission": mission.name, "f_cost": cost, "samples": len(errors),
             "steady_rms": math.sqrt(sum(e * e for e in steady) / len(steady)),

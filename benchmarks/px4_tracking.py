@@ -27,6 +27,7 @@ import os
 import sys
 import tempfile
 import time
+from itertools import pairwise
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -44,7 +45,7 @@ def heading_lead_deg(csv_path: str) -> float:
         rows = [r for r in csv.DictReader(f) if r["mission_time"]]
     lead_max, prev_yaw, prev_ref = 0.0, None, None
     unwrapped_yaw = unwrapped_ref = 0.0
-    for a, b in zip(rows, rows[1:]):
+    for a, b in pairwise(rows):
         dx, dy = float(b["x_ref"]) - float(a["x_ref"]), float(b["y_ref"]) - float(a["y_ref"])
         if math.hypot(dx, dy) < 1e-6:
             continue
@@ -80,9 +81,9 @@ def main() -> int:
     args = p.parse_args()
     if not (os.environ.get("PX4_SITL") or os.environ.get("PX4_DIR")):
         raise SystemExit("px4_tracking: set PX4_SITL (the px4 binary) or PX4_DIR")
-    from px4_harness import PX4SITL
-    from native_follow import follow
     from companion import mission as missions
+    from native_follow import follow
+    from px4_harness import PX4SITL
 
     speeds = [float(v) for v in args.f_r.split(",")]
     rows, out = [], {"duration": args.duration}

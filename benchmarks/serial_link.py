@@ -74,7 +74,7 @@ def main() -> int:
             # The bytes of the tracked part and its set-up, over the companion's whole run.
             up, down = (c / run["wall"] for c in run["carried"])
 
-            def num(key, fmt):
+            def num(key: str, fmt: str, r: dict = r) -> str:   # r bound now (B023)
                 return format(r[key], fmt) if r.get(key) is not None else "n/a"
             print(f"{baud:>7} {cap:>7.0f}/s {up:>8.0f}/s {100 * up / cap:>5.1f} % "
                   f"{down:>8.0f}/s {100 * down / cap:>5.1f} % {sum(run['dropped']):>8} "

@@ -45,9 +45,8 @@ sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "tests"))
 sys.path.insert(0, str(ROOT / "benchmarks"))
 
-from sim_to_real import MISSIONS, at_limit_share  # noqa: E402
-
 from companion.core import controllers  # noqa: E402
+from sim_to_real import MISSIONS, at_limit_share  # noqa: E402
 
 CALIBRATED = "companion/sim/vehicles/ardupilot_skid.toml"
 CONFIGS = {"defaults": [], "calibrated": ["--vehicle", CALIBRATED]}

@@ -45,8 +45,8 @@ def main() -> int:
     p.add_argument("--json", action="store_true")
     args = p.parse_args()
     from ardupilot_harness import ArduPilotSITL
-    from native_follow import follow
     from companion import mission as missions
+    from native_follow import follow
 
     params = {k: float(v) for k, v in (item.split("=", 1) for item in args.param)}
     speeds = [float(v) for v in args.f_r.split(",")]

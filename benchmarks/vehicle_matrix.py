@@ -101,9 +101,8 @@ def wait_ready(url: str, logs: Path) -> float:
 def one(name: str, params: dict[str, float], frame: str, speeds: list[float], work: Path,
         native: bool, kanayama: bool = True) -> dict:
     from ardupilot_harness import ArduPilotSITL
-    from native_follow import follow
-
     from companion import mission as missions
+    from native_follow import follow
 
     logs = work / "logs"
     row: dict = {"config": name, "frame": frame, "params": params, "runs": {}}

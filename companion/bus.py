@@ -65,13 +65,14 @@ import re
 import signal
 import threading
 import time
+from collections.abc import Callable
 from contextlib import contextmanager
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Callable
+from typing import TYPE_CHECKING, Any
 
-from .live import events as ev
 from .errors import UserError
+from .live import events as ev
 from .live.events import ControlChannel, LoopRecord, StatusEvent
 from .secretfile import read_private
 
@@ -202,16 +203,19 @@ def _secure(config, opts: BusOptions, file: str | None) -> Identity | None:
     Zenoh does the TLS and the access control; this writes its settings, after checking
     what Zenoh would only report as a failed handshake."""
     import zenoh
+
     from .security import tls
     own = _get(config, tls.TLS_KEY) or {}
     cert = own.get("connect_certificate") or own.get("listen_certificate")
     key = own.get("connect_private_key") or own.get("listen_private_key")
     if opts.tls is None and not (own.get("root_ca_certificate") and cert and key):
         return None
-    from .security import acl, identity as ids
+    from .security import acl
+    from .security import identity as ids
     if opts.tls is not None:
         me = ids.from_spec(opts.tls, opts.roles)
     else:
+        assert cert is not None and key is not None   # all three given: see the return above
         me = ids.load(Path(own["root_ca_certificate"]), Path(cert), Path(key), opts.roles,
                       where=f"{file} (transport/link/tls)", key_flag=f"{file}: key")
     mode = _get(config, "mode") or "peer"
@@ -386,7 +390,8 @@ class Bus:
         self.control: ControlChannel | None = ControlChannel() if secret is not None else None
         self.vehicle_id: str | None = opts.vehicle_id
         self.every = max(1, int(opts.state_every))
-        self._state_pub = self._status_pub = None
+        self._state_pub: Any = None       # zenoh.Publisher, declared with the first status
+        self._status_pub: Any = None
         self._queryable = None
         self._worker: threading.Thread | None = None
         self._requests: queue.Queue = queue.Queue()
@@ -402,6 +407,7 @@ class Bus:
         self._cycle += 1
         if self._state_pub is None or (self._cycle - 1) % self.every:
             return
+        assert self.vehicle_id is not None   # _declare named it with the publishers
         self._state_pub.put(encode(state_payload(self.vehicle_id, self._cycle, self.every, rec,
                                                  time.time())))
         self.published += 1
@@ -412,6 +418,7 @@ class Bus:
                 return
             self._declare(event)
         self._status_seq += 1
+        assert self.vehicle_id is not None   # _declare named it
         self._status_pub.put(encode(status_payload(self.vehicle_id, self._status_seq, event,
                                                    time.time())))
 
@@ -489,7 +496,7 @@ class Bus:
         given = attachment.to_bytes() if attachment is not None else b""
         if not given:
             return verb, "", "refused: no secret (send it as the query's attachment)"
-        if not hmac.compare_digest(given, self.secret):
+        if self.secret is None or not hmac.compare_digest(given, self.secret):
             return verb, "", "refused: wrong secret"
         if verb not in VERBS:
             return verb, "", (f"unknown verb {verb!r}: use ?verb= one of {', '.join(VERBS)}"
@@ -517,6 +524,7 @@ class Bus:
                 _reply(query, False, verb, "the companion is stopping")
                 continue
             # A remote operator sends mission text, never a file name on this machine.
+            assert self.control is not None   # the worker runs only with a control channel
             ok, message = self.control.submit(verb, payload, timeout=CONTROL_TIMEOUT,
                                               allow_path=False)
             extra = {}

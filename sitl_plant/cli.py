@@ -25,7 +25,6 @@ from .telemetry import TelemetryConfig
 from .vehicle import VehicleConfig
 
 
-
 class _Parser(argparse.ArgumentParser):
     """argparse whose usage errors are a single line (and exit code 2)."""
 
@@ -262,7 +261,7 @@ def config_from_args(args: argparse.Namespace) -> PlantConfig:
                        tick_aligned=(args.tick_aligned if args.tick_aligned is not None
                                      else args.preset == "ardupilot-skid"),
                        telemetry=telemetry, takeover_at=args.takeover_at, signing_key=key,
-                       origin=OriginConfig(*args.origin,
+                       origin=OriginConfig(args.origin[0], args.origin[1], args.origin[2],
                                            delay=max(args.origin_delay, args.ekf_delay)),
                        global_position_rate=args.global_position_rate,
                        params=tuple(args.param), param_loss=args.param_loss,

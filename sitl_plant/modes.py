@@ -12,10 +12,15 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from companion.profiles.autopilot import (FLAG_AUTO_ENABLED, FLAG_CUSTOM_MODE_ENABLED,  # noqa: F401
-                                          FLAG_GUIDED_ENABLED, FLAG_MANUAL_INPUT_ENABLED,
-                                          FLAG_SAFETY_ARMED, FLAG_STABILIZE_ENABLED,
-                                          AutopilotProfile)
+from companion.profiles.autopilot import (  # noqa: F401
+    FLAG_AUTO_ENABLED,
+    FLAG_CUSTOM_MODE_ENABLED,
+    FLAG_GUIDED_ENABLED,
+    FLAG_MANUAL_INPUT_ENABLED,
+    FLAG_SAFETY_ARMED,
+    FLAG_STABILIZE_ENABLED,
+    AutopilotProfile,
+)
 
 
 @dataclass(frozen=True)

@@ -18,14 +18,15 @@ import math
 import select
 import socket
 import time
-from typing import Any, Callable
+from collections.abc import Callable
+from typing import Any
 
 from . import params, status, streams
+from .auto import Auto
 from .clock import LockstepGate, Pacer
 from .config import PlantConfig
 from .earth import Earth, e7
 from .link import Link
-from .auto import Auto
 from .mission import MissionStore
 from .modes import hold_mode
 from .setpoint import Setpoint
@@ -188,7 +189,7 @@ class PlantServer:
             ready, _, _ = select.select(fds, [], [], timeout)
         except (OSError, ValueError):
             return
-        if wake_fd is not None and wake_fd in ready:
+        if wake_fd is not None and self.wake is not None and wake_fd in ready:
             try:
                 self.wake.recv(64)
             except OSError:
@@ -334,6 +335,7 @@ class PlantServer:
     def _drain_gcs(self) -> None:
         """The ground station's link: route, then answer what is for the plant on that link."""
         gcs = self.gcs
+        assert gcs is not None   # drained only when --gcs gave one
         while (msg := gcs.recv()) is not None:
             if msg.get_type() == "BAD_DATA":
                 continue

@@ -17,7 +17,8 @@ import socket
 import subprocess
 import sys
 import time
-from typing import Any, Callable
+from collections.abc import Callable
+from typing import Any
 
 MASK_SPEED_TURN_RATE = 1511   # 0x05E7: vx, vy, yaw_rate used (ArduPilot speed + turn rate)
 MASK_VELOCITY = 3559          # vx, vy used
@@ -43,7 +44,7 @@ class PlantProcess:
         self.proc: subprocess.Popen | None = None
         self.stderr = ""
 
-    def __enter__(self) -> "PlantProcess":
+    def __enter__(self) -> PlantProcess:
         self.proc = subprocess.Popen(self.argv, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
                                      text=True)
         return self
@@ -92,7 +93,7 @@ class Pilot:
         self.target_system = target_system
         self.texts: list[str] = []
 
-    def __enter__(self) -> "Pilot":
+    def __enter__(self) -> Pilot:
         return self
 
     def __exit__(self, *exc) -> None:

@@ -28,8 +28,17 @@ from companion.profiles.autopilot import AutopilotProfile
 from companion.sim.plant import RoverModel, RoverParams, RoverState
 
 from . import guidance, modes
-from .setpoint import (STOP, HeadingSpeed, Pose, PositionTarget, Rejected, Setpoint, Target,
-                       decode_ardupilot, decode_px4)
+from .setpoint import (
+    STOP,
+    HeadingSpeed,
+    Pose,
+    PositionTarget,
+    Rejected,
+    Setpoint,
+    Target,
+    decode_ardupilot,
+    decode_px4,
+)
 
 GUIDED_TIMEOUT_TEXT = "target not received last 3secs, stopping"
 ARM_REFUSED_TEXT = "Arm: AHRS: not using configured AHRS type"

@@ -29,17 +29,26 @@ from __future__ import annotations
 import contextlib
 import os
 import socket
+from collections.abc import Callable, Iterator
 from pathlib import Path
-from typing import Any, Callable, Iterator
+from typing import Any
 
 import pytest
+from pymavlink import mavutil  # noqa: E402
 
 import sitl_common  # first: it sets MAVLINK20 before pymavlink is imported
-from pymavlink import mavutil  # noqa: E402
 from companion_harness import ROOT, Companion  # noqa: F401  (ROOT: the tests use it from here)
-from sitl_common import (FORBIDDEN_PORT, InstanceLock,  # noqa: F401  (the tests use them)
-                         SITLProcess, claim_instance, ground_speed, port_free, started_under)
-from sitl_common import LIVE as _LIVE, stop_all as _stop_all  # noqa: F401  (the tests use them)
+from sitl_common import (  # noqa: F401  (the tests use them)
+    FORBIDDEN_PORT,
+    InstanceLock,
+    SITLProcess,
+    claim_instance,
+    ground_speed,
+    port_free,
+    started_under,
+)
+from sitl_common import LIVE as _LIVE  # noqa: F401  (the tests use them)
+from sitl_common import stop_all as _stop_all  # noqa: F401  (the tests use it)
 
 SKIP_REASON = ("ArduPilot SITL not configured: set ARDUPILOT_SITL (the ardurover binary) or "
                "ARDUPILOT_DIR (an ArduPilot tree with build/sitl/bin/ardurover)")
@@ -135,7 +144,7 @@ class ArduPilotSITL(SITLProcess):
                 *(["--home", ",".join(f"{v:.8f}" for v in self.home)] if self.home else []),
                 "--defaults", ",".join(defaults)]
 
-    def start(self, timeout: float = 10.0) -> "ArduPilotSITL":
+    def start(self, timeout: float = 10.0) -> ArduPilotSITL:
         self.workdir.mkdir(parents=True, exist_ok=True)
         # SERIAL0 is listening (SITL says so); nobody connects yet (a client starts the boot)
         if self._start_claimed(_claim_instance, lambda: self._spawn(self.argv(), self.workdir),

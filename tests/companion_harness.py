@@ -46,7 +46,7 @@ class Companion:
         self.stdout = self.stderr = ""
         self.started_at = 0.0
 
-    def __enter__(self) -> "Companion":
+    def __enter__(self) -> Companion:
         self.proc = subprocess.Popen(self.argv, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                                      text=True, cwd=ROOT)
         self.started_at = time.monotonic()
@@ -63,7 +63,7 @@ class Companion:
         except subprocess.TimeoutExpired:
             self.proc.kill()
             self.stdout, self.stderr = self.proc.communicate()
-            raise AssertionError(f"companion still running after {timeout} s:\n{self.stderr}")
+            raise AssertionError(f"companion still running after {timeout} s:\n{self.stderr}") from None
         return self.proc.returncode
 
     def result(self) -> dict[str, Any]:
@@ -105,7 +105,7 @@ class Proxy:
         self._thread = threading.Thread(target=self._run, daemon=True)
         self.lock = threading.Lock()
 
-    def __enter__(self) -> "Proxy":
+    def __enter__(self) -> Proxy:
         self._thread.start()
         return self
 
@@ -190,7 +190,7 @@ class FakeVehicle:
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, daemon=True)
 
-    def __enter__(self) -> "FakeVehicle":
+    def __enter__(self) -> FakeVehicle:
         self._thread.start()
         return self
 

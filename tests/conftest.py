@@ -35,6 +35,13 @@ def pytest_unconfigure(config):
     _PATH.unlink(missing_ok=True)
 
 
+def pytest_collection_modifyitems(config, items):
+    """The long tests (marked slow) first, the rest in their order: on xdist workers (make
+    test) the longest then start at once instead of finishing alone at the end. The order
+    is the same in every worker, as xdist requires (a stable sort of one collection)."""
+    items.sort(key=lambda item: item.get_closest_marker("slow") is None)
+
+
 @pytest.fixture
 def ardupilot(tmp_path):
     """Start ArduPilot Rover SITL: ``ardupilot(speedup=5, params={"NAME": value})`` returns a

@@ -14,7 +14,6 @@ import math
 import select
 import socket
 import threading
-import time
 from typing import Any
 
 EARTH = 6378100.0      # m: ArduPilot's flat-earth radius (AP_Common/Location.cpp)

@@ -10,7 +10,8 @@ from __future__ import annotations
 import math
 import random
 from collections import Counter, deque
-from typing import Any, Callable
+from collections.abc import Callable
+from typing import Any
 
 from safety_harness import encoder, frame
 

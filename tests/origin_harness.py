@@ -11,8 +11,9 @@ from __future__ import annotations
 
 import json
 import math
+from collections.abc import Iterable
 from pathlib import Path
-from typing import Any, Iterable
+from typing import Any
 
 EARTH_RADIUS = 6378100.0      # m (the radius ArduPilot's constant is made from)
 CMAC = (-35.363261, 149.165230)   # ArduPilot SITL's default home; example_rover.plan's home

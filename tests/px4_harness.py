@@ -36,18 +36,26 @@ import os
 import re
 import shutil
 import socket
+from collections.abc import Callable, Iterator
 from pathlib import Path
-from typing import Callable, Iterator
 
 import pytest
+from pymavlink import mavutil  # noqa: E402
 
 import sitl_common  # first: it sets MAVLINK20 before pymavlink is imported
-from pymavlink import mavutil  # noqa: E402
 from companion_harness import Companion
+from sitl_common import (  # noqa: F401  (the tests use them)
+    FORBIDDEN_PORT,
+    InstanceLock,
+    SITLProcess,
+    claim_instance,
+    ground_speed,
+    port_free,
+    started_under,
+)
+from sitl_common import LIVE as _LIVE  # noqa: F401  (the tests use them)
+from sitl_common import stop_all as _stop_all  # noqa: F401  (the tests use it)
 from sitl_plant.testing import free_udp_port
-from sitl_common import (FORBIDDEN_PORT, InstanceLock,  # noqa: F401  (the tests use them)
-                         SITLProcess, claim_instance, ground_speed, port_free, started_under)
-from sitl_common import LIVE as _LIVE, stop_all as _stop_all  # noqa: F401  (the tests use them)
 
 SKIP_REASON = ("PX4 SITL not configured: set PX4_SITL (the px4 binary of a posix SITL build) or "
                "PX4_DIR (a PX4-Autopilot tree with build/px4_sitl_default/bin/px4)")
@@ -166,7 +174,7 @@ class PX4SITL(SITLProcess):
         env.update({f"PX4_PARAM_{k}": f"{v:g}" for k, v in self.params.items()})
         return env
 
-    def start(self, timeout: float = 30.0) -> "PX4SITL":
+    def start(self, timeout: float = 30.0) -> PX4SITL:
         if self._start_claimed(_claim_instance, self._launch,
                                "Startup script returned successfully", timeout):
             return self

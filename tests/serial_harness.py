@@ -40,7 +40,7 @@ class PtyCable:
         self._thread = threading.Thread(target=self._run, daemon=True)
         self.started = 0.0
 
-    def __enter__(self) -> "PtyCable":
+    def __enter__(self) -> PtyCable:
         self.started = time.monotonic()
         self._thread.start()
         return self

@@ -24,8 +24,9 @@ import sys
 import tempfile
 import threading
 import time
+from collections.abc import Callable, Iterator
 from pathlib import Path
-from typing import Any, Callable, Iterator, TypeVar
+from typing import Any, TypeVar
 
 os.environ["MAVLINK20"] = "1"
 from pymavlink import mavutil  # noqa: E402
@@ -107,7 +108,7 @@ def die_with_parent() -> None:
 
 # --------------------------------------------------------------------------- the process
 
-LIVE: set["SITLProcess"] = set()         # every SITL started and not yet stopped, of either kind
+LIVE: set[SITLProcess] = set()         # every SITL started and not yet stopped, of either kind
 
 
 @atexit.register
@@ -135,7 +136,7 @@ class SITLProcess:
         self.log_path = self.workdir / log_name
         self.started_at = 0.0
 
-    def start(self, timeout: float) -> "SITLProcess":
+    def start(self, timeout: float) -> SITLProcess:
         raise NotImplementedError
 
     def _start_claimed(self, claim: Callable[[set[int]], InstanceLock], launch: Callable[[], None],

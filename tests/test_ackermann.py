@@ -11,19 +11,18 @@ import json
 import math
 import subprocess
 import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
 
 from companion import profiles
+from companion.core.limits import Limits
 from companion.core.signals import Reference
 from companion.ident.excite import CarExcitation, Excitation, Plan, manoeuvre
 from companion.ident.fit import FITTED, Series, fit
 from companion.mission.feasibility import check
-from companion.profiles import ackermann, ardupilot, skid
-from companion.core.limits import Limits
 from companion.mission.paths import Circle
+from companion.profiles import ackermann, ardupilot, skid
 from companion.sim.plant import LAT_ACCEL_MIN_SPEED, RoverModel, RoverParams, RoverState
 from companion.sim.vehicle_file import VehicleFile, load, save
 from companion_harness import ROOT

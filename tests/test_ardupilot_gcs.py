@@ -17,11 +17,11 @@ import sys
 import time
 
 import pytest
-from ardupilot_harness import ROOT, CompanionProcess
-from gcs_harness import COMPANION, GroundStation
 
+from ardupilot_harness import ROOT, CompanionProcess
 from companion.mav import mission_transfer as mt
 from companion.mission import geo
+from gcs_harness import COMPANION, GroundStation
 
 SPEEDUP = 5
 TRACK_SPEEDUP = 2

@@ -15,8 +15,15 @@ import time
 import pytest
 
 from ardupilot_harness import GUIDED, HOLD, ROOT, CompanionProcess, GroundStation
-from origin_harness import (CMAC, closest_approaches, metres_between, moved, path_distances,
-                            plan_waypoints, write_plan)
+from origin_harness import (
+    CMAC,
+    closest_approaches,
+    metres_between,
+    moved,
+    path_distances,
+    plan_waypoints,
+    write_plan,
+)
 
 SPEEDUP = 5
 BOOT_WALL = 120.0 / SPEEDUP + 20.0     # wall s: boot to armable, with margin
@@ -118,7 +125,7 @@ def test_a_plan_flies_where_drawn_on_ardupilot_booted_50_m_away(ardupilot, tmp_p
                   f"{r['steady_rms']:.3f} m; closest approach per waypoint (m): "
                   + ", ".join(f"{a:.2f}" for a in approaches) + "; the path's own: "
                   + ", ".join(f"{d:.2f}" for d in by_design))
-        for got, path in zip(approaches, by_design):
+        for got, path in zip(approaches, by_design, strict=True):
             assert got < max(1.0, path + 0.5), (approaches, by_design)
         if which == "gentle":
             assert max(approaches) < 1.0

@@ -24,8 +24,17 @@ from pathlib import Path
 import pytest
 
 import ardupilot_harness as harness
-from ardupilot_harness import (GUIDED, HOLD, MANUAL, SKIP_REASON, CompanionProcess,
-                               GroundStation, circle_mission, from_vehicle, ground_speed)
+from ardupilot_harness import (
+    GUIDED,
+    HOLD,
+    MANUAL,
+    SKIP_REASON,
+    CompanionProcess,
+    GroundStation,
+    circle_mission,
+    from_vehicle,
+    ground_speed,
+)
 from safety_harness import read_tlog
 from sitl_common import process_gone, sent_by_companion, started_by_a_dying_process
 

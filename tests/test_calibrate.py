@@ -5,9 +5,9 @@ from __future__ import annotations
 
 import json
 import shlex
-from pathlib import Path
 import subprocess
 import sys
+from pathlib import Path
 
 import pytest
 
@@ -28,6 +28,7 @@ def companion(*args: str, timeout: float = 300.0) -> subprocess.CompletedProcess
                           text=True, timeout=timeout, cwd=ROOT)
 
 
+@pytest.mark.slow   # long: started first under workers (conftest.py)
 def test_calibrate_identifies_tunes_and_says_how_to_fly(tmp_path):
     truth = tmp_path / "truth.toml"
     vehicle_file.save(vehicle_file.VehicleFile(TRUE, name="truth"), truth)
@@ -92,6 +93,7 @@ def test_calibrate_errors_are_one_line(tmp_path):
 
 def _report(status: dict, speed_rms: float = 0.05, yaw_rate_rms: float = 0.04):
     import numpy as np
+
     from companion.ident.fit import Fit, Series
     from companion.ident.priors import Priors
     from companion.ident.record import Report
@@ -125,6 +127,7 @@ def test_a_model_that_does_not_explain_the_manoeuvre_names_what_to_check():
 
 def test_a_tuner_that_finds_nothing_robust_is_one_line_saying_what_to_do(tmp_path):
     import argparse
+
     from companion.commands.calibrate import _tune
     from companion.errors import UserError
     # a turn-rate clamp of 0.02 rad/s: no gain set follows any ellipse without pinning it
@@ -142,6 +145,7 @@ def test_a_vehicle_overshooting_its_autopilots_limit_is_named_as_such():
     # ATC_STR_RAT_FF 0.5 on SITL rover-skid (2026-12-02): the turn rate identified at 3.6
     # rad/s against ATC_STR_RAT_MAX 120 deg/s, RMS 0.27 rad/s
     import numpy as np
+
     from companion.commands.calibrate import check_identified
     from companion.errors import UserError
     from companion.ident.fit import Fit, Series

@@ -8,8 +8,15 @@ import os
 import signal
 import time
 
-from companion_harness import (Companion, FakeVehicle, Proxy, ellipse_mission, finite_setpoint,
-                               is_mode_command, is_zero)
+from companion_harness import (
+    Companion,
+    FakeVehicle,
+    Proxy,
+    ellipse_mission,
+    finite_setpoint,
+    is_mode_command,
+    is_zero,
+)
 from sitl_plant.testing import PlantProcess, free_udp_port
 
 HOLD, GUIDED = 4, 15
@@ -63,7 +70,7 @@ def test_stale_telemetry_stops_the_rover_then_resumes(tmp_path):
 
 def test_sigterm_stops_the_rover_holds_and_exits_0(tmp_path):
     with Proxy() as proxy, \
-            PlantProcess("--speedup", "2", "--d-cen", "0.3", port=proxy.plant_port) as plant, \
+            PlantProcess("--speedup", "2", "--d-cen", "0.3", port=proxy.plant_port), \
             Companion(proxy.companion_port, "--arm", "--json", "--mission",
                       "missions/paper_ellipse_012.toml") as comp:
         proxy.wait_for(lambda: _tracking(proxy), 20.0)

@@ -9,7 +9,6 @@ EKF_STATUS_REPORT, STATUSTEXT on its script). Each test checks what went on the 
 from __future__ import annotations
 
 from companion_harness import Companion, FakeVehicle, ellipse_mission, is_mode_command, is_zero
-
 from sitl_plant.testing import free_udp_port
 
 HEALTHY, GLITCHING, NO_GPS = 0x33F, 0x833F, 0x27     # ArduPilot SITL's flags (field-faults.md)

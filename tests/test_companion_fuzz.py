@@ -14,10 +14,10 @@ import time
 from collections import Counter, deque
 
 from companion.core.limits import Limits
-from companion.live.link import Link, LinkConfig
-from companion.mission import paper_ellipse
 from companion.core.pzc import PZCTracker
+from companion.live.link import Link, LinkConfig
 from companion.live.runner import Runner, RunnerConfig
+from companion.mission import paper_ellipse
 from companion_harness import Companion, _parser, ellipse_mission
 from fuzzframes import Fuzzer, wild
 from safety_harness import InjectingProxy, encoder, frame

@@ -8,13 +8,11 @@ from types import SimpleNamespace
 import pytest
 
 from companion import mission as missions
-from companion.errors import UserError
 from companion.core.filter import FilterGains
-from companion.core.limits import Limits
+from companion.core.limits import DEFAULT_LIMITS, Limits
 from companion.core.pzc import PZCGains
-from companion.core.limits import DEFAULT_LIMITS
-from companion.live.policy import (GainOptions, KnownVehicle, choose_gains, choose_limits,
-                                   requested_rate)
+from companion.errors import UserError
+from companion.live.policy import GainOptions, KnownVehicle, choose_gains, choose_limits, requested_rate
 from companion.live.stats import LatencyHistogram, TrackingStats
 from companion.live.telemetry import TelemetryCheck
 

@@ -9,12 +9,12 @@ import math
 
 import pytest
 
-from companion.sim.batch import SimConfig, simulate
 from companion.core.filter import FilterGains
 from companion.core.limits import Limits
-from companion.sim.plant import RoverParams
 from companion.core.pzc import PZCGains, PZCTracker
 from companion.core.trajectory import Ellipse
+from companion.sim.batch import SimConfig, simulate
+from companion.sim.plant import RoverParams
 from companion_harness import Companion, Proxy, ellipse_mission, is_mode_command, is_zero
 from sitl_plant.testing import PlantProcess
 
@@ -81,7 +81,7 @@ def test_px4_gets_velocity_vectors_in_offboard(tmp_path):
     mission = ellipse_mission(tmp_path / "m.toml", 5.0)
     with Proxy() as proxy, \
             PlantProcess("--lockstep", "--autopilot", "px4", "--d-cen", "0.3",
-                         port=proxy.plant_port) as plant, \
+                         port=proxy.plant_port), \
             Companion(proxy.companion_port, "--arm", "--json", "-q", "--mission",
                       str(mission)) as comp:
         assert comp.wait(60.0) == 0, comp.stderr
@@ -99,7 +99,7 @@ def test_px4_gets_velocity_vectors_in_offboard(tmp_path):
 def test_ardupilot_setpoints_are_body_speed_and_yaw_rate(tmp_path):
     mission = ellipse_mission(tmp_path / "m.toml", 3.0)
     with Proxy() as proxy, \
-            PlantProcess("--lockstep", "--d-cen", "0.3", port=proxy.plant_port) as plant, \
+            PlantProcess("--lockstep", "--d-cen", "0.3", port=proxy.plant_port), \
             Companion(proxy.companion_port, "--arm", "--json", "-q", "--mission", str(mission),
                       "--max-speed", "2", "--max-yaw-rate", "1.5") as comp:
         assert comp.wait(60.0) == 0, comp.stderr

@@ -15,7 +15,7 @@ from companion.errors import UserError
 from companion.mav.signing import load_key
 from companion_harness import ROOT, Companion, ellipse_mission, is_zero
 from safety_harness import GUIDED, InjectingProxy, encoder, frame, make_key, read_tlog
-from sitl_plant.testing import MASK_SPEED_TURN_RATE, PlantProcess, Pilot
+from sitl_plant.testing import MASK_SPEED_TURN_RATE, Pilot, PlantProcess
 
 
 # --- key files ---------------------------------------------------------------------------------

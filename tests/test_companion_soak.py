@@ -8,6 +8,8 @@ from __future__ import annotations
 import math
 import time
 
+import pytest
+
 from companion_harness import Companion
 from safety_harness import read_tlog, rss_kb
 from sitl_plant.testing import PlantProcess
@@ -16,6 +18,7 @@ MINUTES = 10
 MAX_SPEED, MAX_YAW_RATE = 6.0, 6.0
 
 
+@pytest.mark.slow   # long: started first under workers (conftest.py)
 def test_ten_minutes_of_faulty_link_in_lockstep(tmp_path):
     mission = tmp_path / "m.toml"
     mission.write_text(f'name = "soak"\nframe = "start"\nduration = {MINUTES * 60}\n'

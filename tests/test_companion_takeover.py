@@ -10,8 +10,7 @@ import time
 
 import pytest
 
-from companion_harness import (Companion, FakeVehicle, Proxy, ellipse_mission, is_mode_command,
-                               is_zero)
+from companion_harness import Companion, FakeVehicle, Proxy, ellipse_mission, is_mode_command, is_zero
 from sitl_plant.testing import PlantProcess, free_udp_port
 
 HOLD, GUIDED = 4, 15

@@ -5,9 +5,6 @@ it), its limits on every setpoint, and the mission's ``[vehicle] file`` doing th
 from __future__ import annotations
 
 import csv
-import math
-
-import pytest
 
 from companion.core.filter import FilterGains
 from companion.core.pzc import PZCGains
@@ -83,11 +80,12 @@ def test_gains_for_another_vehicle_file_are_not_used(tmp_path):
 
 
 def test_the_shipped_preset_has_gains_tuned_for_it_and_the_demo_flies_them(tmp_path):
-    from companion.sim.vehicle_file import preset_path
-    from companion_harness import ROOT
     import json
     import subprocess
     import sys
+
+    from companion.sim.vehicle_file import preset_path
+    from companion_harness import ROOT
     shipped = vehicle_gains.find_beside(preset_path("ardupilot-skid"), 40.0)
     assert shipped is not None, "re-tune the preset's gains: its vehicle file changed"
     assert shipped.pzc.lead_tau == 0.0

@@ -14,7 +14,7 @@ import pytest
 from companion.core import controllers
 from companion.core.filter import FilterGains
 from companion.core.limits import Limits
-from companion.core.signals import Command, Estimate, Measurement, Reference
+from companion.core.signals import Command, Estimate, Measurement
 from companion.core.tracker import Tracker
 from companion.core.trajectory import Ellipse
 from companion_harness import ROOT
@@ -82,7 +82,7 @@ def test_every_controller_runs_vectorised_and_agrees_with_one_vehicle(name):
         one = controllers.build(name, LIMITS)
         for k, cmd in enumerate(cmds):
             t, meas, ref = _inputs(k, n)
-            pick = lambda s: type(s)(*[float(getattr(s, f)[i]) for f in s.__slots__])  # noqa: E731
+            pick = lambda s, i=i: type(s)(*[float(getattr(s, f)[i]) for f in s.__slots__])  # noqa: E731
             c1 = one.step(t, pick(meas), pick(ref))
             assert c1.speed == pytest.approx(float(cmd.speed[i]), rel=1e-9, abs=1e-12)
             assert c1.yaw_rate == pytest.approx(float(cmd.yaw_rate[i]), rel=1e-9, abs=1e-12)

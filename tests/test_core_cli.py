@@ -34,6 +34,7 @@ def _cells(d: dict, name: str, d_cen_zero_only: bool = False) -> list[dict]:
             if not d_cen_zero_only or s["d_cen"] == 0.0]
 
 
+@pytest.mark.slow   # long: started first under workers (conftest.py)
 def test_paper_table_at_1_khz_reproduces_the_paper():
     d = table()
     assert (d["rate_hz"], d["w_c"], d["duration_s"]) == (1000.0, 20.0, 60.0)

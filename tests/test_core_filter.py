@@ -146,7 +146,7 @@ def test_many_turns_stay_bounded_and_exact():
 def test_batch_filter_equals_single_filters():
     gains = FilterGains(np.array([1000.0, 200.0, 50.0]), np.array([120.0, 30.0, 5.0]))
     batch = PoseFilter(gains, n=3)
-    singles = [PoseFilter(FilterGains(float(k), float(l))) for k, l in zip(gains.k_df, gains.lambda_f)]
+    singles = [PoseFilter(FilterGains(float(k), float(l))) for k, l in zip(gains.k_df, gains.lambda_f, strict=True)]
     rng = np.random.default_rng(0)
     for k in range(200):
         t = 0.02 * k

@@ -160,7 +160,7 @@ def test_wrap_is_half_open_and_the_same_for_floats_and_arrays():
     arr = ops.array.wrap(values)
     assert np.all(arr > -math.pi) and np.all(arr <= math.pi)
     assert ops.array.wrap(np.array([math.pi, -math.pi])) == pytest.approx([math.pi, math.pi])
-    for v, a in zip(values, arr):
+    for v, a in zip(values, arr, strict=True):
         s = ops.scalar.wrap(float(v))
         assert -math.pi < s <= math.pi
         assert s == pytest.approx(wrap(float(v)), abs=1e-12)
@@ -363,6 +363,7 @@ def _fly(lanes: list[PZCGains], f_r: float, vehicle: RoverParams = ARDUPILOT_SKI
     """Each gain set on the vehicle at 40 Hz on ArduPilot's ticks with EKF-like noise, one
     batch: (steady RMS, share of the second half at the yaw-rate limit) per lane."""
     from dataclasses import fields
+
     from companion.core.filter import FilterGains
     from companion.core.pzc import PZCTracker
     from companion.core.trajectory import Ellipse
@@ -375,9 +376,9 @@ def _fly(lanes: list[PZCGains], f_r: float, vehicle: RoverParams = ARDUPILOT_SKI
             stacked[f.name] = values[0]
             continue
         if f.name in ("k_dc_yaw", "lambda_c_yaw"):
-            values = [getattr(g, f.name[:-4]) if v is None else v for g, v in zip(lanes, values)]
+            values = [getattr(g, f.name[:-4]) if v is None else v for g, v in zip(lanes, values, strict=True)]
         if f.name == "accel_ff_turn":
-            values = [g.accel_ff if v is None else v for g, v in zip(lanes, values)]
+            values = [g.accel_ff if v is None else v for g, v in zip(lanes, values, strict=True)]
         stacked[f.name] = np.array(values, dtype=float)
     tracker = PZCTracker(FilterGains(1237.8, 242.1), PZCGains(**stacked),
                          Limits(3.08332, 2.0944), n=n)

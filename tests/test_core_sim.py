@@ -12,13 +12,13 @@ import numpy as np
 import pytest
 
 from companion.core.baselines import KanayamaGains, KanayamaTracker, PIDGains, PIDTracker
-from companion.sim.batch import SimConfig, simulate
-from companion.sim.experiment import TableConfig, run_table
 from companion.core.filter import FilterGains
 from companion.core.limits import Limits
-from companion.sim.plant import RoverModel, RoverParams, RoverState
 from companion.core.pzc import PZCGains, PZCTracker
 from companion.core.trajectory import Ellipse
+from companion.sim.batch import SimConfig, simulate
+from companion.sim.experiment import TableConfig, run_table
+from companion.sim.plant import RoverModel, RoverParams, RoverState
 
 
 def test_exact_plant_step_agrees_with_fine_rk4():
@@ -156,7 +156,7 @@ def test_batch_vehicle_model_equals_one_vehicle_each():
     for k in range(3000):
         u, w = 3.0 * math.sin(0.002 * k) + 1.0, 2.0 * math.cos(0.003 * k)
         sb = batch.step(sb, u + z, w + z, 1e-3)
-        ss = [m.step(s, u, w, 1e-3) for m, s in zip(singles, ss)]
+        ss = [m.step(s, u, w, 1e-3) for m, s in zip(singles, ss, strict=True)]
     for key in ("x", "y", "yaw", "v", "omega"):
         assert getattr(sb, key) == pytest.approx([getattr(s, key) for s in ss], abs=1e-12)
 

@@ -26,8 +26,6 @@ import re
 from dataclasses import dataclass
 from pathlib import Path
 
-import pytest
-
 from companion import cli
 from companion.errors import ExitCode
 from sitl_plant import cli as plant_cli

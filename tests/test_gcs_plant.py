@@ -14,11 +14,10 @@ import subprocess
 import sys
 import time
 
-from companion_harness import ROOT, Companion, Proxy, ellipse_mission, is_mode_command
-from gcs_harness import COMPANION, GroundStation
-
 from companion.mav import mission_transfer as mt
 from companion.mission import geo
+from companion_harness import ROOT, Companion, Proxy, ellipse_mission, is_mode_command
+from gcs_harness import COMPANION, GroundStation
 from sitl_plant.earth import CMAC
 from sitl_plant.testing import PlantProcess, free_udp_port
 

@@ -22,9 +22,9 @@ from companion.core.signals import Reference
 from companion.ident import channels
 from companion.ident.excite import Excitation, Plan
 from companion.ident.fit import BOUND, FITTED, PRIOR, Series, fit, join, rms
+from companion.live.flightlog import CSV_FIELDS
 from companion.profiles import ardupilot
 from companion.profiles.priors import defaults
-from companion.live.flightlog import CSV_FIELDS
 from companion.sim.plant import RoverModel, RoverParams, RoverState
 from companion.sim.response import respond
 from companion.sim.vehicle_file import VehicleFile, load, save
@@ -274,6 +274,7 @@ def test_identify_a_companion_run_log_end_to_end(vehicle_file, tmp_path):
     check_recovered(j["params"])
 
 
+@pytest.mark.slow   # long: started first under workers (conftest.py)
 def test_live_identify_stays_within_space_ends_in_hold_and_writes_the_file(vehicle_file,
                                                                          tmp_path):
     out, logs = tmp_path / "live.toml", tmp_path / "logs"
@@ -463,7 +464,8 @@ def test_each_fitted_parameter_says_how_tightly_and_by_which_log_it_is_determine
 
 def test_the_vehicle_file_records_what_each_log_determined(tmp_path):
     from companion.ident.priors import Priors
-    from companion.ident.record import Report, determined, vehicle_file as to_file
+    from companion.ident.record import Report, determined
+    from companion.ident.record import vehicle_file as to_file
     turning, driving, series, result = turning_and_driving()
     report = Report(result, Priors(defaults(), {}), series, "/logs/turn.tlog + /logs/drive.tlog",
                     1.0, parts=[turning, driving])

@@ -18,10 +18,10 @@ import pytest
 
 pytest.importorskip("mcap")
 pytest.importorskip("foxglove")
-from companion_harness import ROOT, Companion, Proxy, ellipse_mission, is_zero  # noqa: E402
 from mcap.reader import NonSeekingReader, make_reader  # noqa: E402
-from safety_harness import read_tlog  # noqa: E402
 
+from companion_harness import ROOT, Companion, Proxy, ellipse_mission, is_zero  # noqa: E402
+from safety_harness import read_tlog  # noqa: E402
 from sitl_plant.testing import PlantProcess  # noqa: E402
 
 ENV = {**os.environ, "PYTHONPATH": str(ROOT)}

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import random
 from collections import Counter
+from itertools import pairwise
 
 import pytest
 
@@ -70,7 +71,7 @@ def test_the_20_20_20_40_pattern_is_not_missed_cycles_at_any_phase(phase):
 
 def test_scheduler_model_gives_what_sitl_showed():
     times = ardupilot_ms(2400, seed=3)
-    intervals = Counter(b - a for a, b in zip(times, times[1:]))
+    intervals = Counter(b - a for a, b in pairwise(times))
     assert intervals[20] + intervals[40] > 0.97 * 2399
     assert set(intervals) <= {19, 20, 21, 39, 40, 41}
     assert (times[-1] - times[0]) / 2399 == pytest.approx(25.0, abs=0.02)

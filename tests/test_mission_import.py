@@ -10,9 +10,9 @@ import sys
 import numpy as np
 import pytest
 
-from companion.mission import geo
 from companion import mission as missions
 from companion.errors import UserError
+from companion.mission import geo
 
 CMAC = (-35.363261, 149.165230)    # ArduPilot SITL's default home
 

@@ -23,9 +23,16 @@ from companion.errors import UserError  # noqa: E402
 from companion.live import origin as origin_mod  # noqa: E402
 from companion.mission import geo  # noqa: E402
 from companion_harness import Companion, Proxy, ellipse_mission  # noqa: E402
-from origin_harness import (CMAC, closest_approaches, metres_between, moved,  # noqa: E402
-                            path_distances, plan_waypoints, write_plan)
-from sitl_plant.testing import PlantProcess, Pilot  # noqa: E402
+from origin_harness import (  # noqa: E402
+    CMAC,
+    closest_approaches,
+    metres_between,
+    moved,
+    path_distances,
+    plan_waypoints,
+    write_plan,
+)
+from sitl_plant.testing import Pilot, PlantProcess  # noqa: E402
 
 BOOT = moved(CMAC, 50.0, 0.0)                  # the plant's EKF origin: 50 m north of the plan
 ORIGIN_ARG = f"--origin={BOOT[0]:.7f},{BOOT[1]:.7f}"
@@ -76,7 +83,7 @@ def test_the_shipped_example_plan_passes_its_waypoints_on_the_plant(tmp_path):
     approaches = closest_approaches([s.msg for s in proxy.plant_sent("GLOBAL_POSITION_INT")],
                                     waypoints)
     rounded = path_distances(plan, waypoints)
-    for got, by_design in zip(approaches, rounded):
+    for got, by_design in zip(approaches, rounded, strict=True):
         assert got < max(1.0, by_design + 0.3), (approaches, rounded)
 
 
@@ -275,6 +282,7 @@ def _geo_line(start_north: float) -> str:
 
 def _fly_in_thread(settings, control):
     import threading
+
     from companion.live.session import fly
     out: dict = {}
     worker = threading.Thread(target=lambda: out.setdefault("r", fly(settings, control=control)))
@@ -287,6 +295,7 @@ def test_load_mission_places_a_geodetic_mission_around_the_vehicles_origin(tmp_p
     the start limit; a run that read no origin (a local mission) refuses a geodetic one."""
     import json
     import time
+
     from companion.live.events import ControlChannel
     from companion.live.link import LinkConfig
     from companion.live.runner import RunnerConfig

@@ -10,10 +10,10 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from companion import mission as missions
+from companion.core.trajectory import Ellipse
 from companion.mission.paths import Circle, FigureEight, PathError, Placed
 from companion.mission.polyline import Polyline
 from companion.mission.spline import TimedWaypoints
-from companion.core.trajectory import Ellipse
 
 H = 1e-5   # central-difference step, s
 

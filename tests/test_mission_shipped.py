@@ -12,12 +12,12 @@ from pathlib import Path
 import pytest
 
 from companion import mission as missions
-from companion.sim.batch import SimConfig, simulate
 from companion.core.filter import FilterGains
-from companion.sim.gains import find_tuned
 from companion.core.limits import Limits
-from companion.sim.plant import RoverParams
 from companion.core.pzc import PZCGains, PZCTracker
+from companion.sim.batch import SimConfig, simulate
+from companion.sim.gains import find_tuned
+from companion.sim.plant import RoverParams
 
 ROOT = Path(__file__).resolve().parent.parent
 SHIPPED = sorted(str(p.relative_to(ROOT)) for p in (ROOT / "missions").iterdir()
@@ -49,7 +49,7 @@ def test_every_shipped_mission_passes_check():
     assert proc.stderr == ""
     lines = proc.stdout.strip().splitlines()
     assert len(lines) == len(SHIPPED)
-    for name, line in zip(SHIPPED, lines):
+    for name, line in zip(SHIPPED, lines, strict=True):
         assert line.startswith(f"{name}: ok: ") and "peak speed" in line and "turn rate" in line
 
 

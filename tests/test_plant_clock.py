@@ -7,7 +7,7 @@ from __future__ import annotations
 import math
 import time
 
-from sitl_plant.testing import PlantProcess, Pilot, speed_of
+from sitl_plant.testing import Pilot, PlantProcess, speed_of
 
 LPN, ATT = 32, 30
 

@@ -9,7 +9,7 @@ import time
 
 import pytest
 
-from sitl_plant.testing import PlantProcess, Pilot, free_udp_port, speed_of
+from sitl_plant.testing import Pilot, PlantProcess, free_udp_port, speed_of
 
 
 def free_tcp_port() -> int:
@@ -30,7 +30,7 @@ def wait_listening(port: int, timeout: float = 5.0) -> None:
 
 def test_udpin_replies_to_whoever_talks_to_it():
     port = free_udp_port()
-    with PlantProcess("--connect", f"udpin:127.0.0.1:{port}", "--speedup", "4") as plant, \
+    with PlantProcess("--connect", f"udpin:127.0.0.1:{port}", "--speedup", "4"), \
             Pilot(port, url=f"udpout:127.0.0.1:{port}") as pilot:
         hb = None
         for _ in range(20):                    # the plant only knows us once we have spoken

@@ -10,9 +10,10 @@ import struct
 import subprocess
 import sys
 
+from companion.sim.vehicle_file import load as load_vehicle
+from companion.sim.vehicle_file import preset_path
 from sitl_plant.earth import CMAC, e7
-from sitl_plant.testing import PlantProcess, Pilot
-from companion.sim.vehicle_file import load as load_vehicle, preset_path
+from sitl_plant.testing import Pilot, PlantProcess
 
 PREARM = 0x10000000
 PRESET = load_vehicle(preset_path("ardupilot-skid")).params   # what the plant serves

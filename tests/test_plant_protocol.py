@@ -9,10 +9,11 @@ import random
 import signal
 import subprocess
 import sys
+from itertools import pairwise
 
 import pytest
 
-from sitl_plant.testing import (GUIDED, HOLD, MASK_VELOCITY, PlantProcess, Pilot, speed_of)
+from sitl_plant.testing import GUIDED, HOLD, MASK_VELOCITY, Pilot, PlantProcess, speed_of
 
 LPN, ATT = 32, 30
 
@@ -91,7 +92,7 @@ def test_message_rates_accepted_refused_disabled_and_default():
         lpn = [m.time_boot_ms for m in msgs if m.get_type() == "LOCAL_POSITION_NED"]
         rate = (len(lpn) - 1) / ((lpn[-1] - lpn[0]) / 1000.0)
         assert len(lpn) > 60 and rate == pytest.approx(40.0, abs=0.5)
-        for before, m in zip(msgs, msgs[1:]):                   # ATTITUDE just before, same time
+        for before, m in pairwise(msgs):                   # ATTITUDE just before, same time
             if m.get_type() == "LOCAL_POSITION_NED":
                 assert before.get_type() == "ATTITUDE" and before.time_boot_ms == m.time_boot_ms
         assert pilot.set_rate(LPN, 50) == 2                    # above 0.8 x loop rate: DENIED
@@ -103,7 +104,7 @@ def test_message_rates_accepted_refused_disabled_and_default():
         assert msgs and all(m.get_type() == "ATTITUDE" for m in msgs)
         assert pilot.command(511, LPN, 0) == 0                 # 0 restores the default (1 Hz)
         lpn = [m.time_boot_ms for m in pilot.collect(("LOCAL_POSITION_NED",), 1.0)]
-        assert 2 <= len(lpn) <= 6 and all(b - a == 1000 for a, b in zip(lpn, lpn[1:]))
+        assert 2 <= len(lpn) <= 6 and all(b - a == 1000 for a, b in pairwise(lpn))
         pilot.mav.command_long_send(1, 1, 510, 0, LPN, 0, 0, 0, 0, 0, 0)  # GET_MESSAGE_INTERVAL
         reply = pilot.wait("MESSAGE_INTERVAL")
         assert reply.message_id == LPN and reply.interval_us == 1_000_000
@@ -115,7 +116,7 @@ def test_higher_loop_rate_allows_fifty_hertz():
         pilot.wait("HEARTBEAT")
         assert pilot.set_rate(LPN, 50) == 0
         lpn = [m.time_boot_ms for m in pilot.collect(("LOCAL_POSITION_NED",), 1.0)]
-        assert {b - a for a, b in zip(lpn, lpn[1:])} == {20}
+        assert {b - a for a, b in pairwise(lpn)} == {20}
 
 
 def test_targets_ignored_unless_guided_and_armed():

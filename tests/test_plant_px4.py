@@ -7,7 +7,7 @@ import math
 
 import pytest
 
-from sitl_plant.testing import PlantProcess, Pilot, speed_of
+from sitl_plant.testing import Pilot, PlantProcess, speed_of
 
 OFFBOARD = 6 << 16
 HOLD = (4 << 16) | (3 << 24)

@@ -7,14 +7,15 @@ import math
 
 import pytest
 
+from companion.profiles import ardupilot
+from companion.profiles import px4 as px4_profile
 from companion.sim.plant import RoverParams
-from sitl_plant import modes, setpoint as sp
+from sitl_plant import modes
+from sitl_plant import setpoint as sp
 from sitl_plant.clock import LockstepGate, Pacer
-from companion.profiles import ardupilot, px4 as px4_profile
 from sitl_plant.streams import ATTITUDE, LOCAL_POSITION_NED, StreamSchedule
 from sitl_plant.telemetry import TelemetryConfig, TelemetryPipe
-from sitl_plant.vehicle import (GUIDED_TIMEOUT_TEXT, OFFBOARD_LOST_TEXT, Result, Vehicle,
-                                VehicleConfig)
+from sitl_plant.vehicle import GUIDED_TIMEOUT_TEXT, OFFBOARD_LOST_TEXT, Result, Vehicle, VehicleConfig
 
 DT = 0.001
 AP_GUIDED, AP_HOLD = ardupilot.PROFILE.mode_number("GUIDED"), ardupilot.PROFILE.mode_number("HOLD")

@@ -9,7 +9,7 @@ import pytest
 from companion.sim import vehicle_file
 from companion.sim.plant import RoverParams
 from sitl_plant import streams
-from sitl_plant.testing import PlantProcess, Pilot
+from sitl_plant.testing import Pilot, PlantProcess
 
 
 def _intervals_ms(schedule: streams.StreamSchedule, msg_id: int, until_us: int) -> list[float]:

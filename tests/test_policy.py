@@ -12,11 +12,11 @@ from pathlib import Path
 import pytest
 
 from companion import mission as missions
+from companion.core.filter import FilterGains
 from companion.core.limits import DEFAULT_LIMITS, Limits
+from companion.core.pzc import PZCGains
 from companion.live.policy import GainOptions, KnownVehicle, choose_limits, resolve
 from companion.sim.gains import TunedGains
-from companion.core.filter import FilterGains
-from companion.core.pzc import PZCGains
 from companion_harness import Companion, ellipse_mission
 from sitl_plant.testing import PlantProcess
 

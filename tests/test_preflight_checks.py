@@ -8,9 +8,19 @@ from dataclasses import replace
 
 import pytest
 
-from companion.preflight.checks import (FAIL, OK, WARN, Ekf, Limits, Observed, Streams,
-                                        exit_code, fixes, run_checks)
 from companion.live.params import decode, encode
+from companion.preflight.checks import (
+    FAIL,
+    OK,
+    WARN,
+    Ekf,
+    Limits,
+    Observed,
+    Streams,
+    exit_code,
+    fixes,
+    run_checks,
+)
 
 GOOD_PARAMS = {
     "FRAME_CLASS": 1, "FRAME_TYPE": 0, "SERVO1_FUNCTION": 73, "SERVO3_FUNCTION": 74,

@@ -15,9 +15,9 @@ from pathlib import Path
 
 import pytest
 
-from companion.sim.vehicle_file import load as load_vehicle, preset_path
-
-from sitl_plant.testing import PlantProcess, Pilot, free_udp_port
+from companion.sim.vehicle_file import load as load_vehicle
+from companion.sim.vehicle_file import preset_path
+from sitl_plant.testing import Pilot, PlantProcess, free_udp_port
 
 ROOT = Path(__file__).resolve().parent.parent
 SKID = str(ROOT / "companion" / "sim" / "vehicles" / "ardupilot_skid.toml")

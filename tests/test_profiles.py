@@ -315,6 +315,7 @@ def test_a_registered_profile_reaches_the_flags_the_link_and_preflight(monkeypat
     args = build_parser().parse_args(["--autopilot", "px4-clone"])
     assert config_from_args(args).vehicle.autopilot is clone
     import argparse
+
     from companion.commands import demo
     sub = argparse.ArgumentParser().add_subparsers()
     demo.register(sub)

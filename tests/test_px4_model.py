@@ -24,8 +24,8 @@ from companion.core.trajectory import Ellipse
 from companion.errors import UserError
 from companion.ident.excite import Home, Plan, VectorExcitation
 from companion.ident.fit import FITTED, Series, fit, rms
-from companion.profiles import px4
 from companion.mission.feasibility import check
+from companion.profiles import px4
 from companion.sim import vehicle_file
 from companion.sim.batch import SimConfig, simulate
 from companion.sim.plant import RoverModel, RoverParams, RoverState
@@ -166,6 +166,7 @@ def _manoeuvre(params: RoverParams, seconds: float = 60.0, rate: float = 40.0) -
                   yaw=np.remainder(a[:, 5] + math.pi, 2 * math.pi) - math.pi)
 
 
+@pytest.mark.slow   # long: started first under workers (conftest.py)
 def test_the_velocity_vector_fit_finds_the_course_gain_and_the_turning_radius():
     truth = PX4_ROVER.with_(course_gain=4.0, min_turn_radius=0.7)
     series = _manoeuvre(truth)

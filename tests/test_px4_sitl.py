@@ -25,8 +25,7 @@ import pytest
 
 import px4_harness as harness
 from companion_harness import ellipse_mission
-from px4_harness import (HOLD, OFFBOARD, SKIP_REASON, CompanionProcess, GroundStation,
-                         ground_speed)
+from px4_harness import HOLD, OFFBOARD, SKIP_REASON, CompanionProcess, GroundStation, ground_speed
 from safety_harness import read_tlog
 from sitl_common import process_gone, sent_by_companion, started_by_a_dying_process
 

@@ -12,6 +12,7 @@ import sys
 from pathlib import Path
 
 import pytest
+
 from companion_harness import ROOT
 
 VEHICLE = ROOT / "companion" / "sim" / "vehicles" / "ardupilot_skid.toml"

@@ -5,11 +5,11 @@
 from __future__ import annotations
 
 import pytest
-from companion_harness import Companion, ellipse_mission
 
 from companion import profiles
 from companion.live import presets
 from companion.sim import vehicle_file
+from companion_harness import Companion, ellipse_mission
 from sitl_plant.testing import PlantProcess
 
 ARDUPILOT = profiles.autopilot_named("ardupilot")

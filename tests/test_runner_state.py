@@ -63,6 +63,7 @@ def test_every_piece_of_state_is_read():
 def test_a_fresh_runner_has_all_its_state(monkeypatch):
     """No attribute appears later (getattr fallbacks): a Runner just made has every piece."""
     from types import SimpleNamespace
+
     from companion.core.limits import Limits
     from companion.live.runner import Runner, RunnerConfig
     from companion.profiles import px4

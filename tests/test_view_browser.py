@@ -17,6 +17,7 @@ import time
 from pathlib import Path
 
 import pytest
+
 from companion_harness import ROOT
 from zenoh_harness import free_tcp_port
 

@@ -3,18 +3,26 @@ and status streams of a SITL run, every control verb, refusals, and bad input.""
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import math
 import time
+from itertools import pairwise
+from pathlib import Path
 
 import pytest
 
 from companion.bus import STATE_SCHEMA, STATUS_SCHEMA, control_request
 from companion.cli import main
 from sitl_plant.testing import PlantProcess
-from zenoh_harness import (ISOLATED, Collector, Proc, endpoint, free_tcp_port, mission_file,
-                           secret_file, session)
+from zenoh_harness import (
+    ISOLATED,
+    Collector,
+    Proc,
+    endpoint,
+    free_tcp_port,
+    mission_file,
+    secret_file,
+    session,
+)
 
 STATE_FIELDS = {"schema": str, "vehicle_id": str, "seq": int, "every": int, "sent_at": float,
                 "vehicle_time": float, "mission_time": float, "pose": dict, "filtered": dict,
@@ -65,7 +73,7 @@ def test_state_and_status_of_a_sitl_run_follow_the_schema(tmp_path):
         assert seqs == list(range(1, 2 * len(seqs), 2)), seqs[:10]
         assert abs(len(states) - result["cycles"] / 2) <= 1, (len(states), result["cycles"])
         times = [h.msg["vehicle_time"] for h in states]
-        assert all(b > a for a, b in zip(times, times[1:]))
+        assert all(b > a for a, b in pairwise(times))
         assert all(h.msg["mode"] == "GUIDED" and h.msg["armed"] for h in states)
         assert states[-1].msg["mission_time"] > 2.8
         assert states[-1].msg["error"]["position"] < 0.5     # it really tracked

@@ -25,8 +25,21 @@ from companion.bus import BusOptions, control_request, encode, prepare, state_pa
 from companion.cli import main
 from companion.live.events import LoopRecord
 from companion.security import pki
-from zenoh_harness import (ROOT, Collector, Proc, WireRecorder, config, endpoint, free_tcp_port,
-                           make_pki, mission_file, secret_file, session, tls_endpoint, tls_isolated)
+from zenoh_harness import (
+    ROOT,
+    Collector,
+    Proc,
+    WireRecorder,
+    config,
+    endpoint,
+    free_tcp_port,
+    make_pki,
+    mission_file,
+    secret_file,
+    session,
+    tls_endpoint,
+    tls_isolated,
+)
 
 SECRET = "correct horse battery staple"
 FLEET = {"router": "router", "rover1": "rover", "rover2": "rover", "rover3": "rover",
@@ -55,6 +68,7 @@ def _demo(d: Path, name: str, cfg: Path, connect: str, secret: Path, tmp: Path,
 
 # --------------------------------------------------------------------------- the fleet
 
+@pytest.mark.slow   # long: started first under workers (conftest.py)
 def test_a_tls_fleet_admits_only_its_certificates_each_in_its_role(tmp_path):
     d = make_pki(tmp_path / "pki", FLEET)
     other = make_pki(tmp_path / "other", {"mon": "monitor", "op": "operator"})
@@ -123,7 +137,7 @@ def test_a_tls_fleet_admits_only_its_certificates_each_in_its_role(tmp_path):
             for verb, event in (("pause", "paused"), ("resume", "resumed")):
                 out = _companion("control", "rover1", verb, "--secret", str(secret), *as_op)
                 assert out.returncode == 0 and json.loads(out.stdout)["ok"], out
-                heard.wait(lambda: event in heard.statuses("rover1"), 5.0, event)
+                heard.wait(lambda event=event: event in heard.statuses("rover1"), 5.0, event)
             with session(config("client", connect=[router_ep], tls=(d, "op"))) as op:
                 wrong = control_request(op, "rover1", "pause", secret="not the secret",
                                         timeout=3.0)

@@ -16,9 +16,10 @@ import subprocess
 import sys
 import threading
 import time
+from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Iterator
+from typing import Any
 
 import zenoh
 
@@ -121,7 +122,7 @@ class WireRecorder:
         with self._lock:
             return bytes(self._data)
 
-    def __enter__(self) -> "WireRecorder":
+    def __enter__(self) -> WireRecorder:
         self._thread.start()
         return self
 
@@ -228,7 +229,7 @@ class Proc:
         self.out_path, self.err_path = tmp / f"{name}.out", tmp / f"{name}.err"
         self.proc: subprocess.Popen | None = None
 
-    def __enter__(self) -> "Proc":
+    def __enter__(self) -> Proc:
         self._out, self._err = open(self.out_path, "w"), open(self.err_path, "w")
         self.proc = subprocess.Popen(self.argv, stdout=self._out, stderr=self._err, cwd=ROOT,
                                      env={**os.environ, "PYTHONUNBUFFERED": "1"})

@@ -132,7 +132,7 @@ def add_origin_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def add_gain_arguments(p: argparse.ArgumentParser) -> None:
-    from ..core.controllers import DEFAULT, NAMES      # names only: no numpy to build the CLI
+    from ..core.controllers import DEFAULT, NAMES  # names only: no numpy to build the CLI
     g = p.add_argument_group("gains and limits")
     g.add_argument("--controller", choices=NAMES, default=DEFAULT,
                    help=f"the tracker to fly (default {DEFAULT}); pid and kanayama fly their "

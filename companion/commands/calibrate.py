@@ -114,7 +114,7 @@ def _quick_gains(vehicle: Path, rate: float, command: str, log) -> Path:
     vehicle file (removed before calibrate ends: ``run --vehicle`` must never find them)."""
     from ..sim import vehicle_gains
     from ..sim.robust import tune
-    cfg = vehicle_gains.config_for(vehicle, rate, **REFINE_SEARCH)
+    cfg = vehicle_gains.config_for(vehicle, rate, (), **REFINE_SEARCH)
     try:
         result = tune(cfg)
     except RuntimeError:
@@ -136,9 +136,9 @@ def _refine(options, args, vehicle: Path, report, log, gains_file: Path,
     holds the joint fit. ``options``: the manoeuvre's flight options."""
     from ..ident.fit import rms
     from ..live.policy import GainOptions
+    from .flight import fly_mission
     from .identify import FitOptions, identify_log
     from .options import OutputOptions
-    from .flight import fly_mission
     folder = vehicle.parent
     # The vehicle's own gains and limits (no manoeuvre limits), at the manoeuvre's rate.
     flown = replace(options, vehicle_file=str(vehicle),

@@ -33,8 +33,9 @@ import os
 import re
 import sys
 import tomllib
+from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
-from typing import Any, Iterator, Sequence
+from typing import Any
 
 from ..errors import UserError
 
@@ -70,7 +71,7 @@ def parse_args(parser: argparse.ArgumentParser, argv: Sequence[str] | None = Non
         return parser.parse_args(argv)
     with _only_given(subs.values()):
         given = parser.parse_args(argv)
-    sub = subs.get(getattr(given, "command", None))
+    sub = subs.get(getattr(given, "command", ""))
     if sub is None:
         return parser.parse_args(argv)
     values: dict[str, Any] = {}
@@ -194,7 +195,7 @@ def _one(action: argparse.Action, raw: Any) -> Any:
     if isinstance(raw, bool) or not isinstance(raw, (str, int, float)):
         raise ValueError(f"must be a number or a string, not {_toml(raw)}")
     text = raw if isinstance(raw, str) else repr(raw)
-    convert = action.type
+    convert: Any = action.type   # typeshed also admits a registry name (str): none used here
     if convert is None:
         value: Any = text
     else:

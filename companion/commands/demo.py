@@ -24,8 +24,7 @@ from pathlib import Path
 
 from .. import profiles
 from ..errors import UserError
-from .arguments import (add_gain_arguments, add_safety_arguments, add_zenoh_arguments,
-                        non_negative, positive)
+from .arguments import add_gain_arguments, add_safety_arguments, add_zenoh_arguments, non_negative, positive
 
 DEFAULT_D_CEN = 0.3
 

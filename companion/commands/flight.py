@@ -16,13 +16,18 @@ from __future__ import annotations
 import json
 import signal
 import sys
+from collections.abc import Callable, Sequence
 from dataclasses import replace
 from pathlib import Path
-from typing import Any, Callable, Sequence
+from typing import TYPE_CHECKING, Any
 
 from ..core import controllers
 from ..errors import UserError
 from .options import FlightOptions, LogOptions
+
+if TYPE_CHECKING:   # for the hints only: the bus and the logs load when a flight opens them
+    from ..bus import Bus
+    from ..live.flightlog import LogPaths
 
 Log = Callable[[str], None]
 
@@ -90,19 +95,25 @@ def install_signals(switch) -> Callable[[], None]:
         switch.trigger(signal.Signals(signum).name)
 
     old = {sig: signal.signal(sig, handler) for sig in (signal.SIGTERM, signal.SIGINT)}
-    return lambda: [signal.signal(sig, h) for sig, h in old.items()]
+
+    def restore() -> None:
+        for sig, h in old.items():
+            signal.signal(sig, h)
+    return restore
 
 
-def open_flight_log(options: LogOptions, label: str, log: Log):
+def open_flight_log(options: LogOptions, label: str,
+                    log: Log) -> tuple[LogPaths | None, list[Any]]:
     """(paths or None, [CSV sink]) for ``--log-dir`` / ``--no-log``; the paths are logged."""
     if not options.enabled:
         return None, []
     from ..live.flightlog import new_paths, open_csv
     paths = new_paths(options.folder, label, options.format)
-    if options.format == "mcap":
+    if paths.mcap is not None:        # --log-format mcap
         from ..live.mcaplog import open_mcap
         sink: Any = open_mcap(paths.mcap)
     else:
+        assert paths.csv is not None  # new_paths gives one of the two
         sink = open_csv(paths.csv)
     log(f"flight log: {paths.tlog} and {paths.mcap or paths.csv}")
     return paths, [sink]
@@ -120,14 +131,14 @@ class Flight:
     def __init__(self, options: FlightOptions, label: str, log: Log):
         self.options, self.label, self.log = options, label, log
         self.key = signing_key(options.signing_key_file)   # a bad key fails before anything
-        self.paths = None
+        self.paths: LogPaths | None = None
         self.log_sinks: list[Any] = []
-        self.bus = None
+        self.bus: Bus | None = None
         self._restore: Callable[[], None] | None = None
         from ..live.session import StopSwitch
         self.switch = StopSwitch()
 
-    def __enter__(self) -> "Flight":
+    def __enter__(self) -> Flight:
         from ..bus import open_bus
         self._restore = install_signals(self.switch)
         try:

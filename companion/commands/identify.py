@@ -35,9 +35,15 @@ from pathlib import Path
 from typing import Any
 
 from ..errors import ExitCode, UserError
-from .arguments import (add_limit_arguments, add_link_arguments, add_output_arguments,
-                        add_safety_arguments, add_timeout_arguments, add_zenoh_arguments,
-                        positive)
+from .arguments import (
+    add_limit_arguments,
+    add_link_arguments,
+    add_output_arguments,
+    add_safety_arguments,
+    add_timeout_arguments,
+    add_zenoh_arguments,
+    positive,
+)
 
 EPILOG = """\
 exit codes: 0 done; 2 a user error (bad flag, a log that is malformed, too short or without
@@ -101,8 +107,7 @@ def live_options(args: argparse.Namespace):
     """identify --connect's (and calibrate's) flight options: no gains, the manoeuvre's
     limits and rate."""
     from ..live.policy import GainOptions
-    from .options import (FlightOptions, bus_options, link_config, log_options,
-                          output_options, runner_config)
+    from .options import FlightOptions, bus_options, link_config, log_options, output_options, runner_config
     return FlightOptions(
         link=link_config(args), runner=runner_config(args),
         gains=GainOptions(rate=args.rate, max_speed=args.max_speed,
@@ -140,9 +145,9 @@ def identify_log(paths: str | list[str], fit_opts: FitOptions, autopilot: dict[s
     """Read, fit, check, write, plot: the offline half (the live half ends here too).
     Several ``paths`` are fitted together (:func:`companion.ident.fit.join`). ``label`` names
     the log in the file when the path is not worth keeping (``--no-log``)."""
+    from .. import profiles
     from ..ident.data import autopilot_params, read_series
     from ..ident.fit import fit, join, rms
-    from .. import profiles
     from ..ident.record import Report, vehicle_file
     from ..sim.vehicle_file import save
 
@@ -158,8 +163,9 @@ def identify_log(paths: str | list[str], fit_opts: FitOptions, autopilot: dict[s
     # the autopilot such setpoints are for (velocity vectors: PX4's rover parameters, its course loop)
     priors = profiles.from_setpoints(series.vector).priors_from(autopilot)
     if prior is not None:       # an earlier fit of this vehicle: what this log leaves open
-        from ..ident.priors import Priors
         from dataclasses import fields
+
+        from ..ident.priors import Priors
         priors = Priors(prior, {f.name: "the earlier fit" for f in fields(prior)})
     log(f"fitting {len(series.t)} samples ({series.duration:.1f} s)")
     t0 = time.perf_counter()
@@ -301,6 +307,7 @@ def fly_and_fit(options, fit: FitOptions, space: float):
             result = flight.fly(_mission(space), make_tracker=make_tracker)
             refuse_user_error(result)
             paths = flight.paths
+            assert paths is not None   # the log is on: the user's or the scratch one
             tracker = made[-1] if made else None
             flight_summary = {
                 "reason": result.reason, "exit_code": result.exit_code,

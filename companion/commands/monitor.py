@@ -158,6 +158,7 @@ def table(snap: dict[str, Any]) -> str:
 
 def run(args) -> int:
     import zenoh  # noqa: F401  (fail here, not inside a callback, if it is missing)
+
     from ..bus import session_until_signal
 
     record = None

@@ -61,7 +61,7 @@ class FlightOptions:
     gcs_report: bool = True            # --no-gcs-report turns it off (companion.live.gcs)
     handover: Any = None               # --handover: a companion.live.handover.HandoverPlan
 
-    def for_handover(self, plan: Any, auto_mode: str) -> "FlightOptions":
+    def for_handover(self, plan: Any, auto_mode: str) -> FlightOptions:
         """--handover: AUTO's guided sub-mode is the track mode, entered by the mission, never
         asked for; the rover's pose at each hand-over is the segment's start (no start limit)."""
         from dataclasses import replace
@@ -70,7 +70,7 @@ class FlightOptions:
         return replace(self, runner=runner, handover=plan)
 
     @classmethod
-    def from_args(cls, args: argparse.Namespace) -> "FlightOptions":
+    def from_args(cls, args: argparse.Namespace) -> FlightOptions:
         """``companion run``'s flags: every group."""
         return cls(link=link_config(args),
                    runner=runner_config(args, max_start_distance=start_limit(

@@ -73,7 +73,7 @@ def _worker(config, tuned, source, only, shared, conn):
         shared.value = frac
     try:
         conn.send(("ok", run_table(config, tuned, source, progress, only)))
-    except BaseException as exc:          # reported by the parent, which owns the exit code
+    except BaseException as exc:  # noqa: BLE001  (a worker: reported by the parent, which owns the exit code)
         conn.send(("error", f"{type(exc).__name__}: {exc}"))
     finally:
         conn.close()
@@ -106,9 +106,10 @@ def compute(config, tuned, source, jobs: int, bar=None):
     ctx = mp.get_context("fork" if sys.platform.startswith("linux") else "spawn")
     shared = [ctx.Value("d", 0.0, lock=False) for _ in parts]
     pipes = [ctx.Pipe(duplex=False) for _ in parts]
-    procs = [ctx.Process(target=_worker, args=(config, tuned, source, part, value, send),
-                         daemon=True)
-             for part, value, (_, send) in zip(parts, shared, pipes)]
+    # typeshed types get_context(str) as BaseContext, whose subclasses (fork, spawn) have Process
+    procs = [ctx.Process(target=_worker,  # type: ignore[attr-defined]
+                         args=(config, tuned, source, part, value, send), daemon=True)
+             for part, value, (_, send) in zip(parts, shared, pipes, strict=True)]
     try:
         for proc in procs:
             proc.start()

@@ -58,7 +58,7 @@ def register(subparsers) -> None:
 
 
 def run(args) -> int:
-    from ..security import pki   # the cryptography library: only when a command needs it
+    from ..security import pki  # the cryptography library: only when a command needs it
     if args.pki_command == "init":
         ca = pki.init_ca(Path(args.dir), days=args.days, common_name=args.name)
         print(f"CA {ca.name!r} in {args.dir}: {ca.path} (give to every member), "

@@ -30,8 +30,8 @@ def run(args) -> int:
     from pathlib import Path
 
     from ..errors import UserError
-    from ..logs.plot import plot_flight
     from ..logs.logread import read
+    from ..logs.plot import plot_flight
 
     mission = None
     if args.mission:

@@ -16,9 +16,9 @@ import json
 import sys
 
 from ..errors import UserError
+from ..live.config import DEFAULT_RATE, LINK
 from .arguments import BAUD_HELP, baud_rate, mavlink_id, positive
 from .flight import logger, signing_key
-from ..live.config import DEFAULT_RATE, LINK
 
 EPILOG = """\
 exit codes: 0 every check ok; 1 a warning or a failure; 2 could not check (no vehicle, no

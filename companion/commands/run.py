@@ -4,10 +4,17 @@ from __future__ import annotations
 
 import argparse
 
-from .arguments import (add_gain_arguments, add_gcs_arguments, add_link_arguments,
-                        add_origin_arguments,
-                        add_output_arguments, add_safety_arguments, add_timeout_arguments,
-                        add_vehicle_arguments, add_zenoh_arguments)
+from .arguments import (
+    add_gain_arguments,
+    add_gcs_arguments,
+    add_link_arguments,
+    add_origin_arguments,
+    add_output_arguments,
+    add_safety_arguments,
+    add_timeout_arguments,
+    add_vehicle_arguments,
+    add_zenoh_arguments,
+)
 
 EPILOG = """\
 precedence (companion.live.policy): flags > --gains FILE > the mission's gains > the vehicle

@@ -17,6 +17,7 @@ import json
 import math
 import sys
 
+from ..core.tracker import Tracker
 from ..errors import ExitCode, UserError, require_positive
 from ..live.config import DEFAULT_RATE
 
@@ -42,7 +43,7 @@ def register(subparsers) -> None:
                    help="speed limit of every command (m/s)")
     p.add_argument("--max-yaw-rate", type=float, dest="max_yaw_rate", metavar="RAD_S",
                    help="turn-rate limit of every command (rad/s)")
-    from ..core.controllers import DEFAULT, NAMES      # names only: no numpy to build the CLI
+    from ..core.controllers import DEFAULT, NAMES  # names only: no numpy to build the CLI
     p.add_argument("--controller", choices=NAMES, default=DEFAULT,
                    help=f"the tracker to fly (default {DEFAULT}); pid and kanayama fly their "
                         "own default gains within the same limits")
@@ -55,7 +56,7 @@ def register(subparsers) -> None:
 class _Recorder:
     """Wraps a tracker and keeps what it saw at each control step (for --plot)."""
 
-    def __init__(self, tracker):
+    def __init__(self, tracker: Tracker) -> None:
         self.tracker = tracker
         self.name = tracker.name
         self.log: dict[str, list[float]] = {k: [] for k in ("t", "x", "y", "x_ref", "y_ref")}

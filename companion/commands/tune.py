@@ -19,9 +19,13 @@ import json
 import math
 import sys
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from ..errors import UserError, require_positive
 from ..progress import progress_bar
+
+if TYPE_CHECKING:   # a hint only: the command loads numpy when it runs, not to build the CLI
+    from ..core.trajectory import Trajectory
 
 
 def register(subparsers) -> None:
@@ -164,7 +168,7 @@ def run(args) -> int:
           f"limits {cfg.limits.max_speed:g} m/s, {cfg.limits.max_yaw_rate:g} rad/s "
           f"({result.evaluated} gain sets simulated)")
     _print_gains(d)
-    for fr, cost, rms in zip(d["f_r"], d["f_cost"], d["steady_rms"]):
+    for fr, cost, rms in zip(d["f_r"], d["f_cost"], d["steady_rms"], strict=True):
         print(f"  f_r {fr:5.2f} Hz: f_cost {cost:7.3f}  steady RMS {rms:6.3f} m")
     print(f"cost (mean f_cost) {d['cost']:.4f}")
     if args.out:
@@ -188,12 +192,13 @@ def _print_gains(d: dict) -> None:
     print(f"        turning preview {turn}; braking curves: {brakes or 'off'}")
 
 
-def mission_references(paths: list[str]) -> tuple[list[tuple[str, object]], float]:
+def mission_references(paths: list[str]) -> tuple[list[tuple[str, Trajectory]], float]:
     """Missions as the robust tuner's references (``start`` frame at the simulated rover's
     pose; other frames moved so the path begins there) and the duration to simulate."""
     from .. import mission as missions_mod
     from ..mission.paths import Placed
-    refs, durations = [], []
+    refs: list[tuple[str, Trajectory]] = []
+    durations: list[float] = []
     for path in paths:
         m = missions_mod.load(path)
         traj = m.trajectory
@@ -206,7 +211,8 @@ def mission_references(paths: list[str]) -> tuple[list[tuple[str, object]], floa
 
 
 def run_robust(args) -> int:
-    from ..sim.robust import RobustConfig, tune as robust_tune
+    from ..sim.robust import RobustConfig
+    from ..sim.robust import tune as robust_tune
     args.population = RobustConfig.population if args.population is None else args.population
     args.rounds = RobustConfig.rounds if args.rounds is None else args.rounds
     rate = 40.0 if args.rate is None else args.rate
@@ -243,7 +249,7 @@ def run_robust(args) -> int:
           f"({result.rejected['limit cycle']} limit-cycled, {result.rejected['diverged']} diverged)")
     _print_gains(d)
     for label, a, b, c in zip(result.references, result.nominal_steady_rms,
-                              result.worst_steady_rms, result.nominal_f_cost):
+                              result.worst_steady_rms, result.nominal_f_cost, strict=True):
         print(f"  {label:24s} steady RMS {a:6.3f} m (worst neighbour {b:6.3f})  f_cost {c:7.3f}")
     if args.out:
         print(f"written to {args.out}")

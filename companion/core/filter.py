@@ -59,7 +59,7 @@ class FilterGains:
         return self.k_df * self.lambda_f
 
 
-def transition(gains: FilterGains, dt: float, m=_ops.scalar) -> tuple[Num, Num, Num, Num]:
+def transition(gains: FilterGains, dt: float, m: _ops.Ops = _ops.scalar) -> tuple[Num, Num, Num, Num]:
     """exp(A_L dt) = [[p11, p12], [p21, p22]] for A_L = [[-l1, 1], [-l2, 0]].
 
     With a = k_df and b = lambda_f (the eigenvalues are -a and -b), Sylvester's formula gives
@@ -121,7 +121,7 @@ class PoseFilter:
             raise ValueError(f"filter time must increase: dt = {dt!r}")
         # Recompute exp(A_L dt) only when dt really changes: sample times like k * 0.001 differ
         # in the last bits from step to step, which would otherwise cost an exp per sample.
-        if self._dt is None or abs(dt - self._dt) > 1e-9 * dt:
+        if self._phi is None or self._dt is None or abs(dt - self._dt) > 1e-9 * dt:
             self._phi = transition(self.gains, dt, self._m)
             self._dt = dt
         p11, p12, p21, p22 = self._phi

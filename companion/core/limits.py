@@ -9,6 +9,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+from .ops import Ops
 from .signals import Command, Num
 
 SPEED_LAWS = ("projected", "paper")
@@ -21,7 +22,7 @@ class Limits:
     max_speed: float = math.inf
     max_yaw_rate: float = math.inf
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         for name in ("max_speed", "max_yaw_rate"):
             value = getattr(self, name)
             if not value > 0:
@@ -33,7 +34,7 @@ class Limits:
 DEFAULT_LIMITS = Limits(max_speed=6.0, max_yaw_rate=6.0)
 
 
-def speed_from_up(m, speed_law: str, norm_up: Num, heading_error: Num) -> Num:
+def speed_from_up(m: Ops, speed_law: str, norm_up: Num, heading_error: Num) -> Num:
     """v_ref from u_p: the paper's |u_p| (eq. 20) or its projection on the heading (default).
 
     ``norm_up`` is |u_p| and ``heading_error`` is phi_ref - phi with phi_ref = atan2(u_y, u_x), so
@@ -45,7 +46,8 @@ def speed_from_up(m, speed_law: str, norm_up: Num, heading_error: Num) -> Num:
     return norm_up * m.cos(heading_error)
 
 
-def clamp(m, lim: Limits, speed: Num, yaw_rate: Num, ux: Num, uy: Num, norm_up: Num):
+def clamp(m: Ops, lim: Limits, speed: Num, yaw_rate: Num, ux: Num, uy: Num,
+          norm_up: Num) -> tuple[Command, Num, Num]:
     """Clamp a raw command to the limits.
 
     Returns ``(command, speed_free, rate_free)``; the two flags are False where a clamp bit, and
@@ -62,6 +64,6 @@ def clamp(m, lim: Limits, speed: Num, yaw_rate: Num, ux: Num, uy: Num, norm_up: 
     return Command(speed, yaw_rate, ux * scale, uy * scale), speed_free, rate_free
 
 
-def keep_if(m, free, new: Num, old: Num) -> Num:
+def keep_if(m: Ops, free: Num, new: Num, old: Num) -> Num:
     """Conditional integration: the new integrator value where ``free``, else the old one."""
     return new if free is True else m.where(free, new, old)

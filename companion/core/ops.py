@@ -12,30 +12,33 @@ from types import SimpleNamespace
 
 import numpy as np
 
+from .signals import Num
+
 TAU = 2.0 * math.pi
+Ops = SimpleNamespace   # the type of `scalar` and `array` below: what the maths is written against
 
 
-def _clip(x, lo, hi):
+def _clip(x: float, lo: float, hi: float) -> float:
     return lo if x < lo else (hi if x > hi else x)
 
 
-def _array_clip(x, lo, hi):
+def _array_clip(x: Num, lo: Num, hi: Num) -> np.ndarray:
     # Two ufunc calls: about 3x faster than np.clip's Python-level dispatch on small arrays.
     return np.minimum(np.maximum(x, lo), hi)
 
 
-def _scalar_wrap(angle):
+def _scalar_wrap(angle: float) -> float:
     # See companion.core.angles.wrap: (-pi, pi], one float modulo.
     return math.pi - (math.pi - angle) % TAU
 
 
-def _array_wrap(angle):
+def _array_wrap(angle: Num) -> np.ndarray:
     # (-pi, pi] with a ceil instead of numpy's float modulo (several times slower per element):
     # (a - pi) / 2 pi lies in (k - 1, k] exactly when a - 2 pi k lies in (-pi, pi].
     return angle - TAU * np.ceil((angle - math.pi) * (1.0 / TAU))
 
 
-def _where(cond, a, b):
+def _where(cond: bool, a: float, b: float) -> float:
     return a if cond else b
 
 
@@ -52,7 +55,7 @@ array = SimpleNamespace(
 )
 
 
-def is_plain_zero(value) -> bool:
+def is_plain_zero(value: Num) -> bool:
     """True for a plain number 0 (an optional term switched off for every vehicle), so the
     one-vehicle path can skip the work; an array is never plain, even if all zeros."""
     return isinstance(value, (int, float)) and value == 0

@@ -42,7 +42,7 @@ class PIDTracker:
 
     def reset(self) -> None:
         zero = self._m.zeros(self.n)
-        self.t = None
+        self.t: float | None = None
         self.int_x = self.int_y = self.int_yaw = zero
         self.prev_yaw_ref = zero
         self.estimate: Estimate | None = None
@@ -51,7 +51,7 @@ class PIDTracker:
         m, g = self._m, self.gains
         self.estimate = raw_estimate(meas)
         first = self.t is None
-        dt = 0.0 if first else t - self.t
+        dt = 0.0 if self.t is None else t - self.t
         self.t = t
         ex, ey = ref.x - meas.x, ref.y - meas.y
         int_x, int_y = self.int_x + ex * dt, self.int_y + ey * dt

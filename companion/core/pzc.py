@@ -80,7 +80,7 @@ class PZCGains:
     brake_yaw_accel: Num = 0.0
     min_progress: Num = 0.0
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         if self.speed_law not in SPEED_LAWS:
             raise ValueError(f"speed_law must be one of {SPEED_LAWS}, not {self.speed_law!r}")
         for name in ("accel_ff_turn", "brake_accel", "brake_yaw_accel", "min_progress"):
@@ -108,20 +108,20 @@ class PZCGains:
         k, lam = self._yaw_pair()
         return k * lam
 
-    def _yaw_pair(self):
+    def _yaw_pair(self) -> tuple[Num, Num]:
         k = self.k_dc if self.k_dc_yaw is None else self.k_dc_yaw
         lam = self.lambda_c if self.lambda_c_yaw is None else self.lambda_c_yaw
         return k, lam
 
 
-def _any_negative(value) -> bool:
+def _any_negative(value: Num) -> bool:
     try:
         return bool((value < 0).any())
     except AttributeError:
         return value < 0
 
 
-def braking_p(m, kp: Num, alpha: Num, err_abs: Num) -> tuple[Num, Num]:
+def braking_p(m: _ops.Ops, kp: Num, alpha: Num, err_abs: Num) -> tuple[Num, Num]:
     """The proportional demand for an error magnitude ``err_abs`` (>= 0) under an acceleration
     limit ``alpha``: ``(K_P |e|, False)`` in the linear zone |e| <= alpha / K_P^2, else
     ``(sqrt(2 alpha (|e| - alpha / (2 K_P^2))), True)`` (ArduPilot's ``sqrt_controller``): the
@@ -141,7 +141,7 @@ def braking_p(m, kp: Num, alpha: Num, err_abs: Num) -> tuple[Num, Num]:
     return m.where(beyond, root, kp * err_abs), beyond
 
 
-def reference_heading_rate(ref: Reference, m=_ops.scalar) -> Num:
+def reference_heading_rate(ref: Reference, m: _ops.Ops = _ops.scalar) -> Num:
     """d/dt atan2(vy, vx) of the reference = (vx ay - vy ax) / |v|^2 (0 where it stands still)."""
     speed2 = ref.vx * ref.vx + ref.vy * ref.vy
     return (ref.vx * ref.ay - ref.vy * ref.ax) / m.maximum(speed2, 1e-6)

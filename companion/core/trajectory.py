@@ -18,12 +18,14 @@ from .signals import Num, Reference
 
 
 class Trajectory(Protocol):
-    duration: float | None
+    # Read-only: the frozen dataclasses below (and mission.paths' wrappers) satisfy it too.
+    @property
+    def duration(self) -> float | None: ...
 
     def sample(self, t: float) -> Reference: ...
 
 
-def _ops_for(*values):
+def _ops_for(*values: Num) -> _ops.Ops:
     return _ops.array if any(isinstance(v, np.ndarray) for v in values) else _ops.scalar
 
 
@@ -44,16 +46,16 @@ class Ellipse:
     duration: float | None = None
 
     @classmethod
-    def paper(cls, f_r: Num = 0.12, duration: float | None = None) -> "Ellipse":
+    def paper(cls, f_r: Num = 0.12, duration: float | None = None) -> Ellipse:
         return cls(f_r=f_r, duration=duration)
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         # Many vehicles usually share a few frequencies: take cos/sin once per distinct one.
         if isinstance(self.f_r, np.ndarray):
             freqs, index = np.unique(self.f_r, return_inverse=True)
             object.__setattr__(self, "_unique", (2.0 * math.pi * freqs, index))
 
-    def _cos_sin(self, t: float):
+    def _cos_sin(self, t: float) -> tuple[Num, Num]:
         unique = getattr(self, "_unique", None)
         if unique is not None:
             w, index = unique

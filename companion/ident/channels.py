@@ -37,7 +37,7 @@ class Grid:
     sample_step: np.ndarray
 
     @classmethod
-    def of(cls, t: np.ndarray, dt: float) -> "Grid":
+    def of(cls, t: np.ndarray, dt: float) -> Grid:
         steps = int(np.floor((t[-1] - t[0]) / dt)) + 1
         grid = t[0] + dt * np.arange(steps)
         held = np.searchsorted(t, grid + 1e-9 * dt, side="right") - 1     # as respond

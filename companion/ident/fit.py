@@ -40,8 +40,8 @@ at the lowest value the log allows, a cautious model).
 from __future__ import annotations
 
 import math
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
-from typing import Callable, Sequence
 
 import numpy as np
 
@@ -88,7 +88,7 @@ class Series:
     def segments(self) -> list[slice]:
         """Each joined log's samples (one slice for a single log)."""
         ends = self.starts[1:] + (len(self.t),)
-        return [slice(a, b) for a, b in zip(self.starts, ends)]
+        return [slice(a, b) for a, b in zip(self.starts, ends, strict=True)]
 
     @property
     def duration(self) -> float:
@@ -106,7 +106,7 @@ def with_course_loop(series: Series, course_gain: float, min_turn_radius: float,
     (:meth:`companion.sim.plant.RoverModel.step_vector`), on the *measured* heading and speed:
     ``clip(K wrap(course - yaw), +-max_yaw_rate, +-|v| / R_min)``. The turn-rate channel is
     then fitted as ArduPilot's (series-parallel: the loop closed on what was measured)."""
-    if not series.vector:
+    if series.course_cmd is None:   # (not series.vector)
         return series
     err = np.remainder(series.course_cmd - series.yaw + math.pi, 2.0 * math.pi) - math.pi
     cmd = np.clip(course_gain * err, -max_yaw_rate, max_yaw_rate)
@@ -125,7 +125,8 @@ def join(parts: Sequence[Series]) -> Series:
     setpoint and ends at rest after its stop: the model's state carries nothing across a seam."""
     if len(parts) == 1:
         return parts[0]
-    times, offset = [], 0.0
+    times: list[np.ndarray] = []
+    offset = 0.0
     for i, part in enumerate(parts):
         step = float(np.median(np.diff(part.t)))
         if i > 0:
@@ -336,7 +337,7 @@ def _search(channel: _Channel, dims: list[_Dim], u0: np.ndarray, cfg: Search,
     us, costs = np.split(u, chains), np.split(evaluate(u, dt), chains)
     for r, (population, dt) in enumerate(rounds):
         width = max(0.3 * cfg.shrink ** r, 0.003)
-        us = [_next_population(uc, cc, population, width, rng) for uc, cc in zip(us, costs)]
+        us = [_next_population(uc, cc, population, width, rng) for uc, cc in zip(us, costs, strict=True)]
         costs = np.split(evaluate(np.vstack(us), dt), chains)
     best_chain = int(np.argmin([c.min() for c in costs]))
     k = int(np.argmin(costs[best_chain]))
@@ -585,9 +586,9 @@ def _fit_course(series: Series, params: RoverParams, prior: RoverParams, cfg: Se
                 if (kk if name == "course_gain" else rr) in values
                 and (rr == r if name == "course_gain" else kk == k)]
         status[name] = FITTED if near and min(near) > limit else PRIOR
-    values = {"course_gain": k if status["course_gain"] == FITTED else k0,
+    fitted = {"course_gain": k if status["course_gain"] == FITTED else k0,
               "min_turn_radius": r if status["min_turn_radius"] == FITTED else r0}
-    return values, status
+    return fitted, status
 
 
 def fit(series: Series, prior: RoverParams, search: Search = Search(),
@@ -622,7 +623,7 @@ def _fit_channels(series: Series, prior: RoverParams, search: Search,
                   progress: Callable[[str], None], overshoot: bool = True) -> Fit:
     rng = np.random.default_rng(search.seed)
     progress("turn-rate channel")
-    yaw_fields = YAW_FIELDS
+    yaw_fields: tuple[str, ...] = YAW_FIELDS
     if not series.vector and float(np.max(prior.min_turn_radius)) > 0:
         # A car driven by turn-rate setpoints (ArduPilot's Ackermann rover): its turning radius
         # clamps the turn rate by the measured speed, so the turn-rate channel fits it.

@@ -29,9 +29,10 @@ import dataclasses
 import os
 import struct
 import time
-from datetime import datetime, timezone
+from collections.abc import Callable
+from datetime import UTC, datetime
 from pathlib import Path
-from typing import Any, BinaryIO, Callable
+from typing import Any, BinaryIO
 
 from ..errors import UserError
 from .events import LoopRecord, StatusEvent
@@ -169,7 +170,7 @@ def new_paths(log_dir: str | None, label: str, log_format: str = "csv") -> LogPa
         raise UserError(f"--log-dir {directory}: cannot create it: {exc.strerror}") from None
     if not os.access(directory, os.W_OK):
         raise UserError(f"--log-dir {directory}: not writable")
-    stem = datetime.now(timezone.utc).strftime("%Y%m%d-%H%M%S") + f"-{label}"
+    stem = datetime.now(UTC).strftime("%Y%m%d-%H%M%S") + f"-{label}"
     for n in range(1000):
         base = directory / (stem if n == 0 else f"{stem}-{n}")
         tlog, loop = base.with_suffix(".tlog"), base.with_suffix("." + log_format)

@@ -139,7 +139,7 @@ class FailsafeWatch:
         last = self.last
         recent = (last is not None and now - last[2] <= TEXT_MEMORY
                   and self.cleared_at < last[2])
-        if recent:
+        if recent and last is not None:
             return last[0], f'"{last[1]}"'
         if self.critical:
             if last is not None and self.cleared_at < last[2]:

@@ -26,8 +26,9 @@ from __future__ import annotations
 import os
 import socket
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any, Callable
+from typing import Any
 
 os.environ["MAVLINK20"] = "1"   # before pymavlink.mavutil is imported: MAVLink 2 frames
 # Every connection here says dialect="ardupilotmega"; without this mavutil would first load
@@ -35,14 +36,14 @@ os.environ["MAVLINK20"] = "1"   # before pymavlink.mavutil is imported: MAVLink 
 os.environ.setdefault("MAVLINK_DIALECT", "ardupilotmega")
 from pymavlink import mavutil  # noqa: E402
 
+from .. import profiles  # noqa: E402
+from ..core.signals import Command  # noqa: E402
+from ..errors import UserError  # noqa: E402
 from ..mav import signing  # noqa: E402
 from ..mav.connection import open_connection  # noqa: E402
 from ..mav.sockets import size_receive_buffer  # noqa: E402
-from ..errors import UserError  # noqa: E402
-from ..core.signals import Command  # noqa: E402
-from .config import PLACEHOLDER_SYSID, LinkConfig  # noqa: E402,F401  (its home; imported from here too)
-from .. import profiles  # noqa: E402
 from ..profiles.autopilot import AutopilotProfile, ModeTable  # noqa: E402
+from .config import PLACEHOLDER_SYSID, LinkConfig  # noqa: E402,F401  (its home; imported from here too)
 
 mavlink = mavutil.mavlink
 
@@ -88,7 +89,7 @@ class Link:
             self.tlog = open_tlog(config.tlog)
             self.tlog.attach(self.master)
             self.on_idle.append(self.tlog.idle)
-        self.vehicle: VehicleInfo | None = None
+        self._vehicle: VehicleInfo | None = None   # found by wait_vehicle (see vehicle)
         # Mode and arming as the vehicle's own heartbeats say (is_vehicle_heartbeat), not
         # pymavlink's per-system state, which any frame carrying our vehicle's system id
         # rewrites (a stranger's heartbeat, a corrupted one claiming another vehicle type).
@@ -126,6 +127,14 @@ class Link:
             pass
         if self.tlog is not None:
             self.tlog.close()
+
+    @property
+    def vehicle(self) -> VehicleInfo:
+        """The vehicle followed, once :meth:`wait_vehicle` has found it (reading it before is a
+        programming error)."""
+        if self._vehicle is None:
+            raise RuntimeError("Link.vehicle read before wait_vehicle() found a vehicle")
+        return self._vehicle
 
     @property
     def signing_rejected(self) -> int:
@@ -170,7 +179,7 @@ class Link:
             self._recv_failed = True
             return None
         self._recv_failed = False
-        if (msg is not None and msg.get_type() == "HEARTBEAT" and self.vehicle is not None
+        if (msg is not None and msg.get_type() == "HEARTBEAT" and self._vehicle is not None
                 and self.is_vehicle_heartbeat(msg)):
             self._note_heartbeat(msg)
         return msg
@@ -190,7 +199,7 @@ class Link:
 
     def is_vehicle(self, msg: Any) -> bool:
         """True for a message from the vehicle we follow (its system and component)."""
-        v = self.vehicle
+        v = self._vehicle
         return v is not None and msg.get_srcSystem() == v.sysid and msg.get_srcComponent() == v.compid
 
     def is_for_us(self, msg: Any) -> bool:
@@ -227,7 +236,7 @@ class Link:
         return self._armed
 
     # --- connection set-up (blocking; before the control loop) ------------------------------
-    def wait_vehicle(self, should_stop=lambda: False) -> VehicleInfo:
+    def wait_vehicle(self, should_stop: Callable[[], bool] = lambda: False) -> VehicleInfo:
         """Wait for the first heartbeat of a vehicle (of ``config.sysid`` if given)."""
         cfg = self.config
         deadline = time.monotonic() + cfg.heartbeat_timeout
@@ -246,7 +255,7 @@ class Link:
                 raise UserError(f"system {msg.get_srcSystem()} runs an autopilot this companion "
                                 f"does not drive (MAV_AUTOPILOT {msg.autopilot}); "
                                 f"{known} are supported")
-            self.vehicle = VehicleInfo(msg.get_srcSystem(), msg.get_srcComponent(), profile,
+            self._vehicle = VehicleInfo(msg.get_srcSystem(), msg.get_srcComponent(), profile,
                                        msg.type)
             self.master.target_system = self.vehicle.sysid
             self.master.target_component = self.vehicle.compid
@@ -297,7 +306,7 @@ class Link:
         Returns (accepted rate, notes). ``None`` means the vehicle never answered (an autopilot
         without MAV_CMD_SET_MESSAGE_INTERVAL): the loop then runs at whatever rate arrives.
         """
-        notes = []
+        notes: list[str] = []
         candidates = [hz] + [r for r in FALLBACK_RATES if r < hz]
         for rate in candidates:
             results = [self.set_message_rate(mid, rate) for mid in

@@ -21,8 +21,9 @@ from __future__ import annotations
 import math
 import struct
 import time
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass
-from typing import Any, Callable, Iterable
+from typing import Any
 
 from .link import Link, mavlink
 

@@ -169,7 +169,7 @@ def choose_limits(mission: Any, options: GainOptions,
 
 
 def gains_dict(filt: FilterGains, pzc: PZCGains) -> dict[str, Any]:
-    d = {"k_df": float(filt.k_df), "lambda_f": float(filt.lambda_f)}
+    d: dict[str, Any] = {"k_df": float(filt.k_df), "lambda_f": float(filt.lambda_f)}
     for key, value in asdict(pzc).items():
         d[key] = value if value is None or isinstance(value, (bool, str)) else float(value)
     return d

@@ -45,21 +45,23 @@ import gc
 import json
 import math
 import time
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from enum import Enum
 from pathlib import Path
-from typing import Any, Callable, Sequence
+from typing import Any
 
-from . import events as ev
-from ..errors import ExitCode, UserError
-from .events import ControlChannel, ControlRequest, LoopRecord, Sink, StatusEvent
-from . import health
 from ..core.limits import Limits
-from .link import Link
-from ..core.signals import Command, Measurement
+from ..core.signals import Command, Measurement, Reference
+from ..core.trajectory import Trajectory
+from ..errors import ExitCode, UserError
+from . import events as ev
+from . import health
 from .config import RunnerConfig
+from .events import ControlChannel, ControlRequest, LoopRecord, Sink, StatusEvent
+from .link import Link
 from .stats import TrackingStats
-from .telemetry import TelemetryCheck
+from .telemetry import Sample, TelemetryCheck
 
 _finite = math.isfinite
 REBOOTED = ("vehicle_restarted: time_boot_ms went back (the autopilot rebooted); not resuming a "
@@ -68,7 +70,7 @@ TIMER_EVERY = 0.02     # wall s: timers run at least this often even while messa
 MAX_WAIT = 0.05        # wall s: the longest sleep (so stop requests are seen promptly)
 
 
-class State(str, Enum):
+class State(str, Enum):  # noqa: UP042  (StrEnum changes str(): a behaviour change, not a lint fix)
     WAITING = "waiting"
     ENGAGING = "engaging"
     READY = "ready"
@@ -191,7 +193,7 @@ class Runner:
         self.telemetry = TelemetryCheck(v.sysid, v.compid, max_attitude_age=config.stale_timeout)
         self.stats = TrackingStats(mission.duration, config.period)
         self.state = State.WAITING
-        self.trajectory = None            # anchored at the first tracking sample
+        self.trajectory: Trajectory | None = None   # anchored at the first tracking sample
         self.outcome: Outcome | None = None
         self.heard = Heard()
         # A gap this long between tracked samples resets the tracker (at least 5 periods).
@@ -263,6 +265,7 @@ class Runner:
         finally:
             gc.unfreeze()
         self._wait_for_hold()
+        assert self.outcome is not None   # the loop ends only through _finish
         self._emit(ev.STOPPED, self.outcome.reason,
                    {"exit_code": self.outcome.exit_code,
                     "stop_cause": stop_cause(self.outcome.exit_code),
@@ -272,7 +275,8 @@ class Runner:
             self._safely(sink.close)
         return self.outcome
 
-    def _loop(self, recv, on_position, attitude, clock) -> None:
+    def _loop(self, recv: Callable[[], Any], on_position: Callable[[Any, float], None],
+              attitude: Callable[[Any], None], clock: Callable[[], float]) -> None:
         link = self.link
         estimate_kind = self.profile.estimate.message
         while self.state is not State.DONE:
@@ -391,7 +395,7 @@ class Runner:
             self.counters.refusals_logged = counts
             self.log(f"refused telemetry so far (never used): {counts}")
 
-    def _track(self, s, t_read: float) -> None:
+    def _track(self, s: Sample, t_read: float) -> None:
         clock = self.clock
         if clock.segment_t0 is None:
             if self.trajectory is None:
@@ -408,6 +412,7 @@ class Runner:
             self._emit(ev.MISSION_DONE, f"{self.mission.duration:g} s of mission tracked")
             self._finish("mission_done", ExitCode.OK, s.time_boot_ms)
             return
+        assert self.trajectory is not None   # anchored when tracking began
         ref = self.trajectory.sample(mt)
         cmd = self.tracker.step(s.t, Measurement(s.x, s.y, s.yaw, s.vx, s.vy, s.yaw_rate), ref)
         problem = self._check(cmd)
@@ -436,7 +441,7 @@ class Runner:
                     f"{rate:.3f} rad/s): stopping the rover")
         return None
 
-    def _record(self, s, mt: float, ref, cmd: Command, e2: float) -> None:
+    def _record(self, s: Sample, mt: float, ref: Reference, cmd: Command, e2: float) -> None:
         est = self.tracker.estimate
         yaw_ref = math.atan2(cmd.uy, cmd.ux)
         err_yaw = math.remainder(yaw_ref - est.yaw, 2 * math.pi)
@@ -596,7 +601,8 @@ class Runner:
         if not self.link.is_vehicle(msg):
             return
         facts = self.profile.estimate
-        ratios = {name: getattr(msg, name, None) for name in facts.variances}
+        ratios = {name: float(value) for name in facts.variances
+                  if (value := getattr(msg, name, None)) is not None}
         self.estimate.report(int(getattr(msg, facts.flags_field)), ratios, now)
         problem = self.estimate.problem(now)
         if problem is not None and self.state in (State.TRACKING, State.ENGAGING):
@@ -923,7 +929,7 @@ class Runner:
         for sink in self.sinks:
             self._safely(sink.status, event)
 
-    def _safely(self, fn, *args) -> None:
+    def _safely(self, fn: Callable[..., object], *args: Any) -> None:
         """A failing sink (a full disk, a dead network) must never stop the control loop."""
         try:
             fn(*args)

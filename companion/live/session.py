@@ -13,16 +13,16 @@ from __future__ import annotations
 import math
 import os
 import time
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
-from typing import Any, Callable, Sequence
+from typing import Any
 
 from ..core import controllers
 from ..core.limits import Limits
 from ..errors import UserError
-from . import gcs
+from . import gcs, policy
 from . import handover as handover_mod
 from . import origin as origin_mod
-from . import policy
 from .config import LinkConfig, OriginConfig, RunnerConfig
 from .events import ControlChannel, Sink
 from .policy import GainOptions, KnownVehicle

@@ -133,6 +133,7 @@ class TrackingStats:
     def _count_gaps(self, vehicle_t: float) -> None:
         """The module docstring's gap count, for one more interval of this segment."""
         self._seg_intervals += 1
+        assert self.period is not None   # only called with a known period
         behind = (vehicle_t - self._seg_t0) / self.period - self._seg_intervals
         if behind < self._seg_best:
             self._seg_best = behind
@@ -180,7 +181,7 @@ class RunResult:
     sysid: int
     gains: dict[str, Any]
     gains_source: str
-    limits: dict[str, float]
+    limits: dict[str, float | None]   # None: no limit (JSON null)
     failsafes: int
     hold_confirmed: bool
     mission: str

@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import csv
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 from pathlib import Path
 from typing import Any
 
@@ -26,6 +26,9 @@ from ..errors import UserError
 from ..live.events import LoopRecord
 from ..live.flightlog import CSV_FIELDS
 from ..live.mcaplog import McapLog
+
+# a CSV row's first 16 columns: LoopRecord's numeric fields, in order
+_NUMBERS = tuple(f.name for f in fields(LoopRecord))[:16]
 
 _NUMERIC = CSV_FIELDS[:16]
 _MAVLINK_SCHEMA = {"type": "object", "description": "a MAVLink message's fields "
@@ -105,7 +108,7 @@ def _from_csv(src: Path, sink: McapLog, result: Exported) -> None:
                 except ValueError:
                     result.skipped += 1
                     continue
-                rec = LoopRecord(*v, mode=row[16], armed=row[17] in ("1", "True", "true"),
+                rec = LoopRecord(**dict(zip(_NUMBERS, v, strict=True)), mode=row[16], armed=row[17] in ("1", "True", "true"),
                                  failsafe=row[failsafe_at])
                 last_ns = _ns(rec.vehicle_time)
                 first_ns = last_ns if first_ns is None else first_ns

@@ -170,7 +170,7 @@ def read_tlog(path: str | Path, mission: Any = None) -> Flight:
     vehicle: tuple[int, int] | None = None
     att: dict[tuple[int, int], tuple[float, float]] = {}
     poses: list[tuple[float, float, float, float, float, float, float]] = []
-    cmds: dict[int, tuple[float, float]] = {}
+    cmds: dict[int, tuple[float, float, float]] = {}   # speed, turn rate, course
     events: list[tuple[float | None, str]] = []
     corrupt: list[int] = []
     last_t = -math.inf
@@ -195,14 +195,14 @@ def read_tlog(path: str | Path, mission: Any = None) -> Flight:
             elif kind == "ATTITUDE":
                 att[src] = (msg.yaw, msg.yawspeed)
             elif kind == "LOCAL_POSITION_NED" and (vehicle is None or src == vehicle):
-                t = msg.time_boot_ms * 1e-3
+                stamp = msg.time_boot_ms * 1e-3
                 values = (msg.x, msg.y, msg.vx, msg.vy)
-                if t <= last_t or not all(math.isfinite(v) for v in values) or src not in att:
+                if stamp <= last_t or not all(math.isfinite(v) for v in values) or src not in att:
                     continue     # a reboot, a duplicate, a bad sample: the companion refused it
-                last_t = t
-                yaw, rate = att[src]
-                poses.append((t, msg.x, msg.y, yaw, math.hypot(msg.vx, msg.vy), rate,
-                              msg.vx * math.cos(yaw) + msg.vy * math.sin(yaw)))
+                last_t = stamp
+                heading, turn = att[src]
+                poses.append((stamp, msg.x, msg.y, heading, math.hypot(msg.vx, msg.vy), turn,
+                              msg.vx * math.cos(heading) + msg.vy * math.sin(heading)))
             elif kind == "SET_POSITION_TARGET_LOCAL_NED":
                 if msg.type_mask & (1 << 11):       # yaw rate ignored: PX4's velocity vector
                     cmds[msg.time_boot_ms] = (math.hypot(msg.vx, msg.vy), math.nan,

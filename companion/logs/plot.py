@@ -15,8 +15,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .logread import Flight
 from ..mission.plot import _pyplot
+from .logread import Flight
 
 
 def plot_flight(flight: Flight, out_dir: str | Path, title: str) -> list[str]:
@@ -34,7 +34,7 @@ def plot_flight(flight: Flight, out_dir: str | Path, title: str) -> list[str]:
 
     f = flight
     has_ref = f.x_ref is not None and f.mission_t is not None
-    t = f.mission_t if has_ref else f.t - f.t[0]
+    t = f.mission_t if has_ref and f.mission_t is not None else f.t - f.t[0]
     t_label = "mission time (s)" if has_ref else "vehicle time since the first sample (s)"
 
     fig, (ax, ax2) = plt.subplots(1, 2, figsize=(12, 5.5))
@@ -77,7 +77,7 @@ def plot_flight(flight: Flight, out_dir: str | Path, title: str) -> list[str]:
     axes[1].plot(t, f.yaw_rate, color="tab:blue", label="measured")
     if cmd_t is not None:
         axes[0].plot(cmd_t, f.speed_cmd, color="tab:orange", lw=0.8, label="setpoint")
-        if np.isfinite(f.yaw_rate_cmd).any():
+        if f.yaw_rate_cmd is not None and np.isfinite(f.yaw_rate_cmd).any():
             axes[1].plot(cmd_t, f.yaw_rate_cmd, color="tab:orange", lw=0.8, label="setpoint")
     axes[0].set_ylabel("speed (m/s)")
     axes[1].set_ylabel("yaw rate (rad/s)")

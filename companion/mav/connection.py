@@ -85,7 +85,7 @@ def open_connection(url: str, baud: int | None = None, **kwargs: Any) -> Any:
     if target is None:
         try:
             return mavutil.mavlink_connection(url, **kwargs)
-        except Exception as exc:   # pymavlink raises anything from ValueError to OSError
+        except Exception as exc:  # noqa: BLE001  (pymavlink raises anything from ValueError to OSError)
             raise UserError(f"cannot open {url!r}: {exc}") from None
     return _open_serial(mavutil, *target, **kwargs)
 

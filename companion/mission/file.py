@@ -38,24 +38,25 @@ from __future__ import annotations
 
 import math
 import tomllib
+from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from functools import partial
 from pathlib import Path
-from typing import Callable
+from typing import Any
 
-from ..sim import gains as _gains
-from ..sim import vehicle_file as _vehicle_file
-from . import paths
-from ..errors import UserError
 from ..core.filter import FilterGains
 from ..core.limits import Limits
+from ..core.pzc import PZCGains
+from ..core.trajectory import Ellipse, Trajectory
+from ..errors import UserError
+from ..sim import gains as _gains
+from ..sim import vehicle_file as _vehicle_file
 from ..sim.plant import RoverParams
+from . import paths
 from .polyline import Polyline
 from .profile import MotionProfile, limit_problem, measure
-from ..core.pzc import PZCGains
 from .schema import Table, check_rows, short
 from .spline import TimedWaypoints
-from ..core.trajectory import Ellipse, Trajectory
 
 FRAMES = ("start", "local", "geodetic")
 KINDS = ("ellipse", "circle", "figure8", "line", "polyline", "waypoints", "plan")
@@ -92,9 +93,9 @@ class Mission:
     # around another origin with ArduPilot's exact maths (`at_origin`).
     geodetic: bool = False
     datum: tuple[float, float] | None = None
-    placer: Callable[..., "Mission"] | None = field(default=None, compare=False, repr=False)
+    placer: Callable[..., Mission] | None = field(default=None, compare=False, repr=False)
 
-    def at_origin(self, origin: tuple[float, float]) -> "Mission":
+    def at_origin(self, origin: tuple[float, float]) -> Mission:
         """The same mission placed around the EKF origin ``origin`` = (lat, lon) (a local or
         start-frame mission is returned as it is). Files are read again: a file changed or gone
         since is a UserError, still before anything moves."""
@@ -223,6 +224,7 @@ def _from_table(top: Table, base: Path, origin: tuple[float, float] | None) -> M
         frame = "local"
     if frame == "geodetic":
         from . import geo
+        assert geo_origin is not None   # read with required=True above
         shift = geo.ne_from_latlon(*geo_origin, origin) if origin is not None else (0.0, 0.0)
         datum = origin if origin is not None else geo_origin
         frame = "local"
@@ -300,7 +302,7 @@ def _read_vehicle(table: Table | None, base: Path) -> tuple[RoverParams | None, 
             base_params = _vehicle_file.load(path).params
         except UserError as err:   # name the mission file and key too, still on one line
             raise table.error("file", str(err)) from None
-    keys = {"d_cen": dict(minimum=0.0, maximum=100.0), "w_c": dict(positive=True, maximum=1e4),
+    keys: dict[str, dict[str, Any]] = {"d_cen": dict(minimum=0.0, maximum=100.0), "w_c": dict(positive=True, maximum=1e4),
             "w_c_yaw": dict(positive=True, maximum=1e4), "max_speed": dict(positive=True),
             "max_yaw_rate": dict(positive=True), "max_accel": dict(positive=True)}
     given = {k: table.number(k, None, **kw) for k, kw in keys.items()}
@@ -312,8 +314,10 @@ def _read_vehicle(table: Table | None, base: Path) -> tuple[RoverParams | None, 
 def _build_trajectory(spec: Table, base: Path, laps: float | None,
                       origin: tuple[float, float] | None):
     kind = spec.string("kind", required=True, choices=KINDS)
-    speed = {"positive": True, "maximum": MAX_SPEED}
+    speed: dict[str, Any] = {"positive": True, "maximum": MAX_SPEED}
     warnings: tuple[str, ...] = ()
+    traj: Trajectory
+    points: tuple[tuple[float, float], ...]
     datum = None
     try:
         if kind == "ellipse":
@@ -358,16 +362,16 @@ def _build_trajectory(spec: Table, base: Path, laps: float | None,
                     raise spec.error(f"waypoints[{i}][0]", f"time must be in [0, {MAX_DURATION:g}] "
                                                            f"s, not {row[0]!r}")
                 _bounded(spec, f"waypoints[{i}]", row[1:])
-            traj = TimedWaypoints(tuple(rows), closed=spec.boolean("closed", False))
+            traj = TimedWaypoints(tuple((t, n, e) for t, n, e in rows), closed=spec.boolean("closed", False))
         else:  # plan
             name = spec.string("file", required=True)
             path = _file_key(spec, "file", name, base)
             if path.suffix.lower() not in (".plan", ".waypoints"):
                 raise spec.error("file", f"must be a .plan or .waypoints file, not {short(name)}")
             plan_speed = spec.number("speed", None, **speed)
-            radius = spec.number("corner_radius", None, minimum=MIN_LENGTH, maximum=MAX_DISTANCE)
+            corner = spec.number("corner_radius", None, minimum=MIN_LENGTH, maximum=MAX_DISTANCE)
             try:
-                imported = _from_plan(path, origin=origin, speed=plan_speed, corner_radius=radius)
+                imported = _from_plan(path, origin=origin, speed=plan_speed, corner_radius=corner)
             except UserError as err:   # name the mission file and key, then the plan's problem
                 raise spec.error("file", str(err)) from None
             traj, warnings, datum = imported.trajectory, imported.warnings, imported.datum
@@ -400,7 +404,7 @@ def _speed_or_period(spec: Table, radius: float) -> float:
     if spec.has("speed") and spec.has("period"):
         raise spec.error("period", "give speed or period, not both")
     if spec.has("period"):
-        period = spec.number("period", minimum=0.01, maximum=MAX_DURATION)
+        period = spec.number("period", required=True, minimum=0.01, maximum=MAX_DURATION)
         return 2.0 * math.pi * radius / period
     return spec.number("speed", required=True, positive=True, maximum=MAX_SPEED)
 
@@ -423,7 +427,8 @@ def _duration(top: Table, traj, period: float | None, duration: float | None,
         start = traj.waypoints[0][0]           # the laps begin at the first waypoint's time
     if laps is not None:
         if isinstance(traj, Polyline) and traj.closed:
-            result = traj.motion_end           # built for these laps, ramps included
+            end = traj.motion_end              # built for these laps, ramps included
+            result = math.inf if end is None else end
         elif period is None:
             raise top.error("laps", f"needs a periodic trajectory; this {_kind_name(traj)} is "
                                     "open: give duration instead")
@@ -471,6 +476,7 @@ def _waypoint_path(points, speed: float, corner_radius: float | None, source: st
     except paths.PathError as exc:
         raise UserError(f"{source}: {exc}") from None
     duration = traj.motion_end
+    assert duration is not None   # an open path (a plan's) comes to a stop
     traj = replace(traj, duration=duration)
     try:
         profile = measure(traj, duration, motion_end=duration)

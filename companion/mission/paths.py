@@ -27,6 +27,7 @@ import math
 from dataclasses import dataclass
 
 from ..core.signals import Reference
+from ..core.trajectory import Trajectory
 
 _TWO_PI = 2.0 * math.pi
 
@@ -117,7 +118,7 @@ class FigureEight:
 class Placed:
     """``inner`` turned by ``yaw`` (from north towards east) about the origin, then moved to (x, y)."""
 
-    inner: object
+    inner: Trajectory
     x: float = 0.0
     y: float = 0.0
     yaw: float = 0.0

@@ -23,8 +23,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from . import geo
 from ..errors import UserError
+from . import geo
 from .schema import check_number, fail, short
 
 NAV_WAYPOINT = 16
@@ -186,7 +186,7 @@ def _parse_wpl(text: str, source: str):
         names = ("INDEX", "CURRENT", "FRAME", "COMMAND", "P1", "P2", "P3", "P4", "LAT", "LON",
                  "ALT", "AUTOCONTINUE")
         values = []
-        for name, field in zip(names, fields):
+        for name, field in zip(names, fields, strict=True):
             try:
                 value = float(field)
             except ValueError:

@@ -11,11 +11,11 @@ from __future__ import annotations
 
 import bisect
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import Sequence
 
-from .paths import PathError
 from ..core.signals import Reference
+from .paths import PathError
 
 _TWO_PI = 2.0 * math.pi
 

@@ -13,7 +13,8 @@ from __future__ import annotations
 
 import difflib
 import math
-from typing import Any, Iterable
+from collections.abc import Iterable
+from typing import Any, Literal, overload
 
 from ..errors import UserError
 
@@ -66,6 +67,19 @@ class Table:
             raise self.error(name, "missing (required)")
         return self.data[name]
 
+    # The overloads say what the checks guarantee: a default or required=True gives a number.
+    @overload
+    def number(self, name: str, default: float, *, required: bool = False,
+               minimum: float | None = None, positive: bool = False,
+               maximum: float | None = None) -> float: ...
+    @overload
+    def number(self, name: str, default: None = None, *, required: Literal[True],
+               minimum: float | None = None, positive: bool = False,
+               maximum: float | None = None) -> float: ...
+    @overload
+    def number(self, name: str, default: float | None = None, *, required: bool = False,
+               minimum: float | None = None, positive: bool = False,
+               maximum: float | None = None) -> float | None: ...
     def number(self, name: str, default: float | None = None, *, required: bool = False,
                minimum: float | None = None, positive: bool = False,
                maximum: float | None = None) -> float | None:
@@ -80,6 +94,15 @@ class Table:
         return check_number(value, self.source, self.key(name), minimum=minimum,
                             positive=positive, maximum=maximum)
 
+    @overload
+    def string(self, name: str, default: str, *, required: bool = False,
+               choices: Iterable[str] | None = None) -> str: ...
+    @overload
+    def string(self, name: str, default: None = None, *, required: Literal[True],
+               choices: Iterable[str] | None = None) -> str: ...
+    @overload
+    def string(self, name: str, default: str | None = None, *, required: bool = False,
+               choices: Iterable[str] | None = None) -> str | None: ...
     def string(self, name: str, default: str | None = None, *, required: bool = False,
                choices: Iterable[str] | None = None) -> str | None:
         if required:
@@ -107,6 +130,15 @@ class Table:
             raise self.error(name, f"must be true or false, not {short(value)}")
         return value
 
+    @overload
+    def point(self, name: str, default: tuple[float, float], *,
+              required: bool = False) -> tuple[float, float]: ...
+    @overload
+    def point(self, name: str, default: None = None, *,
+              required: Literal[True]) -> tuple[float, float]: ...
+    @overload
+    def point(self, name: str, default: tuple[float, float] | None = None, *,
+              required: bool = False) -> tuple[float, float] | None: ...
     def point(self, name: str, default: tuple[float, float] | None = None, *,
               required: bool = False) -> tuple[float, float] | None:
         """A pair [x, y] of finite numbers."""
@@ -117,9 +149,14 @@ class Table:
             return default
         else:
             value = self.raw(name)
-        return check_row(value, 2, self.source, self.key(name), "[north, east]")
+        north, east = check_row(value, 2, self.source, self.key(name), "[north, east]")
+        return north, east
 
-    def table(self, name: str, *, required: bool = False) -> "Table | None":
+    @overload
+    def table(self, name: str, *, required: Literal[True]) -> Table: ...
+    @overload
+    def table(self, name: str, *, required: bool = False) -> Table | None: ...
+    def table(self, name: str, *, required: bool = False) -> Table | None:
         if required:
             value = self.require(name)
         elif name not in self.data:

@@ -5,13 +5,13 @@ from __future__ import annotations
 
 import bisect
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import Sequence
 
 import numpy as np
 
-from .paths import PathError
 from ..core.signals import Reference
+from .paths import PathError
 
 
 @dataclass(frozen=True)

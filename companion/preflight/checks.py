@@ -30,12 +30,18 @@ ArduPilot Rover, PX4 sources):
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import Mapping
 
 from .. import profiles
-from ..profiles.autopilot import (AirframeFrame, AutopilotProfile, GcsFailsafe, OffboardFailsafe,
-                                  ServoFrame, TopSpeedParams)
+from ..profiles.autopilot import (
+    AirframeFrame,
+    AutopilotProfile,
+    GcsFailsafe,
+    OffboardFailsafe,
+    ServoFrame,
+    TopSpeedParams,
+)
 
 OK, WARN, FAIL = "ok", "warn", "fail"
 MAV_TYPE_GROUND_ROVER, MAV_TYPE_SURFACE_BOAT = 10, 11
@@ -248,14 +254,17 @@ def check_streams(obs: Observed) -> list[Check]:
     loop = obs.params.get(loop_param) if loop_param else None
     if refused:
         need = math.ceil(asked / RATE_CAP)
-        fix = {loop_param: float(need)} if loop is not None and loop < need else {}
-        extra = (f"; {loop_param} {loop:g} allows {RATE_CAP * loop:g} Hz, {need} allows "
-                 f"{asked:g} Hz (after a reboot)" if fix else "")
+        fix: dict[str, float] = {}
+        extra = ""
+        if loop_param and loop is not None and loop < need:
+            fix = {loop_param: float(need)}
+            extra = (f"; {loop_param} {loop:g} allows {RATE_CAP * loop:g} Hz, {need} allows "
+                     f"{asked:g} Hz (after a reboot)")
         return [Check(name, WARN, value + f", refused for {', '.join(refused)}",
                       f"{want}" + (f" ({loop_param} {need})" if fix else ""),
                       "the vehicle refused the rate; the companion falls back to a slower one"
                       + extra, fix)]
-    slow = [k for k, v in measured.items() if v < 0.8 * asked]
+    slow = [k for k, v in measured.items() if v is not None and v < 0.8 * asked]   # (none is)
     if slow:
         return [Check(name, WARN, value, want, "accepted but slower on the wire: a slow serial "
                       "link (baud rate) or a busy autopilot; the loop runs at what arrives")]

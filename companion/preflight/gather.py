@@ -124,7 +124,7 @@ class Probe:
             for kind in pending:
                 link.command(mavlink.MAV_CMD_REQUEST_MESSAGE, wanted[kind])
             self.pump(min(1.0, deadline - time.monotonic()),
-                      done=lambda: all(fresh(k) for k in pending))
+                      done=lambda pending=pending: all(fresh(k) for k in pending))
         # the pre-arm messages follow the command's ACK: give them a moment
         if facts.prearm_command and not link.armed:
             self.pump(0.5)

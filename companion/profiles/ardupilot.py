@@ -23,15 +23,36 @@
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING, Mapping
+from collections.abc import Mapping
+from typing import TYPE_CHECKING
 
 from . import skid
-from .autopilot import (FLAG_CUSTOM_MODE_ENABLED, FLAG_GUIDED_ENABLED, FLAG_MANUAL_INPUT_ENABLED,
-                        MAV_AUTOPILOT_ARDUPILOTMEGA, MAV_FRAME_BODY_NED, MAV_RESULT_FAILED,
-                        MAV_TYPE_GROUND_ROVER, MAV_TYPE_SURFACE_BOAT, PARAM_INT8, PARAM_INT16,
-                        PARAM_REAL32, AutopilotProfile, GcsFailsafe, IdentFacts, LimitParam, Mode,
-                        ModeTable, PlantFacts, PreflightFacts, ServoFrame, SetpointEncoding,
-                        TopSpeedParams, FailsafeFacts, EstimateFacts)
+from .autopilot import (
+    FLAG_CUSTOM_MODE_ENABLED,
+    FLAG_GUIDED_ENABLED,
+    FLAG_MANUAL_INPUT_ENABLED,
+    MAV_AUTOPILOT_ARDUPILOTMEGA,
+    MAV_FRAME_BODY_NED,
+    MAV_RESULT_FAILED,
+    MAV_TYPE_GROUND_ROVER,
+    MAV_TYPE_SURFACE_BOAT,
+    PARAM_INT8,
+    PARAM_INT16,
+    PARAM_REAL32,
+    AutopilotProfile,
+    EstimateFacts,
+    FailsafeFacts,
+    GcsFailsafe,
+    IdentFacts,
+    LimitParam,
+    Mode,
+    ModeTable,
+    PlantFacts,
+    PreflightFacts,
+    ServoFrame,
+    SetpointEncoding,
+    TopSpeedParams,
+)
 from .priors import Priors, defaults, finite
 
 if TYPE_CHECKING:
@@ -75,9 +96,9 @@ def requested_mode(param2: float, param3: float) -> int | None:
 def mode_name(table: ModeTable, base_mode: int, custom_mode: int) -> str:
     """The mode a heartbeat reports, named as pymavlink's ``mode_string_v10`` names it."""
     if not base_mode & FLAG_CUSTOM_MODE_ENABLED:
-        return "Mode(0x%08x)" % base_mode
+        return f"Mode(0x{base_mode:08x})"
     mode = table.by_number(custom_mode)
-    return mode.name if mode is not None else "Mode(%u)" % custom_mode
+    return mode.name if mode is not None else f"Mode({custom_mode:d})"
 
 
 # --------------------------------------------------------------------------- priors
@@ -155,7 +176,7 @@ def priors(values: Mapping[str, float]) -> Priors:
 
 def steering_of(values: Mapping[str, float]):
     """The steering kind SERVOn_FUNCTION shows (None when none was read or none matches)."""
-    from . import steering_by_servos      # the registry imports this module
+    from . import steering_by_servos  # the registry imports this module
     functions = {int(v) for k in SERVO_PARAMS if (v := finite(values, k)) is not None}
     return steering_by_servos(functions) if functions else None
 
@@ -176,7 +197,7 @@ def plant_params(vehicle: RoverParams, loop_rate: float, sysid: int,
     ArduPilot's units (0 for none), the frame of its steering kind (a turning radius: a car,
     SERVO1 26 / SERVO3 70; else skid-steer, 73 / 74), the failsafes at the firmware's
     defaults, SCHED_LOOP_RATE its loop rate."""
-    from . import steering_of_model       # the registry imports this module
+    from . import steering_of_model  # the registry imports this module
     deg = 180.0 / math.pi
     top = _limit(vehicle.max_speed)
     left, right = steering_of_model(vehicle).servo_functions

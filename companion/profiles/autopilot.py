@@ -26,8 +26,8 @@ pymavlink's by ``tests/test_profiles.py``).
 
 from __future__ import annotations
 
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
-from typing import Callable, Mapping
 
 from .priors import Priors
 

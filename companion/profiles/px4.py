@@ -25,15 +25,33 @@
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING, Mapping
+from collections.abc import Mapping
+from typing import TYPE_CHECKING
 
 from . import skid
-from .autopilot import (FLAG_AUTO_ENABLED, FLAG_CUSTOM_MODE_ENABLED, FLAG_GUIDED_ENABLED,
-                        FLAG_MANUAL_INPUT_ENABLED, FLAG_STABILIZE_ENABLED, MAV_AUTOPILOT_PX4,
-                        MAV_FRAME_LOCAL_NED, MAV_RESULT_DENIED, PARAM_INT32, PARAM_REAL32,
-                        AirframeFrame, AutopilotProfile, EstimateFacts, FailsafeFacts,
-                        IdentFacts, Mode, ModeTable, OffboardFailsafe, PlantFacts,
-                        PreflightFacts, SetpointEncoding)
+from .autopilot import (
+    FLAG_AUTO_ENABLED,
+    FLAG_CUSTOM_MODE_ENABLED,
+    FLAG_GUIDED_ENABLED,
+    FLAG_MANUAL_INPUT_ENABLED,
+    FLAG_STABILIZE_ENABLED,
+    MAV_AUTOPILOT_PX4,
+    MAV_FRAME_LOCAL_NED,
+    MAV_RESULT_DENIED,
+    PARAM_INT32,
+    PARAM_REAL32,
+    AirframeFrame,
+    AutopilotProfile,
+    EstimateFacts,
+    FailsafeFacts,
+    IdentFacts,
+    Mode,
+    ModeTable,
+    OffboardFailsafe,
+    PlantFacts,
+    PreflightFacts,
+    SetpointEncoding,
+)
 from .priors import Priors, defaults, finite
 
 if TYPE_CHECKING:

@@ -12,8 +12,8 @@ Whether it turns in place picks identification's manoeuvre
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Mapping
 
 OK, WARN = "ok", "warn"        # companion.preflight.checks' statuses
 

@@ -110,7 +110,8 @@ def roster(directory: Path, ca_cert: x509.Certificate, now: dt.datetime,
     valid now. Anything else there (another CA's, expired, unreadable) is left out: a peer
     holding it could not complete the TLS handshake anyway."""
     seen: dict[str, set[str]] = {role: set() for role in pki.ROLES}
-    seen[me.role].add(me.name)
+    if me.role is not None:   # (load refuses a certificate without one)
+        seen[me.role].add(me.name)
     for path in sorted(directory.glob("*.pem")):
         if path.name == pki.CA_CERT:
             continue

@@ -27,6 +27,7 @@ from cryptography.x509.oid import ExtendedKeyUsageOID, NameOID
 from ..errors import UserError
 from ..secretfile import read_private
 from .roles import ROLES
+
 CA_CERT, CA_KEY = "ca.pem", "ca.key"
 ORGANIZATION = "pzc-rover fleet"
 # A name becomes one chunk of the key rover/<name>/... and a file name: no wildcards, no '/'.
@@ -63,7 +64,7 @@ class CertInfo:
 
 
 def utcnow() -> dt.datetime:
-    return dt.datetime.now(dt.timezone.utc)
+    return dt.datetime.now(dt.UTC)
 
 
 def stamp(t: dt.datetime) -> str:

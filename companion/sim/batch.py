@@ -22,15 +22,16 @@ first scheduler tick at or after its due time, so 40 Hz on ArduPilot's 50 Hz loo
 from __future__ import annotations
 
 import math
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
-from typing import Callable, Sequence
+from typing import Any
 
 import numpy as np
 
-from .plant import RoverModel, RoverParams, RoverState
-from ..core.signals import Num
+from ..core.signals import Measurement, Num, Reference
 from ..core.tracker import Tracker
 from ..core.trajectory import Trajectory
+from .plant import RoverModel, RoverParams, RoverState
 
 
 @dataclass(frozen=True)
@@ -46,7 +47,7 @@ class SimConfig:
     tick: float | None = None       # s, scheduler tick the samples are aligned to (ArduPilot: 0.02)
     yaw_rate_limit: float | None = None   # rad/s for yaw_at_limit; None: the vehicle's max_yaw_rate
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         for name in ("duration", "control_rate", "max_plant_dt"):
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0):
@@ -73,7 +74,7 @@ class SimConfig:
         sent = sorted({-(-d // tick_us) * tick_us for d in due_us})
         end_us = int(round(self.duration * 1e6))
         sent = [u for u in sent if u < end_us]
-        ticks = [(b - a) // tick_us for a, b in zip(sent, sent[1:] + [end_us])]
+        ticks = [(b - a) // tick_us for a, b in zip(sent, sent[1:] + [end_us], strict=True)]
         return [u * 1e-6 for u in sent], [per_tick * t for t in ticks], self.tick / per_tick
 
 
@@ -87,7 +88,7 @@ class SimResult:
     yaw_at_limit: Num = 0.0         # share of the second half's control steps at the limit
 
 
-def _take(obj, sl):
+def _take(obj: Any, sl: slice | None) -> Any:
     """The slice ``sl`` of every field of a signal dataclass."""
     return type(obj)(*[getattr(obj, name)[sl] for name in obj.__slots__])
 
@@ -101,7 +102,8 @@ def simulate(trackers: Tracker | Sequence[tuple[Tracker, slice]], params: RoverP
     ``n`` vehicles between several trackers (each built with ``n = slice length``).
     ``progress(fraction)`` is called about a hundred times.
     """
-    groups = [(trackers, None)] if not isinstance(trackers, (list, tuple)) else list(trackers)
+    groups: list[tuple[Tracker, slice | None]] = (
+        list(trackers) if isinstance(trackers, Sequence) else [(trackers, None)])
     for tracker, _ in groups:
         tracker.reset()
     model = RoverModel(params, n)
@@ -128,7 +130,8 @@ def simulate(trackers: Tracker | Sequence[tuple[Tracker, slice]], params: RoverP
     step_index = 0
     # PX4's interface: the vehicle gets the velocity vector u_p, not (speed, turn rate)
     vector = params.velocity_vector
-    ux = uy = zero
+    ux: Any = zero   # Num: a float for one vehicle, filled slice by slice for groups
+    uy: Any = zero
 
     for k in range(n_control):
         t = times[k]
@@ -146,6 +149,7 @@ def simulate(trackers: Tracker | Sequence[tuple[Tracker, slice]], params: RoverP
             if vector:
                 ux, uy = cmd.ux, cmd.uy
         else:
+            assert n is not None   # the groups split n vehicles
             speed_cmd, yaw_rate_cmd = np.empty(n), np.empty(n)
             if vector:
                 ux, uy = np.empty(n), np.empty(n)
@@ -191,12 +195,14 @@ def simulate(trackers: Tracker | Sequence[tuple[Tracker, slice]], params: RoverP
     return result
 
 
-def _ops_finite(value) -> bool:
+def _ops_finite(value: Num) -> bool:
     return bool(np.all(np.isfinite(value)))
 
 
-def _record(trace, t, state, ref, speed_cmd, yaw_rate_cmd, meas, groups, n):
-    def put(key, value):
+def _record(trace: dict[str, list[np.ndarray]], t: float, state: RoverState, ref: Reference,
+            speed_cmd: Num, yaw_rate_cmd: Num, meas: Measurement,
+            groups: Sequence[tuple[Tracker, slice | None]], n: int | None) -> None:
+    def put(key: str, value: Num) -> None:
         trace.setdefault(key, []).append(np.array(value, dtype=float, copy=True))
 
     put("t", t)

@@ -24,19 +24,20 @@ owns a slice of 6 vehicles, its tracker built by :func:`companion.core.controlle
 
 from __future__ import annotations
 
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
-from typing import Callable
 
 import numpy as np
 
 from ..core import controllers
-from .batch import SimConfig, simulate
 from ..core.filter import FilterGains
 from ..core.limits import Limits
-from .plant import RoverParams
 from ..core.pzc import PZCGains
+from ..core.signals import Num
 from ..core.tracker import Tracker
 from ..core.trajectory import Ellipse
+from .batch import SimConfig, simulate
+from .plant import RoverParams
 
 SCENARIOS: tuple[tuple[float, float], ...] = (
     (0.04, 0.0), (0.08, 0.0), (0.12, 0.0),      # Section 5.1: reference speed
@@ -106,7 +107,7 @@ class TableResult:
         }
 
 
-def _number(value) -> float | None:
+def _number(value: Num) -> float | None:
     """A JSON-safe float: None for NaN or infinity (strict JSON has neither)."""
     value = float(value)
     return value if np.isfinite(value) else None
@@ -126,7 +127,7 @@ def run_table(config: TableConfig, tuned: tuple[FilterGains, PZCGains], tuned_so
     names = config.controllers if only is None else tuple(only)
     # Controllers that share a tracker class run as one vectorised tracker over their slices:
     # pzc and pzc_tuned are one PZCTracker with per-vehicle gains (half the per-step overhead).
-    blocks: list[tuple[tuple[str, ...], object]] = []
+    blocks: list[tuple[tuple[str, ...], Tracker]] = []
     pzc_names = [k for k in ("pzc", "pzc_tuned") if k in names]
     paper = (FilterGains(), PZCGains())
     sets = {"pzc": paper, "pzc_tuned": tuned}
@@ -143,7 +144,9 @@ def run_table(config: TableConfig, tuned: tuple[FilterGains, PZCGains], tuned_so
         blocks.append(((LITERAL,), controllers.build(
             "pzc", lim, filter_gains=FilterGains(), pzc_gains=PZCGains(speed_law="paper"), n=n_s)))
 
-    groups, slices, start = [], {}, 0
+    groups: list[tuple[Tracker, slice]] = []
+    slices: dict[str, slice] = {}
+    start = 0
     for block_names, tracker in blocks:
         groups.append((tracker, slice(start, start + n_s * len(block_names))))
         for name in block_names:
@@ -182,7 +185,7 @@ def stacked_pzc(gain_sets: list[tuple[FilterGains, PZCGains]], n_each: int,
 
     The gain sets must share a speed law (it is a branch, not a number).
     """
-    def col(values) -> np.ndarray:
+    def col(values: Sequence[Num]) -> np.ndarray:
         return np.repeat(np.asarray(values, dtype=float), n_each)
 
     fgs = [fg for fg, _ in gain_sets]

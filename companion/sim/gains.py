@@ -34,10 +34,11 @@ import math
 import tomllib
 from dataclasses import dataclass, fields
 from pathlib import Path
+from typing import Any
 
-from ..errors import UserError
 from ..core.filter import FilterGains
 from ..core.pzc import PZCGains
+from ..errors import UserError
 
 TUNED_DIR = Path(__file__).parent / "tuned"
 
@@ -113,7 +114,7 @@ def parse(data: dict, where: str) -> TunedGains:
             raise UserError(f"{where}: unknown key 'pzc.{key}'")
     fg = FilterGains(_number(filt, "k_df", f"{where}: filter"),
                      _number(filt, "lambda_f", f"{where}: filter"))
-    kwargs = {"k_dc": _number(pzc, "k_dc", f"{where}: pzc"),
+    kwargs: dict[str, Any] = {"k_dc": _number(pzc, "k_dc", f"{where}: pzc"),
               "lambda_c": _number(pzc, "lambda_c", f"{where}: pzc")}
     for key in ("k_dc_yaw", "lambda_c_yaw"):
         if key in pzc:

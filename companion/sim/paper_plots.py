@@ -9,10 +9,14 @@ the tuned PZC and Kanayama's law are drawn thinner for reference.
 from __future__ import annotations
 
 from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from .experiment import TableResult
+
+if TYPE_CHECKING:   # matplotlib loads only when a figure is drawn
+    from matplotlib.figure import Figure
 
 STYLE = {
     "pzc": dict(color="tab:blue", lw=1.6, label="PZC (paper gains)"),
@@ -29,14 +33,14 @@ def _columns(result: TableResult, want: list[tuple[float, float]]) -> list[int]:
     return [scen.index(w) for w in want if w in scen]
 
 
-def _figure(n_cols: int, title: str):
+def _figure(n_cols: int, title: str) -> tuple[Figure, Any]:   # Any: an array of Axes
     import matplotlib.pyplot as plt
     fig, axes = plt.subplots(1, n_cols, figsize=(4.2 * n_cols, 3.8), squeeze=False)
     fig.suptitle(title)
     return fig, axes[0]
 
 
-def _save(fig, path: Path) -> Path:
+def _save(fig: Figure, path: Path) -> Path:
     import matplotlib.pyplot as plt
     fig.tight_layout()
     fig.savefig(path, dpi=110)
@@ -49,9 +53,9 @@ def _label(result: TableResult, col: int) -> str:
     return f"f_r = {f_r:g} Hz, d_cen = {d_cen:g} m"
 
 
-def _paths(result, cols, title, path):
+def _paths(result: TableResult, cols: list[int], title: str, path: Path) -> Path:
     fig, axes = _figure(len(cols), title)
-    for ax, col in zip(axes, cols):
+    for ax, col in zip(axes, cols, strict=True):
         tr = result.traces["pzc"]
         for name in result.traces:
             t = result.traces[name]
@@ -67,9 +71,10 @@ def _paths(result, cols, title, path):
     return _save(fig, path)
 
 
-def _series(result, cols, key, ref_key, ylabel, title, path, names=("pzc", "pid")):
+def _series(result: TableResult, cols: list[int], key: str, ref_key: str | None, ylabel: str,
+            title: str, path: Path, names: tuple[str, ...] = ("pzc", "pid")) -> Path:
     fig, axes = _figure(len(cols), title)
-    for ax, col in zip(axes, cols):
+    for ax, col in zip(axes, cols, strict=True):
         for name in names:
             if name not in result.traces:
                 continue
@@ -85,10 +90,10 @@ def _series(result, cols, key, ref_key, ylabel, title, path, names=("pzc", "pid"
     return _save(fig, path)
 
 
-def _filter_errors(result, cols, title, path):
+def _filter_errors(result: TableResult, cols: list[int], title: str, path: Path) -> Path:
     fig, axes = _figure(len(cols), title)
     tr = result.traces["pzc"]
-    for ax, col in zip(axes, cols):
+    for ax, col in zip(axes, cols, strict=True):
         for key, label in (("ex", "x - x_hat [m]"), ("ey", "y - y_hat [m]"),
                            ("eyaw", "phi - phi_hat [rad]")):
             ax.plot(tr["t"], tr[key][:, col], lw=0.9, label=label)
@@ -98,7 +103,7 @@ def _filter_errors(result, cols, title, path):
     return _save(fig, path)
 
 
-def _cost_bars(result, path):
+def _cost_bars(result: TableResult, path: Path) -> Path:
     fig, axes = _figure(1, f"f_cost per scenario (Figure 13) at {result.config.rate_hz:g} Hz, "
                            f"w_c {result.config.w_c:g} rad/s")
     ax = axes[0]

@@ -64,6 +64,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, replace
+from typing import Any
 
 import numpy as np
 
@@ -130,26 +131,26 @@ class RoverParams:
         return _any_positive(self.speed_delay) or _any_positive(self.yaw_delay)
 
     @classmethod
-    def paper(cls, d_cen: float = 0.0, w_c: float = 20.0) -> "RoverParams":
+    def paper(cls, d_cen: float = 0.0, w_c: float = 20.0) -> RoverParams:
         """Section 5's plant; the paper does not state w_c, we use 20 rad/s."""
         return cls(d_cen=d_cen, w_c=w_c)
 
     @classmethod
-    def stock_rover(cls, d_cen: float = 0.0) -> "RoverParams":
+    def stock_rover(cls, d_cen: float = 0.0) -> RoverParams:
         """A stock ArduPilot skid-steer Rover as seen in SITL: about 1.9 s to 90 % of a 1 m/s speed
         step (ln 10 / 1.2 s), top speed 4 m/s, 1 m/s^2 acceleration, 120 deg/s turn rate."""
         return cls(d_cen=d_cen, w_c=1.2, w_c_yaw=1.2, max_speed=4.0,
                    max_yaw_rate=math.radians(120.0), max_accel=1.0)
 
-    def with_(self, **changes) -> "RoverParams":
+    def with_(self, **changes: Any) -> RoverParams:
         return replace(self, **changes)
 
 
-def _any_finite(value) -> bool:
+def _any_finite(value: Num) -> bool:
     return bool(np.any(np.isfinite(value)))
 
 
-def _any_positive(value) -> bool:
+def _any_positive(value: Num) -> bool:
     return bool(np.any(np.asarray(value) > 0))
 
 
@@ -181,11 +182,11 @@ class RoverModel:
         self._lateral = _any_finite(params.max_lat_accel)
         self._overshoot = _any_positive(params.speed_overshoot)
         self.delay = CommandDelay(params.speed_delay, params.yaw_delay, n) if params.has_delay else None
-        self._trig_yaw = None
-        self._trig_cs = None
-        self._decay_h = None
+        self._trig_yaw: Num = None                           # no heading is None: no hit yet
+        self._trig_cs: tuple[Num, Num] = (1.0, 0.0)
+        self._decay_h: float | None = None
 
-    def _trig(self, yaw):
+    def _trig(self, yaw: Num) -> tuple[Num, Num]:
         """cos and sin of a heading; the last step's end heading is remembered, so the next step and
         ``measure`` reuse it (trig dominates the cost of a batch step)."""
         if yaw is self._trig_yaw:
@@ -204,7 +205,8 @@ class RoverModel:
         vx, vy = self.velocity(s)
         return Measurement(s.x, s.y, s.yaw, vx, vy, s.omega)
 
-    def _deriv(self, yaw, v, omega, v_cmd, w_cmd):
+    def _deriv(self, yaw: Num, v: Num, omega: Num, v_cmd: Num,
+               w_cmd: Num) -> tuple[Num, Num, Num, Num, Num]:
         """The right-hand side (for the RK4 reference integrator the tests hold the steps to)."""
         m, p = self._m, self.params
         c, sn = m.cos(yaw), m.sin(yaw)
@@ -275,7 +277,7 @@ class RoverModel:
         return self._simpson(s, s.yaw + i_mid, s.yaw + i_end, v_mid, v_end, w_mid, w_end, h,
                              z_end)
 
-    def _decays(self, h: float):
+    def _decays(self, h: float) -> tuple[Num, Num, Num, Num]:
         """e^{-w_c h/2}, e^{-w_c h} and the yaw-loop equivalents, cached for the step size."""
         if self._decay_h != h:
             m, a, b = self._m, self.params.w_c, self.params.yaw_bandwidth
@@ -295,8 +297,8 @@ class RoverModel:
         yaw_end = s.yaw + w * h + dw * ((1.0 - eb) / b)
         return self._simpson(s, yaw_mid, yaw_end, v_mid, v_end, w_mid, w_end, h)
 
-    def _simpson(self, s: RoverState, yaw_mid, yaw_end, v_mid, v_end, w_mid, w_end,
-                 h: float, v_slow=None) -> RoverState:
+    def _simpson(self, s: RoverState, yaw_mid: Num, yaw_end: Num, v_mid: Num, v_end: Num,
+                 w_mid: Num, w_end: Num, h: float, v_slow: Num = None) -> RoverState:
         """x, y by Simpson's rule over the step from the heading, speed and turn rate at its
         start, middle and end (each exact); eq. (1) with the d_cen term."""
         m = self._m
@@ -333,7 +335,7 @@ def overshoot_target(v: Num, z: Num, g: Num) -> Num:
     return (v + g * z) / (1.0 + g)
 
 
-def overshoot_step(m, x0: Num, x1: Num, z0: Num, g: Num, tau: Num, t: float) -> tuple[Num, Num]:
+def overshoot_step(m: _ops.Ops, x0: Num, x1: Num, z0: Num, g: Num, tau: Num, t: float) -> tuple[Num, Num]:
     """(speed, z) ``t`` s on, x having gone from x0 to x1 (linearly, as over one step).
 
     ArduPilot's speed loop with a throttle feed-forward that over-drives the motors (SITL
@@ -347,7 +349,7 @@ def overshoot_step(m, x0: Num, x1: Num, z0: Num, g: Num, tau: Num, t: float) -> 
     return (1.0 + g) * x1 - g * z1, z1
 
 
-def _rate_bounds(m, x, up, down):
+def _rate_bounds(m: _ops.Ops, x: Num, up: Num, down: Num) -> tuple[Num, Num]:
     """(lowest, highest) rate of change for a channel at ``x``: ``up`` while |x| grows, ``down``
     while it shrinks (at x = 0 both directions grow)."""
     lo = m.where(x > 0, -down, -up)
@@ -355,7 +357,8 @@ def _rate_bounds(m, x, up, down):
     return lo, hi
 
 
-def _channel(m, x0, u, b, up, down, h, both=True, integrals=True):
+def _channel(m: _ops.Ops, x0: Num, u: Num, b: Num, up: Num, down: Num, h: float,
+             both: bool = True, integrals: bool = True) -> tuple[Num, Num, Num, Num]:
     """One channel over a step with its input ``u`` held: x' = clip(b (u - x), rate bounds).
 
     Exact: x ramps at the limit L (``up`` or ``down``, by the direction of travel at the start)
@@ -418,7 +421,7 @@ class CommandDelay:
         self._k = k + 1
         out = []
         for buf, flat, lag, uniform, value in zip(self._buf, self._flat, self._lag, self._uniform,
-                                                  (speed, yaw_rate)):
+                                                  (speed, yaw_rate), strict=True):
             buf[k % size] = value
             if uniform is not None:
                 row = buf[(k - uniform) % size]

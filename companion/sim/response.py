@@ -10,15 +10,14 @@ delay line as the full model, so a fitted model is the model the simulations run
 
 from __future__ import annotations
 
-from typing import Sequence
-
 import numpy as np
+from numpy.typing import ArrayLike
 
 from .plant import CommandDelay, RoverModel, RoverParams, _channel, overshoot_step
 
 
-def respond(params: RoverParams, t: Sequence[float], speed_cmd: Sequence[float],
-            yaw_rate_cmd: Sequence[float], n: int, dt: float = 0.01,
+def respond(params: RoverParams, t: ArrayLike, speed_cmd: ArrayLike,
+            yaw_rate_cmd: ArrayLike, n: int, dt: float = 0.01,
             v0: float = 0.0, omega0: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
     """Speed and turn rate at the times ``t`` (s, increasing) for ``n`` models.
 

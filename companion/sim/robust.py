@@ -32,15 +32,15 @@ the physics says the preview belongs.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
-from typing import Callable, Sequence
 
 import numpy as np
 
 from ..core.filter import FilterGains
 from ..core.limits import Limits
 from ..core.pzc import PZCGains, PZCTracker
-from ..core.signals import Reference
+from ..core.signals import Num, Reference
 from ..core.trajectory import Ellipse, Trajectory
 from .batch import SimConfig, simulate
 from .gains import TunedGains
@@ -184,9 +184,11 @@ class StackedReference:
 def _reference(refs: Sequence[Trajectory], n_cand: int, n_veh: int) -> Trajectory:
     """Vehicle order: candidate-major, then vehicle, then reference."""
     which = np.tile(np.arange(len(refs)), n_cand * n_veh)
-    if all(isinstance(r, Ellipse) and r.duration is None and
-           (r.ax, r.bx, r.ay, r.by, r.cx, r.cy) == (6.0, -1.0, 2.0, 3.0, 0.0, 0.0) for r in refs):
-        return Ellipse.paper(np.array([float(r.f_r) for r in refs])[which])
+    ellipses = [r for r in refs if isinstance(r, Ellipse)]
+    if len(ellipses) == len(refs) and all(
+            r.duration is None and (r.ax, r.bx, r.ay, r.by, r.cx, r.cy) == (6.0, -1.0, 2.0, 3.0, 0.0, 0.0)
+            for r in ellipses):
+        return Ellipse.paper(np.array([float(r.f_r) for r in ellipses])[which])
     return StackedReference(refs, which)
 
 
@@ -327,7 +329,7 @@ def seeds(vehicle: RoverParams | None = None) -> Candidates:
     return Candidates(params, flag_values)
 
 
-def _finite(value, default: float) -> float:
+def _finite(value: Num, default: float) -> float:
     v = float(np.mean(value))
     return v if math.isfinite(v) and v > 0 else default
 
@@ -384,8 +386,10 @@ def tune(cfg: RobustConfig, progress: Callable[[float], None] | None = None) -> 
     evaluated, rejected = 0, {"limit cycle": 0, "diverged": 0}
     total = cfg.rounds + 1
     for r in range(cfg.rounds):
-        ev = evaluate(population, cfg, vehicles,
-                      None if progress is None else (lambda f, r=r: progress((r + f) / total)))
+        def round_progress(f: float, r: int = r) -> None:
+            if progress is not None:
+                progress((r + f) / total)
+        ev = evaluate(population, cfg, vehicles, None if progress is None else round_progress)
         evaluated += len(population)
         for why in rejected:
             rejected[why] += int(np.sum(ev.rejected == why))
@@ -394,6 +398,7 @@ def tune(cfg: RobustConfig, progress: Callable[[float], None] | None = None) -> 
         order = np.argsort(pool_obj)[:cfg.elite]
         best, best_obj = pool.take(order), pool_obj[order]
         population = _perturb(rng, best, cfg.population, 0.5 * 0.6 ** r)
+    assert best is not None   # cfg.rounds >= 1 (the command refuses fewer)
     winner = best.take(np.array([0]))
     ev = evaluate(winner, cfg, vehicles,
                   None if progress is None else (lambda f: progress((cfg.rounds + f) / total)))

@@ -18,18 +18,18 @@ acceleration feed-forward, actuator lead) per candidate, so their worth is measu
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Callable
 
 import numpy as np
 
-from .batch import SimConfig, simulate
 from ..core.filter import FilterGains
-from .gains import TunedGains
 from ..core.limits import Limits
-from .plant import RoverParams
 from ..core.pzc import PZCGains, PZCTracker
 from ..core.trajectory import Ellipse
+from .batch import SimConfig, simulate
+from .gains import TunedGains
+from .plant import RoverParams
 
 # log-uniform search ranges: (low, high)
 RANGES = {
@@ -89,12 +89,12 @@ class Candidates:
                          lead_tau=p["lead_tau"] if f["use_lead"] else 0.0,
                          lead_max_gain=p["lead_max_gain"] if f["use_lead"] else 1.0))
 
-    def take(self, index: np.ndarray) -> "Candidates":
+    def take(self, index: np.ndarray) -> Candidates:
         return Candidates({k: v[index] for k, v in self.params.items()},
                           {k: v[index] for k, v in self.flags.items()})
 
     @staticmethod
-    def concat(parts: list["Candidates"]) -> "Candidates":
+    def concat(parts: list[Candidates]) -> Candidates:
         return Candidates({k: np.concatenate([p.params[k] for p in parts]) for k in parts[0].params},
                           {k: np.concatenate([p.flags[k] for p in parts]) for k in parts[0].flags})
 
@@ -134,7 +134,8 @@ def perturb(rng: np.random.Generator, parents: Candidates, n: int, sigma: float)
 
 
 def evaluate(cands: Candidates, cfg: TuneConfig,
-             progress: Callable[[float], None] | None = None) -> tuple[np.ndarray, np.ndarray]:
+             progress: Callable[[float], None] | None = None
+             ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Simulate every candidate on every reference at once.
 
     Returns (objective per candidate, f_cost and steady RMS per candidate and reference).
@@ -184,7 +185,7 @@ def tune(cfg: TuneConfig, progress: Callable[[float], None] | None = None) -> Tu
     best_obj = np.array([])
     evaluated = 0
     for r in range(cfg.rounds):
-        def round_progress(frac, r=r):
+        def round_progress(frac: float, r: int = r) -> None:
             if progress is not None:
                 progress((r + frac) / cfg.rounds)
         obj, _, _ = evaluate(population, cfg, round_progress)
@@ -197,6 +198,7 @@ def tune(cfg: TuneConfig, progress: Callable[[float], None] | None = None) -> Tu
         population = perturb(rng, best, cfg.population, sigma)
 
     # Re-evaluate the winner alone to report its per-reference figures.
+    assert best is not None   # cfg.rounds >= 1 (the command refuses fewer)
     winner = best.take(np.array([0]))
     obj, cost, rms = evaluate(winner, cfg)
     fg, pg = winner.gains(0)

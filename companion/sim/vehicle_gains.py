@@ -11,9 +11,10 @@ from __future__ import annotations
 
 import hashlib
 import math
+from collections.abc import Callable, Sequence
 from dataclasses import replace
 from pathlib import Path
-from typing import Callable, Sequence
+from typing import Any
 
 from ..core.limits import DEFAULT_LIMITS, Limits
 from ..core.trajectory import Trajectory
@@ -21,7 +22,9 @@ from ..errors import UserError
 from . import gains as gains_mod
 from . import vehicle_file
 from .gains import TunedGains
+from .plant import RoverParams
 from .robust import RobustConfig, RobustResult, tune
+
 
 class NothingRobust(UserError):
     """The robust tuner found no gain set that held on every neighbour (exit 2)."""
@@ -37,7 +40,7 @@ def digest(vehicle_path: str | Path) -> str:
         raise UserError(f"{vehicle_path}: cannot read: {exc}") from None
 
 
-def vehicle_limits(vehicle, max_speed: float | None = None,
+def vehicle_limits(vehicle: RoverParams, max_speed: float | None = None,
                    max_yaw_rate: float | None = None) -> Limits:
     """The companion's setpoint limits for a vehicle: what it can do (or the flags, if lower)."""
     def pick(flag: float | None, own: float, ceiling: float) -> float:
@@ -50,7 +53,7 @@ def vehicle_limits(vehicle, max_speed: float | None = None,
 
 def config_for(vehicle_path: str | Path, rate: float,
                references: Sequence[tuple[str, Trajectory]] = (), duration: float = 60.0,
-               **search) -> RobustConfig:
+               **search: Any) -> RobustConfig:
     """The robust tuner's configuration for a vehicle file at a loop rate (ArduPilot's 50 Hz
     scheduler ticks below 50 Hz), on the references given or the paper's ellipses."""
     vehicle = vehicle_file.load(vehicle_path).params
@@ -77,7 +80,7 @@ def record(result: RobustResult, cfg: RobustConfig, vehicle_path: str | Path,
              f"{cfg.seed}",
              "steady RMS (m) on the vehicle / worst neighbour: " + ", ".join(
                  f"{a:.3f}/{b:.3f}" for a, b in zip(result.nominal_steady_rms,
-                                                    result.worst_steady_rms))]
+                                                    result.worst_steady_rms, strict=True))]
     return replace(result.gains, header="\n".join(lines), vehicle_file=Path(vehicle_path).name,
                    vehicle_sha256=sha)
 
@@ -115,7 +118,7 @@ def path_beside(vehicle_path: str | Path, rate: float) -> Path:
 
 def gains_for(vehicle_path: str | Path, rate: float, command: str,
               progress: Callable[[float], None] | None = None,
-              log: Callable[[str], None] = lambda text: None, **search) -> TunedGains:
+              log: Callable[[str], None] = lambda text: None, **search: Any) -> TunedGains:
     """The vehicle's gains at ``rate``: found beside it, else tuned now (``search``: the
     tuner's population, rounds, ...) and stored there."""
     found = find_beside(vehicle_path, rate)

@@ -167,7 +167,7 @@ def table(rovers: list[Snapshot]) -> str:
         def num(v: Any, fmt: str = "{:.2f}") -> str:
             return fmt.format(v) if isinstance(v, (int, float)) and math.isfinite(v) else "-"
         state = ("**STALE**" if r.stale else r.phase)
-        armed = {True: "yes", False: "no"}.get(s.get("armed"), "-")
+        armed = {True: "yes", False: "no"}.get(bool(s["armed"]), "-") if s.get("armed") is not None else "-"
         rows.append(f"| {r.vehicle_id} | {state} | {r.failsafe or '-'} | {s.get('mode') or '-'} "
                     f"| {armed} | {num(err)} | {num(sp.get('speed'))} "
                     f"| {num(sp.get('yaw_rate'))} | {num(r.age, '{:.1f}')} |")
