@@ -52,7 +52,7 @@ def requirements(project: dict) -> list[Requirement]:
         reqs += [Requirement(r) for r in extra]
     # an extra naming the project's own extras (test = [..., "pzc-rover[mcap,view]"]) adds
     # their requirements, already listed; the project itself is never pinned
-    me = canonicalize_name(project["name"])
+    me = canonicalize_name(project.get("name", ""))
     return [r for r in reqs if canonicalize_name(r.name) != me]
 
 
@@ -78,7 +78,8 @@ def test_the_checker_catches_each_kind_of_disagreement():
     pins, problems = read_lock("# a comment\nnumpy==1.25.0\npytest==8.1\npytest==8.2\nbroken\n")
     assert problems == ["constraints.txt:4: pytest pinned twice",
                         "constraints.txt:5: not NAME==VERSION: 'broken'"]
-    project = {"dependencies": ["numpy>=1.26"], "optional-dependencies": {"x": ["Zenoh_Thing>=1"]}}
+    project = {"name": "pzc-rover", "dependencies": ["numpy>=1.26"],
+               "optional-dependencies": {"x": ["Zenoh_Thing>=1"], "y": ["pzc-rover[x]"]}}
     assert disagreements(requirements(project), pins) == [
         "numpy: constraints.txt pins 1.25.0, outside pyproject.toml's '>=1.26'",
         "Zenoh_Thing: in pyproject.toml (Zenoh_Thing>=1) but not in constraints.txt"]
