@@ -236,9 +236,8 @@ class PlantServer:
         return self.telemetry.sample(self.t_us, s.x + north, s.y, s.yaw, vx, vy, s.omega)
 
     def _ekf_report(self) -> status.EkfReport:
-        return status.ekf_report(self.vehicle.t,
-                                 max(self.config.ekf_delay, self.config.origin.delay),
-                                 self.config.gps_faults)
+        return status.ekf_report(self.vehicle.t, self.config.ekf_delay, self.config.gps_faults,
+                                 self.config.origin.delay)
 
     def _global_position(self) -> None:
         """GLOBAL_POSITION_INT of the true position (GPS-like: no telemetry faults), once the

@@ -30,6 +30,8 @@ PREARM_TEXT = "PreArm: AHRS: not using configured AHRS type"   # as the plant's 
 
 EKF_GLITCHING = 0x833F                 # EKF_GOOD | EKF_GPS_GLITCHING (0x8000)
 EKF_NO_GPS = 0x27                      # attitude, velocities, relative position, vertical
+EKF_NO_ORIGIN = 0x12F                   # EKF_GOOD without absolute horizontal position (0x10,
+                                        # 0x200): a local estimate, no origin (no GPS)
 
 
 @dataclass(frozen=True)
@@ -61,7 +63,10 @@ def ekf_ready(t: float, ekf_delay: float) -> bool:
     return t >= ekf_delay
 
 
-def ekf_report(t: float, ekf_delay: float, faults: tuple[GpsFault, ...] = ()) -> EkfReport:
+def ekf_report(t: float, ekf_delay: float, faults: tuple[GpsFault, ...] = (),
+               origin_delay: float = 0.0) -> EkfReport:
+    if ekf_ready(t, ekf_delay) and not ekf_ready(t, origin_delay):
+        return EkfReport(EKF_NO_ORIGIN, 0.01, 0.01, 0.01, 0.02)
     if ekf_ready(t, ekf_delay):
         active = {f.kind for f in faults if f.active(t)}
         if "loss" in active:

@@ -163,7 +163,7 @@ def is_mode_command(msg: Any, mode: int) -> bool:
 class FakeVehicle:
     """A scripted ArduPilot-like rover for the companion, on pymavlink, in a thread.
 
-    Answers SET_MESSAGE_INTERVAL, DO_SET_MODE and ARM with ACCEPTED; streams ATTITUDE +
+    Answers SET_MESSAGE_INTERVAL, DO_SET_MODE and ARM with ACCEPTED, PARAM_REQUEST_READ with 0; streams ATTITUDE +
     LOCAL_POSITION_NED one tick at a time, going on when a setpoint answered the tick or after
     ``tick_timeout`` wall seconds. ``script(k, ms) -> dict`` can change tick k: keys ``x, vx``
     (LOCAL_POSITION_NED), ``yaw`` (ATTITUDE), ``ms`` (time_boot_ms), ``sysid`` (sender), or
@@ -209,6 +209,12 @@ class FakeVehicle:
         if kind == "SET_POSITION_TARGET_LOCAL_NED":
             self.setpoints.append(msg)
             return True
+        if kind == "PARAM_REQUEST_READ":
+            # as an autopilot answers (every parameter 0 here): run's preset look-up, without
+            # which it would wait its read timeout while the script's ticks went by
+            name = msg.param_id.encode() if isinstance(msg.param_id, str) else msg.param_id
+            self.conn.mav.param_value_send(name, 0.0, 9, 1, 0)
+            return False
         if kind == "COMMAND_LONG":
             self.commands.append(msg)
             if msg.command == 511:
@@ -252,6 +258,9 @@ class FakeVehicle:
                 mav.statustext_send(2, tick["text"].encode())
             if "mode" in tick:
                 self.mode = tick["mode"]
+            if "status" in tick or "mode" in tick:
+                # heard at once: the script counts ticks, which pass as fast as the companion
+                # answers, while the 10 Hz heartbeat counts wall time
                 self._heartbeat()
             if "ekf" in tick:
                 mav.ekf_status_report_send(tick["ekf"], 0.1, 0.1, 0.1, 0.1, 0.0)

@@ -25,12 +25,26 @@ def watch(profile=AP, **kw):
 ])
 def test_ardupilot_flags(flags, words):
     w = watch()
+    w.report(0x33F, {}, now=9.8)                            # healthy first: GPS had, then lost
     w.report(flags, {}, now=10.0)
     problem = w.problem(10.0)
     assert (problem is None) == (words is None)
     if words:
         assert words in problem and f"0x{flags:x}" in problem
         assert not w.healthy(10.0)
+
+
+def test_absolute_position_counts_once_the_estimator_has_had_it():
+    """A vehicle without GPS (its EKF never had an origin) flies a local mission; one that
+    loses its absolute position pauses."""
+    never = watch()
+    for k in range(5):
+        never.report(0x12F, {}, now=10.0 + 0.2 * k)        # relative position only, always
+    assert never.problem(11.0) is None and never.healthy(20.0)
+    lost = watch()
+    lost.report(0x33F, {}, now=10.0)
+    lost.report(0x12F, {}, now=10.2)
+    assert "no absolute horizontal position" in (lost.problem(10.2) or "")
 
 
 def test_the_glitch_bit_is_each_autopilots_own():

@@ -49,11 +49,14 @@ class EstimateWatch:
     _step_problem: str | None = None  # the last unexplained step, until healthy_for passes
     _bad_until: float = -math.inf     # s: unhealthy at least until then
     _last: tuple[float, float, float, float, float] | None = None   # t, x, y, vx, vy
+    _shown: int = 0                   # every flag any report has set (facts.once_shown)
 
     def report(self, flags: int, ratios: dict[str, float], now: float) -> None:
         """An estimator report (its flags and test ratios) read at ``now`` (s)."""
         self.reports += 1
-        problems = [what for bit, what in self.facts.need if not flags & bit]
+        self._shown |= flags
+        waived = self.facts.once_shown & ~self._shown     # never had it: not lost either
+        problems = [what for bit, what in self.facts.need if not flags & bit and not bit & waived]
         problems += [what for bit, what in self.facts.bad if flags & bit]
         for name in self.facts.variances:
             value = ratios.get(name)

@@ -240,6 +240,7 @@ FAILSAFE = FailsafeFacts(
 ESTIMATE = EstimateFacts(
     message="EKF_STATUS_REPORT", message_id=193, flags_field="flags",
     need=((0x08, "no relative horizontal position"), (0x10, "no absolute horizontal position")),
+    once_shown=0x10,
     bad=((0x80, "constant-position mode"), (0x8000, "GPS glitching")),
     variances=("pos_horiz_variance", "velocity_variance"))
 

@@ -237,7 +237,9 @@ class EstimateFacts:
     ``rate_hz``), its ``flags`` field, the bits that must all be set (``need``) and the bits
     none of which may be (``bad``), each with the words the companion says; ``variances``: the
     message's fields of normalised test ratios (1.0 = the estimator's own rejection gate) that
-    the companion compares with its limit."""
+    the companion compares with its limit. ``once_shown``: the bits of ``need`` that count only
+    after the estimator has set them once (absolute position: a vehicle without GPS, whose EKF
+    never had an origin, still flies a local mission; one that loses GPS pauses)."""
 
     message: str
     message_id: int
@@ -246,6 +248,7 @@ class EstimateFacts:
     bad: tuple[tuple[int, str], ...]
     variances: tuple[str, ...]
     rate_hz: float = 5.0
+    once_shown: int = 0
 
 
 # --------------------------------------------------------------------------- the profile

@@ -203,6 +203,7 @@ FAILSAFE = FailsafeFacts(
 ESTIMATE = EstimateFacts(
     message="ESTIMATOR_STATUS", message_id=230, flags_field="flags",
     need=((0x08, "no relative horizontal position"), (0x10, "no absolute horizontal position")),
+    once_shown=0x10,
     bad=((0x400, "GPS glitching"),),
     variances=("pos_horiz_ratio", "vel_ratio"))
 
