@@ -14,6 +14,10 @@ from pathlib import Path
 
 import pytest
 
+# MAVLink 2 frames: set before any test module imports pymavlink (import sorting may put
+# `from pymavlink import mavutil` above a harness that sets it; mavutil reads it once)
+os.environ["MAVLINK20"] = "1"
+
 ISOLATED_ZENOH = """{
   mode: "peer",
   scouting: { multicast: { enabled: false } },

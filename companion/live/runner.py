@@ -127,6 +127,7 @@ class Engagement:
     said_arm_wait: bool = False
     need_ack: bool = False                # a heartbeat counts only after a mode ACK (see top)
     after_failsafe: bool = False          # re-engaging after a failsafe (not the first time)
+    said_estimate_wait: bool = False      # "waiting for a healthy estimate" logged
 
 
 @dataclass(slots=True)
@@ -605,8 +606,13 @@ class Runner:
                   if (value := getattr(msg, name, None)) is not None}
         self.estimate.report(int(getattr(msg, facts.flags_field)), ratios, now)
         problem = self.estimate.problem(now)
-        if problem is not None and self.state in (State.TRACKING, State.ENGAGING):
+        if problem is None:
+            return
+        if self.state is State.TRACKING or (self.state is State.ENGAGING
+                                            and not self.config.wait_for_mode):
             self._bad_estimate(problem, now)
+        # --start-on-guided / --handover, before it is engaged: the pilot's (or AUTO's)
+        # vehicle, not the companion's to stop; it engages only once the estimate is healthy
 
     def _bad_estimate(self, problem: str, now: float, time_boot_ms: int = 0) -> None:
         """The position estimate is unfit to steer by: pause (or end, --on-bad-estimate)."""
@@ -698,6 +704,12 @@ class Runner:
 
     def _engage(self, now: float) -> None:
         cfg, link, e = self.config, self.link, self.engagement
+        problem = self.estimate.problem(now) if cfg.wait_for_mode else None
+        if problem is not None:
+            if not e.said_estimate_wait:
+                e.said_estimate_wait = True
+                self.log(f"waiting for a healthy estimate before tracking ({problem})")
+            return
         warmup = self.profile.offboard_warmup
         if warmup is not None and (e.warm_t0 is None or self.heard.vehicle_t - e.warm_t0 < warmup):
             return   # the vehicle refuses the track mode until setpoints have streamed a while
