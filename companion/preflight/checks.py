@@ -385,12 +385,25 @@ def _gcs_sysid_names(f: GcsFailsafe, params: Mapping[str, float]) -> tuple[str, 
     return next((names for names in f.sysid_params if names[0] in params), f.sysid_params[-1])
 
 
+def _failsafe_action(obs: Observed, f: GcsFailsafe) -> Check:
+    """The GCS failsafe's action: set, and not "nothing" (both identities' checks)."""
+    p = obs.params
+    missing = _param(f.action, obs, f.action_hold_label, "what the failsafe does")
+    if missing:
+        return missing
+    if p[f.action] == 0:
+        return Check(f.action, WARN, "0 (nothing)", f.action_hold_label,
+                     "a failsafe that does nothing leaves the rover driving",
+                     {f.action: float(f.action_hold)})
+    return Check(f.action, OK, _num(p[f.action]), f.action_hold_label,
+                 f"the failsafe takes the rover out of {obs.profile.track_mode}")
+
+
 def _gcs_failsafe(obs: Observed, f: GcsFailsafe) -> list[Check]:
     if obs.vehicle_sysid is not None and obs.companion_sysid == obs.vehicle_sysid:
         return _gcs_failsafe_onboard(obs, f)
     p, out = obs.params, []
     me = obs.companion_sysid
-    track = obs.profile.track_mode
     missing = _param(f.enable, obs, "1", "the GCS failsafe notices a dead companion")
     if missing:
         out.append(missing)
@@ -403,16 +416,7 @@ def _gcs_failsafe(obs: Observed, f: GcsFailsafe) -> list[Check]:
     else:
         out.append(Check(f.enable, OK, _num(p[f.enable]), "1",
                          f"a companion (or ground station) that falls silent triggers {f.action}"))
-    missing = _param(f.action, obs, f.action_hold_label, "what the failsafe does")
-    if missing:
-        out.append(missing)
-    elif p[f.action] == 0:
-        out.append(Check(f.action, WARN, "0 (nothing)", f.action_hold_label,
-                         "a failsafe that does nothing leaves the rover driving",
-                         {f.action: float(f.action_hold)}))
-    else:
-        out.append(Check(f.action, OK, _num(p[f.action]), f.action_hold_label,
-                         f"the failsafe takes the rover out of {track}"))
+    out.append(_failsafe_action(obs, f))
     lo_t, hi_t = f.timeout_range
     missing = _param(f.timeout, obs, f"{f.timeout_fix:g} s",
                      "how long a silent companion goes unnoticed")
@@ -473,16 +477,7 @@ def _gcs_failsafe_onboard(obs: Observed, f: GcsFailsafe) -> list[Check]:
         out.append(Check(f.enable, OK, _num(p[f.enable]), "1",
                          f"a lost ground station triggers {f.action}; the companion's heartbeat "
                          "does not keep it from firing"))
-    missing = _param(f.action, obs, f.action_hold_label, "what the failsafe does")
-    if missing:
-        out.append(missing)
-    elif p[f.action] == 0:
-        out.append(Check(f.action, WARN, "0 (nothing)", f.action_hold_label,
-                         "a failsafe that does nothing leaves the rover driving",
-                         {f.action: float(f.action_hold)}))
-    else:
-        out.append(Check(f.action, OK, _num(p[f.action]), f.action_hold_label,
-                         f"the failsafe takes the rover out of {obs.profile.track_mode}"))
+    out.append(_failsafe_action(obs, f))
     lo_t, hi_t = f.timeout_range
     missing = _param(f.timeout, obs, f"{f.timeout_fix:g} s",
                      "how long a lost ground station goes unnoticed")
