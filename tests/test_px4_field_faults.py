@@ -25,7 +25,7 @@ from sitl_common import CANDIDATE
 from sitl_plant.testing import free_udp_port
 
 BOOT_WALL = 60.0
-pytestmark = CANDIDATE   # 4 of 7: PX4's Hold creeps past the stop bound
+pytestmark = CANDIDATE   # the stop bound moved from 4 s to 7 s into the stall on 2026-12-02
 
 
 @pytest.mark.px4
@@ -58,9 +58,14 @@ def test_a_udp_link_stall_stops_the_rover_and_the_mission_completes(px4, tmp_pat
                  if m.time_boot_ms <= back_ms]
         modes = [m.custom_mode for m in gs.messages("HEARTBEAT", t_stall)]
     t0 = poses[0].time_boot_ms
-    late = [ground_speed(m) for m in poses if m.time_boot_ms >= t0 + 4000]
+    # PX4 holds after COM_OF_LOSS_T (1 s) and brakes the SIH rover at about 1 m/s^2 from the
+    # ellipse's up to 3.6 m/s: stopped 5-6 s into the stall (seen: 3.08 m/s at the stall,
+    # 0.6 at 4 s, 0.1 from 6 s on). Judged from 7 s on; a rover still driving is at 2-4 m/s.
+    late = [ground_speed(m) for m in poses if m.time_boot_ms >= t0 + 7000]
+    profile = [round(ground_speed(m), 2) for m in poses if (m.time_boot_ms - t0) % 1000 < 20]
     print(f"\nPX4 UDP stall {stall_s:g} s: speed at the start {ground_speed(poses[0]):.2f} m/s"
-          + (f", max {max(late):.2f} m/s from 4 s on" if late else "")
+          f"; every second {profile}"
+          + (f", max {max(late):.2f} m/s from 7 s on" if late else "")
           + f"; Hold seen {HOLD in modes}; exit {code}: {r['reason']}, failsafes "
           f"{r['failsafes']}, {r['duration_s']:.1f} s tracked, {proxy.dropped} datagrams dropped")
     assert code == 0 and r["reason"] == "mission_done", comp.stderr
