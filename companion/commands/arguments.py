@@ -41,24 +41,27 @@ def non_negative(text: str) -> float:
     return _finite(text, lambda v: v >= 0, ">= 0")
 
 
-def at_least_one(text: str) -> int:
+def _integer(text: str, lowest: int, highest: int | None, what: str) -> int:
+    """An integer flag within [lowest, highest]; ``what`` names the range in the error."""
     try:
         value = int(text)
     except ValueError:
         raise argparse.ArgumentTypeError(f"not an integer: {text!r}") from None
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"must be >= 1, not {value}")
+    if value < lowest or (highest is not None and value > highest):
+        raise argparse.ArgumentTypeError(f"{what}, not {value}")
     return value
+
+
+def at_least_one(text: str) -> int:
+    return _integer(text, 1, None, "must be >= 1")
 
 
 def mavlink_id(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"not an integer: {text!r}") from None
-    if not 1 <= value <= 255:
-        raise argparse.ArgumentTypeError(f"a MAVLink id is 1..255, not {value}")
-    return value
+    return _integer(text, 1, 255, "a MAVLink id is 1..255")
+
+
+def port_number(text: str) -> int:
+    return _integer(text, 1, 65535, "a port is 1..65535")
 
 
 def baud_rate(text: str) -> int:

@@ -19,27 +19,17 @@ import resource
 import sys
 import time
 
-from .arguments import add_zenoh_arguments, positive
+from .arguments import add_zenoh_arguments, port_number, positive
 from .options import bus_options
-
-
-def _port(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a port number, got {text!r}") from None
-    if not 1 <= value <= 65535:
-        raise argparse.ArgumentTypeError(f"port {value} is not in 1..65535")
-    return value
 
 
 def register(subparsers) -> None:
     p = subparsers.add_parser(
         "view", help="live fleet view in the browser (Rerun web viewer, served locally)",
         description=__doc__.split("\n\n", 1)[1], formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--web-port", type=_port, default=9090, metavar="PORT",
+    p.add_argument("--web-port", type=port_number, default=9090, metavar="PORT",
                    help="the web viewer's HTTP port (default 9090)")
-    p.add_argument("--grpc-port", type=_port, default=9876, metavar="PORT",
+    p.add_argument("--grpc-port", type=port_number, default=9876, metavar="PORT",
                    help="the port Rerun streams the data on (default 9876)")
     p.add_argument("--refresh", type=positive, default=0.1, metavar="S",
                    help="redraw every S seconds (default 0.1)")
