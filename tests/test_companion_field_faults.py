@@ -164,3 +164,38 @@ def test_a_mode_the_autopilot_chose_during_a_stall_is_not_taken_back(tmp_path):
     assert "switched to RTL" in r["reason"], r
     guided = [c for c in fake.commands[CELL["at_stall"]:] if is_mode_command(c, GUIDED)]
     assert len(guided) <= 1, guided    # at most one asked before the RTL heartbeat came
+
+
+BOOTING = 0xA7     # ArduPilot SITL just after boot: no position yet, constant-position mode
+
+
+def test_a_vehicle_without_a_position_yet_is_waited_for_not_failed(tmp_path):
+    """Powered on moments ago: the EKF has no position for the first 3 s (120 ticks). The
+    companion asks nothing of the vehicle (no arming, no motion) until it is healthy, then
+    flies the mission; no failsafe is counted."""
+    def booting(k, ms):
+        if k == 119:
+            note_commands("before_healthy")
+        return {"ekf": BOOTING if k < 120 else HEALTHY} if k % 8 == 0 else None
+
+    code, r, comp, fake = run(tmp_path, booting)
+    assert code == 0 and r["reason"] == "mission_done", comp.stderr
+    assert r["failsafes"] == 0
+    assert "waiting for a healthy position estimate before engaging" in comp.stderr
+    before = fake.commands[:CELL["before_healthy"]]
+    assert not [c for c in before if c.command == 400], "armed before the estimate was healthy"
+    assert [c for c in fake.commands if c.command == 400 and c.param1 == 1]
+    moving = [sp for sp in fake.setpoints if not is_zero(sp)]
+    assert moving and moving[0].time_boot_ms > fake.sent_ms[120][0]
+
+
+def test_a_position_that_never_comes_ends_the_run_with_exit_6_and_says_what_to_do(tmp_path):
+    def never(k, ms):
+        return {"ekf": BOOTING} if k % 8 == 0 else None
+
+    code, r, comp, fake = run(tmp_path, never, "--estimate-wait", "2")
+    assert code == 6 and r["stop_cause"] == "estimate_unhealthy", comp.stderr
+    assert "no healthy position estimate within 2 s of start" in r["reason"], r
+    assert "--estimate-wait" in r["reason"]
+    assert not [c for c in fake.commands if c.command == 400 and c.param1 == 1]   # never armed
+    assert all(is_zero(sp) for sp in fake.setpoints)

@@ -202,6 +202,10 @@ def add_timeout_arguments(p: argparse.ArgumentParser) -> None:
                    default=RUNNER.estimate_variance,
                    help="pause when an estimator test ratio passes RATIO (1 = its own gate; "
                         f"default {RUNNER.estimate_variance:g})")
+    h.add_argument("--estimate-wait", type=positive, metavar="S", default=RUNNER.estimate_wait,
+                   help="at start, wait this long for a healthy position estimate (GPS fix, "
+                        "EKF) before engaging; then end, exit 6 (default "
+                        f"{RUNNER.estimate_wait:g})")
     h.add_argument("--retake-after-failsafe", action="store_true",
                    help="once the autopilot's own failsafe has cleared, take the vehicle back "
                         "into GUIDED / OFFBOARD and go on (default: end the run, exit 5)")

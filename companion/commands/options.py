@@ -100,6 +100,7 @@ def runner_config(args: argparse.Namespace, **more: Any) -> RunnerConfig:
                         estimate_healthy_for=args.estimate_healthy_for,
                         estimate_step=args.estimate_step,
                         estimate_variance=args.estimate_variance,
+                        estimate_wait=args.estimate_wait,
                         retake_after_failsafe=args.retake_after_failsafe, **more)
 
 

@@ -63,6 +63,10 @@ class RunnerConfig:
     # threshold FS_EKF_THRESH defaults to 0.8 too
     estimate_variance: float = 0.8
     retake_after_failsafe: bool = False   # re-engage once the autopilot's failsafe has cleared
+    # wall s to wait at start for a healthy position estimate before engaging: a vehicle just
+    # powered on has no GPS fix or EKF position for tens of seconds (SITL: about 45 s after
+    # boot); that is not yet a fault, so nothing is asked of the vehicle until it is healthy
+    estimate_wait: float = 120.0
     # --start-on-guided: never ask for the track mode nor arm; wait (without a timeout) until
     # the pilot or a ground station switches the vehicle into it, armed, then track
     wait_for_mode: bool = False

@@ -19,6 +19,8 @@ measures silence (stale telemetry), latency and retry intervals.
              no further setpoint, no mode request (never fight the pilot), PILOT_OVERRIDE event
     TRACKING / ENGAGING --the estimate flagged or stepped (companion.live.health)--> FAILSAFE
              (cause "estimate"); back once healthy for --estimate-healthy-for, or DONE
+    ENGAGING the first time asks nothing of the vehicle until the estimate is healthy (a
+             vehicle just powered on has no position yet); DONE after --estimate-wait
     any state --the autopilot's own failsafe takes the vehicle--> DONE (AUTOPILOT_FAILSAFE: no
              setpoint, no mode request), or FAILSAFE until it clears (--retake-after-failsafe)
 
@@ -68,6 +70,9 @@ REBOOTED = ("vehicle_restarted: time_boot_ms went back (the autopilot rebooted);
             "mission on a rebooted vehicle")
 TIMER_EVERY = 0.02     # wall s: timers run at least this often even while messages pour in
 MAX_WAIT = 0.05        # wall s: the longest sleep (so stop requests are seen promptly)
+# vehicle s of telemetry the first engagement waits for the estimator's first report (asked for
+# at 5 Hz), so a vehicle that has no position yet is not engaged on the strength of no news
+FIRST_REPORT_GRACE = 1.0
 
 
 class State(str, Enum):  # noqa: UP042  (StrEnum changes str(): a behaviour change, not a lint fix)
@@ -128,6 +133,12 @@ class Engagement:
     need_ack: bool = False                # a heartbeat counts only after a mode ACK (see top)
     after_failsafe: bool = False          # re-engaging after a failsafe (not the first time)
     said_estimate_wait: bool = False      # "waiting for a healthy estimate" logged
+    estimate_waited: bool = False         # engaging stood still for the estimate
+
+    def first(self, state: State) -> bool:
+        """Engaging for the first time (not back from a failsafe): the vehicle is not ours
+        yet, and an estimate that is not ready is a reason to wait, not a fault."""
+        return state is State.ENGAGING and not self.after_failsafe
 
 
 @dataclass(slots=True)
@@ -332,7 +343,8 @@ class Runner:
         heard.pose = (s.x, s.y, s.yaw)
         state = self.state
         step = self.estimate.position(s.t, s.x, s.y, s.vx, s.vy, t_read)
-        if step is not None and state in (State.TRACKING, State.ENGAGING):
+        if (step is not None and state in (State.TRACKING, State.ENGAGING)
+                and not self.engagement.first(state)):
             # The stepped sample never reaches the controller as an error to chase.
             self._bad_estimate(step, t_read, s.time_boot_ms)
             state = self.state
@@ -609,10 +621,11 @@ class Runner:
         if problem is None:
             return
         if self.state is State.TRACKING or (self.state is State.ENGAGING
-                                            and not self.config.wait_for_mode):
+                                            and not self.config.wait_for_mode
+                                            and not self.engagement.first(self.state)):
             self._bad_estimate(problem, now)
-        # --start-on-guided / --handover, before it is engaged: the pilot's (or AUTO's)
-        # vehicle, not the companion's to stop; it engages only once the estimate is healthy
+        # Engaging the first time, and --start-on-guided / --handover before it is engaged:
+        # not yet the companion's vehicle to stop; _engage waits for a healthy estimate
 
     def _bad_estimate(self, problem: str, now: float, time_boot_ms: int = 0) -> None:
         """The position estimate is unfit to steer by: pause (or end, --on-bad-estimate)."""
@@ -704,12 +717,26 @@ class Runner:
 
     def _engage(self, now: float) -> None:
         cfg, link, e = self.config, self.link, self.engagement
-        problem = self.estimate.problem(now) if cfg.wait_for_mode else None
-        if problem is not None:
+        if e.first(self.state) and self.estimate.reports == 0 and (
+                e.warm_t0 is None or self.heard.vehicle_t - e.warm_t0 < FIRST_REPORT_GRACE):
+            return
+        if (cfg.wait_for_mode or e.first(self.state)) and not self.estimate.healthy(now):
+            problem = (self.estimate.problem(now)
+                       or f"not yet healthy for {cfg.estimate_healthy_for:g} s")
             if not e.said_estimate_wait:
                 e.said_estimate_wait = True
-                self.log(f"waiting for a healthy estimate before tracking ({problem})")
+                self.log(f"waiting for a healthy position estimate before "
+                         f"{'tracking' if cfg.wait_for_mode else 'engaging'} ({problem})")
+            if not cfg.wait_for_mode and now - e.since > cfg.estimate_wait:
+                self._finish(f"estimate_unhealthy: no healthy position estimate within "
+                             f"{cfg.estimate_wait:g} s of start ({problem}): wait for the GPS "
+                             "fix and the EKF, or raise --estimate-wait",
+                             ExitCode.ESTIMATE_UNHEALTHY)
+            e.estimate_waited = True
             return
+        if e.estimate_waited:
+            # the mode and arm timeouts count from the moment there was something to engage
+            e.estimate_waited, e.since = False, now
         warmup = self.profile.offboard_warmup
         if warmup is not None and (e.warm_t0 is None or self.heard.vehicle_t - e.warm_t0 < warmup):
             return   # the vehicle refuses the track mode until setpoints have streamed a while
