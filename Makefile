@@ -22,8 +22,14 @@ $(BIN)/.installed: pyproject.toml constraints.txt
 demo: $(BIN)/.installed
 	@$(BIN)/companion demo $(ARGS)
 
+# Two runs: everything but the `solo` tests on the workers, then the `solo` ones (judged against
+# the wall clock, or loading both cores) alone in one process. Either run may select nothing
+# (ARGS naming one file); nothing selected by both is pytest's "no tests", exit 5.
 test: $(BIN)/.installed
-	$(BIN)/python -m pytest -n $(WORKERS) --dist loadgroup $(ARGS)
+	@$(BIN)/python -m pytest -n $(WORKERS) --dist loadgroup -m "not solo" $(ARGS); a=$$?; \
+	 $(BIN)/python -m pytest -m solo $(ARGS); b=$$?; \
+	 if [ $$a -eq 5 ] && [ $$b -eq 5 ]; then exit 5; fi; \
+	 for c in $$a $$b; do if [ $$c -ne 0 ] && [ $$c -ne 5 ]; then exit $$c; fi; done
 
 # The linter and the type checker, both configured in pyproject.toml (docs/development.md)
 check: $(BIN)/.installed

@@ -51,6 +51,7 @@ def test_demo_defaults_json(tmp_path):
     assert _plant_gone(r)
 
 
+@pytest.mark.solo   # judged against the wall clock: alone, after the parallel run
 def test_demo_paced_at_a_speedup(tmp_path):
     p, _ = demo("--out", str(tmp_path), "--speedup", "8", "--duration", "16", "--no-plot")
     assert p.returncode == 0, p.stderr

@@ -54,6 +54,7 @@ def test_lockstep_tracks_the_paper_ellipse_and_agrees_with_batch():
     assert r["f_cost"] == pytest.approx(twin, rel=0.05), (r["f_cost"], twin)
 
 
+@pytest.mark.solo   # judged against the wall clock: alone, after the parallel run
 def test_speedup_tracks_the_paper_ellipse():
     """Paced at 5 x real time: the loop runs on the vehicle's clock, so it still tracks."""
     r = fly(["--speedup", "5", "--d-cen", "0.3"], ["--mission", MISSION], timeout=60.0)

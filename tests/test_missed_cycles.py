@@ -128,6 +128,7 @@ def test_overruns_still_count_and_unknown_period_counts_nothing():
     assert st.gaps == 0 and st.overruns == 0
 
 
+@pytest.mark.solo   # judged against the wall clock: alone, after the parallel run
 def test_companion_run_counts_no_missed_cycles_on_the_pattern_and_each_refused_sample(tmp_path):
     """The companion as a process against a scripted vehicle over UDP that time-stamps its
     samples 20, 20, 20, 40 ms apart; four samples (and their ATTITUDEs) come from another system id:

@@ -68,6 +68,7 @@ def pty_device():
         os.close(slave)
 
 
+@pytest.mark.solo   # judged against the wall clock: alone, after the parallel run
 def test_the_paper_ellipse_over_a_115200_baud_serial_link(tmp_path):
     """The plant names its baud pymavlink's way (DEVICE,BAUD), the companion with --baud."""
     with PtyCable(baud=115200) as cable, \

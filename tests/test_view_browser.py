@@ -40,7 +40,9 @@ def _chromium() -> str | None:
 
 
 CHROMIUM = _chromium()
-pytestmark = [pytest.mark.timeout(420), pytest.mark.skipif(
+# solo: Chromium's software rasteriser takes ~1.5 cores while it runs; beside the parallel run
+# it starves the real-time tests (make test runs it alone, after them)
+pytestmark = [pytest.mark.solo, pytest.mark.timeout(420), pytest.mark.skipif(
     CHROMIUM is None, reason="no Chromium installed (apt-get install chromium; .ci/run does)")]
 
 # playwright adds its own switches (headless, a fresh profile, no background networking, no
