@@ -96,6 +96,13 @@ FINAL_SEARCH = {"population": 128, "rounds": 4}
 MAX_WORKERS = 4             # processes for the final search: at most this many, one per core
 
 
+def _children_cpu() -> float:
+    """CPU seconds of this process's ended children (the tune's spawned workers)."""
+    import os
+    t = os.times()
+    return t.children_user + t.children_system
+
+
 def tune_workers() -> int:
     """The final search's processes: one per core this process may use, up to MAX_WORKERS
     (the gains do not depend on it)."""
@@ -286,10 +293,11 @@ def run(args) -> int:
             quick.unlink(missing_ok=True)
         log("refined: " + ("one model fitted to both flights" if refined["refined"]
                            else f"kept the manoeuvre's model ({refined['why']})"))
-    t0, c0 = time.monotonic(), time.process_time()
+    t0, c0, w0 = time.monotonic(), time.process_time(), _children_cpu()
     gains = _tune(vehicle, rate, command, args, log)
     timings["tune"] = time.monotonic() - t0
     cpu["tune"] = time.process_time() - c0
+    cpu["tune_workers"] = _children_cpu() - w0     # the other cores' share (tune_workers())
     timings["total"] = time.monotonic() - t_start
     cpu["total"] = time.process_time() - cpu_start
     log("wall time: " + ", ".join(f"{k.replace('_', ' ')} {v:.0f} s" for k, v in timings.items())
