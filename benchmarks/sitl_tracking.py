@@ -3,6 +3,8 @@
 Boots ``ardurover`` (``--model``: ``rover-skid`` by default, ``rover`` for ArduPilot's
 Ackermann car on rover.parm alone; ``--param NAME=VALUE`` for another vehicle), then
 
+0. a one-second stand-still ``companion run`` that waits for the fresh SITL's GPS and EKF
+   (:func:`sim_to_real.wait_ready`), so calibrate's clock starts on a booted vehicle;
 1. ``companion calibrate --connect ... --out DIR --arm``: identify live, tune;
 2. ``companion run --vehicle DIR/vehicle.toml`` on the paper's ellipse at each ``--f-r``;
 3. ArduPilot's GUIDED position-target following (:mod:`native_follow`) on the same ellipses,
@@ -30,7 +32,7 @@ sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "tests"))
 sys.path.insert(0, str(ROOT / "benchmarks"))
 
-from sim_to_real import MISSIONS, at_limit_share, companion  # noqa: E402
+from sim_to_real import MISSIONS, at_limit_share, companion, wait_ready  # noqa: E402
 
 
 def main() -> int:
@@ -58,6 +60,7 @@ def main() -> int:
                              model=args.model).start()
         try:
             url = sitl.url(0)
+            out["boot_s"] = wait_ready(url, work / "logs")   # not calibrate's time
             t0 = time.monotonic()
             cal = companion(["calibrate", "--connect", url, "--out", str(work / "rover"),
                              "--arm", "--no-zenoh", "--log-dir", str(work / "logs"), "--json"],
@@ -67,6 +70,8 @@ def main() -> int:
             ident = cal["identify"]
             out["identified"] = ident["params"]
             out["identify_rms"] = ident["rms"]
+            out["timings_s"], out["cpu_s"] = cal.get("timings_s"), cal.get("cpu_s")
+            out["refine"] = {k: v for k, v in cal.get("refine", {}).items() if k != "tlog"}
             vehicle = cal["vehicle"]
             from companion.sim import vehicle_file
             yaw_limit = float(vehicle_file.load(vehicle).params.max_yaw_rate)

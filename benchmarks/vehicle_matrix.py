@@ -86,7 +86,9 @@ def companion(argv: list[str], timeout: float) -> tuple[dict, float, str]:
 
 def wait_ready(url: str, logs: Path) -> float:
     """A short stand-still mission flown first, so calibrate's clock starts on a booted vehicle
-    (GPS fix, EKF, arming checks: about 40 s on a fresh SITL, not calibrate's time)."""
+    (GPS fix, EKF, arming checks: about 40 s on a fresh SITL, not calibrate's time);
+    ``--lost-timeout 120``: the estimate a fresh EKF has not yet got is waited out (with the
+    default 30 s the run ends: exit 6, estimate_unhealthy)."""
     mission = logs / "ready.toml"
     logs.mkdir(parents=True, exist_ok=True)
     mission.write_text('name = "ready"\nframe = "start"\nduration = 1\n[trajectory]\n'
@@ -94,7 +96,7 @@ def wait_ready(url: str, logs: Path) -> float:
     t0 = time.monotonic()
     companion(["run", "--connect", url, "--mission", str(mission), "--arm", "--json",
                "--no-zenoh", "--no-log", "-q", "--telemetry-timeout", "90",
-               "--arm-timeout", "120"], 300)
+               "--arm-timeout", "120", "--lost-timeout", "120"], 300)
     return time.monotonic() - t0
 
 

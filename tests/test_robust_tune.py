@@ -7,6 +7,7 @@ import json
 import math
 import subprocess
 import sys
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -17,7 +18,7 @@ from companion.core.pzc import PZCGains
 from companion.sim import gains as gains_mod
 from companion.sim import vehicle_file
 from companion.sim.plant import RoverParams
-from companion.sim.robust import RobustConfig, Spread, ensemble, evaluate
+from companion.sim.robust import RobustConfig, Spread, ensemble, evaluate, tune
 from companion.sim.tuning import Candidates
 
 ROVER = RoverParams(w_c=1 / 0.3, w_c_yaw=1 / 0.05, max_speed=4.0, max_yaw_rate=2.0944,
@@ -81,6 +82,18 @@ def test_the_worst_neighbour_decides():
     ev = evaluate(_candidates(HAND), cfg, vehicles)
     assert ev.steady_rms[0, 0, 1] < 0.08 and ev.yaw_at_limit[0, 0].max() == 0.0
     assert ev.yaw_at_limit[0, 1].max() > 0.05 and ev.rejected[0] == "limit cycle"
+
+
+def test_a_search_split_over_processes_finds_the_very_gains_of_one_process():
+    # calibrate's final search splits each round's candidates over the cores (spawned
+    # processes): every vehicle still sees the noise it sees in the whole batch, so the
+    # figures, and the gains, are those of one process
+    cfg = RobustConfig(vehicle=ROVER, limits=Limits(4.0, 2.0944), neighbours=1, duration=20.0,
+                       population=40, rounds=2)
+    one = tune(cfg)
+    split = tune(replace(cfg, workers=2))
+    assert split.gains == one.gains and split.objective == one.objective
+    assert split.nominal_steady_rms == one.nominal_steady_rms and split.evaluated == one.evaluated
 
 
 def test_companion_tune_vehicle_writes_gains_that_record_their_vehicle(tmp_path):

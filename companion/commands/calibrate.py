@@ -15,7 +15,8 @@
    predicted held-out tracks at every speed as well as or better than either (``--no-refine``
    skips this step; it needs the flight logs);
 3. tunes gains for the model kept, on it and its neighbours (``companion tune --vehicle``,
-   128 x 4 unless ``--population`` / ``--rounds`` say otherwise): ``DIR/gains.toml``, recorded
+   128 x 4 unless ``--population`` / ``--rounds`` say otherwise, each round's candidates split
+   over the machine's cores: the same gains as in one process): ``DIR/gains.toml``, recorded
    with the vehicle file's SHA-256;
 4. prints the ``companion run --vehicle DIR/vehicle.toml`` command that flies with them.
 """
@@ -89,8 +90,28 @@ def _refine_mission(space: float):
 REFINE_SEARCH = {"population": 32, "rounds": 1}
 # The final search: 128 x 4 instead of the tuner's 256 x 6 (77 s of CPU; 128 x 3: 24 s); on the
 # bundled ardupilot-skid model 128 x 3 ended at 0.0021 / 0.054 m (0.04 / 0.08 Hz) in simulation
-# against 256 x 6's 0.0018 / 0.051 m.
+# against 256 x 6's 0.0018 / 0.051 m. (2026-12-02, load 2.5: 128 x 4 took 15 s of CPU in one
+# process, 12 s of wall time on both cores: the same gains, robust.evaluate.)
 FINAL_SEARCH = {"population": 128, "rounds": 4}
+MAX_WORKERS = 4             # processes for the final search: at most this many, one per core
+
+
+def _children_cpu() -> float:
+    """CPU seconds of this process's ended children (the tune's spawned workers)."""
+    import os
+    t = os.times()
+    return t.children_user + t.children_system
+
+
+def tune_workers() -> int:
+    """The final search's processes: one per core this process may use, up to MAX_WORKERS
+    (the gains do not depend on it)."""
+    import os
+    try:
+        cores = len(os.sched_getaffinity(0))
+    except AttributeError:        # not Linux
+        cores = os.cpu_count() or 1
+    return max(1, min(MAX_WORKERS, cores))
 
 
 NOTHING_ROBUST = ("calibrate: the tuner found no gains that hold on every neighbour of {vehicle} "
@@ -104,7 +125,8 @@ def _tune(vehicle: Path, rate: float, command: str, args, log):
     from .flight import gains_for_vehicle
     try:
         return gains_for_vehicle(vehicle, rate, command, not args.quiet and not args.json, log,
-                                 population=args.population, rounds=args.rounds)
+                                 population=args.population, rounds=args.rounds,
+                                 workers=tune_workers())
     except NothingRobust:
         raise UserError(NOTHING_ROBUST.format(vehicle=vehicle)) from None
 
@@ -252,6 +274,7 @@ def run(args) -> int:
         log("not tuned: the manoeuvre did not end normally")
         return code or ExitCode.FAULT
     timings["fit"] = report.fit_time_s
+    cpu["fit"] = report.fit_cpu_s
     check_identified(report, args.space)
     timings["manoeuvre_flight"] = time.monotonic() - t_start - report.fit_time_s
     rate = args.rate or DEFAULT_RATE
@@ -270,10 +293,11 @@ def run(args) -> int:
             quick.unlink(missing_ok=True)
         log("refined: " + ("one model fitted to both flights" if refined["refined"]
                            else f"kept the manoeuvre's model ({refined['why']})"))
-    t0, c0 = time.monotonic(), time.process_time()
+    t0, c0, w0 = time.monotonic(), time.process_time(), _children_cpu()
     gains = _tune(vehicle, rate, command, args, log)
     timings["tune"] = time.monotonic() - t0
     cpu["tune"] = time.process_time() - c0
+    cpu["tune_workers"] = _children_cpu() - w0     # the other cores' share (tune_workers())
     timings["total"] = time.monotonic() - t_start
     cpu["total"] = time.process_time() - cpu_start
     log("wall time: " + ", ".join(f"{k.replace('_', ' ')} {v:.0f} s" for k, v in timings.items())

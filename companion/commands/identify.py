@@ -168,11 +168,12 @@ def identify_log(paths: str | list[str], fit_opts: FitOptions, autopilot: dict[s
         from ..ident.priors import Priors
         priors = Priors(prior, {f.name: "the earlier fit" for f in fields(prior)})
     log(f"fitting {len(series.t)} samples ({series.duration:.1f} s)")
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
     result = fit(series, priors.params, progress=lambda what: log(f"fitting the {what}"))
     report = Report(result, priors, series, label or " + ".join(map(str, paths)),
                     time.perf_counter() - t0, out=fit_opts.out, parts=parts,
-                    autopilot=autopilot, command=_command_line())
+                    autopilot=autopilot, command=_command_line(),
+                    fit_cpu_s=time.process_time() - c0)
     if check is not None:
         report.check_log, report.check_rms = str(fit_opts.check), rms(result.params, check)
     save(vehicle_file(report, fit_opts.name or Path(path).stem), fit_opts.out)

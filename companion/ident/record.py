@@ -36,6 +36,7 @@ class Report:
     figures: list[str] = field(default_factory=list)
     command: str = ""
     parts: list[Series] = field(default_factory=list)    # each log's series, when several
+    fit_cpu_s: float = 0.0         # this process's CPU seconds for the fit
 
 
 def file_value(params: RoverParams, name: str) -> float:

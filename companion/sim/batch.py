@@ -46,6 +46,10 @@ class SimConfig:
     seed: int = 0
     tick: float | None = None       # s, scheduler tick the samples are aligned to (ArduPilot: 0.02)
     yaw_rate_limit: float | None = None   # rad/s for yaw_at_limit; None: the vehicle's max_yaw_rate
+    # (total, start): these n vehicles are [start, start + n) of a batch of ``total`` split
+    # across processes; each draws the whole batch's noise and keeps its own slice, so every
+    # vehicle sees the noise it would see in the whole batch (None: the batch is all there is)
+    noise_slice: tuple[int, int] | None = None
 
     def __post_init__(self) -> None:
         for name in ("duration", "control_rate", "max_plant_dt"):
@@ -112,6 +116,11 @@ def simulate(trackers: Tracker | Sequence[tuple[Tracker, slice]], params: RoverP
     state = RoverState(x0 + zero, y0 + zero, yaw0 + zero, zero, zero)
     rng = np.random.default_rng(config.seed)
     noisy = config.noise_pos > 0 or config.noise_yaw > 0
+    shape: int | None = n
+    noise_part = slice(None)
+    if config.noise_slice is not None and n is not None:
+        total, first = config.noise_slice
+        shape, noise_part = total, slice(first, first + n)
 
     times, substeps_after, h = config.schedule()
     n_control = len(times)
@@ -139,10 +148,14 @@ def simulate(trackers: Tracker | Sequence[tuple[Tracker, slice]], params: RoverP
         ref = reference.sample(t)
         meas = model.measure(state)
         if noisy:
-            shape = None if n is None else n
-            meas.x = meas.x + config.noise_pos * rng.standard_normal(shape)
-            meas.y = meas.y + config.noise_pos * rng.standard_normal(shape)
-            meas.yaw = meas.yaw + config.noise_yaw * rng.standard_normal(shape)
+            if shape is None:
+                meas.x = meas.x + config.noise_pos * rng.standard_normal()
+                meas.y = meas.y + config.noise_pos * rng.standard_normal()
+                meas.yaw = meas.yaw + config.noise_yaw * rng.standard_normal()
+            else:
+                meas.x = meas.x + config.noise_pos * rng.standard_normal(shape)[noise_part]
+                meas.y = meas.y + config.noise_pos * rng.standard_normal(shape)[noise_part]
+                meas.yaw = meas.yaw + config.noise_yaw * rng.standard_normal(shape)[noise_part]
         if len(groups) == 1 and groups[0][1] is None:
             cmd = groups[0][0].step(t, meas, ref)
             speed_cmd, yaw_rate_cmd = cmd.speed, cmd.yaw_rate

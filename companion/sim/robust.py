@@ -31,8 +31,12 @@ the physics says the preview belongs.
 
 from __future__ import annotations
 
+import contextlib
+import itertools
 import math
-from collections.abc import Callable, Sequence
+import multiprocessing
+from collections.abc import Callable, Iterator, Sequence
+from concurrent.futures import Executor, ProcessPoolExecutor
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -106,6 +110,9 @@ class RobustConfig:
     plant_dt: float = 0.02             # s: one exact step per ArduPilot tick (within 3 % of 1 ms)
     seed: int = 1
     min_progress: float = 0.0          # the law's progress floor for every candidate (PX4)
+    # processes that simulate each round's candidates (this one and workers - 1 spawned): the
+    # same gains at any count (:func:`evaluate`), in less wall time where cores are free
+    workers: int = 1
 
     def reference_list(self) -> tuple[tuple[str, Trajectory], ...]:
         if self.references:
@@ -257,8 +264,13 @@ def candidate_gains(cands: Candidates, i: int,
                        brake_accel=ext["brake_accel"], brake_yaw_accel=ext["brake_yaw_accel"])
 
 
-def evaluate(cands: Candidates, cfg: RobustConfig, vehicles: Sequence[RoverParams],
-             progress: Callable[[float], None] | None = None) -> Evaluation:
+def _simulate_part(cands: Candidates, cfg: RobustConfig, vehicles: Sequence[RoverParams],
+                   first: int, total: int, progress: Callable[[float], None] | None = None
+                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Candidates ``first`` .. ``first + len(cands)`` of a batch of ``total``: steady RMS,
+    f_cost, share at the yaw-rate limit and chatter, each [candidate, vehicle, reference]. Each
+    part draws the whole batch's noise (SimConfig.noise_slice), so a batch split across
+    processes gives what it gives in one."""
     refs = [tr for _, tr in cfg.reference_list()]
     n_c, n_v, n_r = len(cands), len(vehicles), len(refs)
     n = n_c * n_v * n_r
@@ -266,16 +278,40 @@ def evaluate(cands: Candidates, cfg: RobustConfig, vehicles: Sequence[RoverParam
     sim = SimConfig(duration=cfg.duration, control_rate=cfg.rate_hz, max_plant_dt=cfg.plant_dt,
                     tick=cfg.tick, noise_pos=cfg.noise_pos, noise_yaw=cfg.noise_yaw,
                     seed=cfg.seed, yaw_rate_limit=min(cfg.limits.max_yaw_rate,
-                                                      float(np.min(params.max_yaw_rate))))
+                                                      float(np.min(params.max_yaw_rate))),
+                    noise_slice=(total * n_v * n_r, first * n_v * n_r))
     with np.errstate(all="ignore"):
         result = simulate(_tracker(cands, n_v * n_r, cfg.limits, brake_scales(cfg.vehicle),
                                    cfg.min_progress), params,
                           _reference(refs, n_c, n_v), n, sim, progress)
     shape = (n_c, n_v, n_r)
-    rms = np.asarray(result.steady_rms).reshape(shape)
-    cost = np.asarray(result.f_cost).reshape(shape)
-    at_limit = np.asarray(result.yaw_at_limit).reshape(shape)
-    chatter = (np.asarray(result.speed_tv) + np.asarray(result.yaw_rate_tv)).reshape(shape)
+    return (np.asarray(result.steady_rms).reshape(shape),
+            np.asarray(result.f_cost).reshape(shape),
+            np.asarray(result.yaw_at_limit).reshape(shape),
+            (np.asarray(result.speed_tv) + np.asarray(result.yaw_rate_tv)).reshape(shape))
+
+
+# Below this many candidates a batch is not split (the step loop's overhead, about a third of
+# a second per evaluation on this machine, would dominate each part).
+MIN_SPLIT = 16
+
+
+def evaluate(cands: Candidates, cfg: RobustConfig, vehicles: Sequence[RoverParams],
+             progress: Callable[[float], None] | None = None,
+             pool: Executor | None = None, workers: int = 1) -> Evaluation:
+    """Every candidate on every vehicle and reference. With a ``pool`` of ``workers - 1``
+    processes the candidates are split ``workers`` ways, this process flying the first part;
+    the figures are the same as in one batch (:func:`_simulate_part`)."""
+    n_c = len(cands)
+    parts = 1 if pool is None else max(1, min(workers, n_c // MIN_SPLIT))
+    bounds = [round(i * n_c / parts) for i in range(parts + 1)]
+    assert pool is not None or parts == 1
+    futures = [pool.submit(_simulate_part, cands.take(np.arange(a, b)), cfg, vehicles, a, n_c)
+               for a, b in itertools.pairwise(bounds[1:])] if pool is not None else []
+    own = _simulate_part(cands.take(np.arange(bounds[0], bounds[1])) if parts > 1 else cands,
+                         cfg, vehicles, 0, n_c, progress)
+    results = [own] + [f.result() for f in futures]
+    rms, cost, at_limit, chatter = (np.concatenate([r[i] for r in results]) for i in range(4))
     finite = np.isfinite(rms) & np.isfinite(cost) & (rms < 1e3)
     rms_mean = np.where(finite, rms, np.inf).mean(axis=1)            # [cand, ref]
     cost_mean = np.where(finite, cost, np.inf).mean(axis=1)
@@ -375,6 +411,44 @@ class RobustResult:
     rejected: dict[str, int] = field(default_factory=dict)
 
 
+@contextlib.contextmanager
+def _workers(count: int) -> Iterator[Executor | None]:
+    """``count - 1`` spawned processes for :func:`evaluate` (None for one: this process
+    alone). Spawned, not forked: the caller may have threads (a link, a progress bar)."""
+    if count <= 1:
+        yield None
+        return
+    with ProcessPoolExecutor(count - 1, mp_context=multiprocessing.get_context("spawn")) as pool:
+        yield pool
+
+
+def _search(cfg: RobustConfig, vehicles: Sequence[RoverParams], population: Candidates,
+            rng: np.random.Generator, rejected: dict[str, int], total: int,
+            progress: Callable[[float], None] | None, pool: Executor | None
+            ) -> tuple[Candidates, int]:
+    """The rounds of :func:`tune`: evaluate, keep the elite, perturb; (the elite, best first,
+    and how many candidates were evaluated)."""
+    best: Candidates | None = None
+    evaluated = 0
+    best_obj = np.array([])
+    for r in range(cfg.rounds):
+        def round_progress(f: float, r: int = r) -> None:
+            if progress is not None:
+                progress((r + f) / total)
+        ev = evaluate(population, cfg, vehicles, None if progress is None else round_progress,
+                      pool, cfg.workers)
+        evaluated += len(population)
+        for why in rejected:
+            rejected[why] += int(np.sum(ev.rejected == why))
+        merged = population if best is None else Candidates.concat([best, population])
+        merged_obj = ev.objective if best is None else np.concatenate([best_obj, ev.objective])
+        order = np.argsort(merged_obj)[:cfg.elite]
+        best, best_obj = merged.take(order), merged_obj[order]
+        population = _perturb(rng, best, cfg.population, 0.5 * 0.6 ** r)
+    assert best is not None   # cfg.rounds >= 1 (the command refuses fewer)
+    return best, evaluated
+
+
 def tune(cfg: RobustConfig, progress: Callable[[float], None] | None = None) -> RobustResult:
     """Search the gains for ``cfg.vehicle`` and its ensemble; ``progress(fraction)``."""
     rng = np.random.default_rng(cfg.seed)
@@ -382,23 +456,11 @@ def tune(cfg: RobustConfig, progress: Callable[[float], None] | None = None) -> 
     vehicles = ensemble(cfg.vehicle, cfg.neighbours, cfg.spread, period, cfg.seed)
     start = seeds(cfg.vehicle)
     population = Candidates.concat([start, _random(rng, max(1, cfg.population - len(start)))])
-    best, best_obj = None, np.array([])
-    evaluated, rejected = 0, {"limit cycle": 0, "diverged": 0}
+    rejected = {"limit cycle": 0, "diverged": 0}
     total = cfg.rounds + 1
-    for r in range(cfg.rounds):
-        def round_progress(f: float, r: int = r) -> None:
-            if progress is not None:
-                progress((r + f) / total)
-        ev = evaluate(population, cfg, vehicles, None if progress is None else round_progress)
-        evaluated += len(population)
-        for why in rejected:
-            rejected[why] += int(np.sum(ev.rejected == why))
-        pool = population if best is None else Candidates.concat([best, population])
-        pool_obj = ev.objective if best is None else np.concatenate([best_obj, ev.objective])
-        order = np.argsort(pool_obj)[:cfg.elite]
-        best, best_obj = pool.take(order), pool_obj[order]
-        population = _perturb(rng, best, cfg.population, 0.5 * 0.6 ** r)
-    assert best is not None   # cfg.rounds >= 1 (the command refuses fewer)
+    with _workers(cfg.workers) as pool:
+        best, evaluated = _search(cfg, vehicles, population, rng, rejected, total, progress,
+                                  pool)
     winner = best.take(np.array([0]))
     ev = evaluate(winner, cfg, vehicles,
                   None if progress is None else (lambda f: progress((cfg.rounds + f) / total)))
