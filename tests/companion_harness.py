@@ -168,8 +168,8 @@ class FakeVehicle:
     ``tick_timeout`` wall seconds. ``script(k, ms) -> dict`` can change tick k: keys ``x, vx``
     (LOCAL_POSITION_NED), ``yaw`` (ATTITUDE), ``ms`` (time_boot_ms), ``sysid`` (sender), or
     ``restart`` (reboot: back to MANUAL, disarmed), ``reboot`` (the same as a real autopilot does it:
-    its clock from ``ms``, and nothing streamed until asked again, only heartbeats; it answers
-    MAV_CMD_REQUEST_MESSAGE for SYSTEM_TIME); the autopilot's own doings: ``ekf`` (an
+    its clock from ``ms``, no heartbeat for ``reboot_gap`` s, then heartbeats only: nothing
+    streamed until asked again; it answers MAV_CMD_REQUEST_MESSAGE for SYSTEM_TIME); the autopilot's own doings: ``ekf`` (an
     EKF_STATUS_REPORT with these flags), ``text`` (a STATUSTEXT), ``status`` (the heartbeat's
     system_status from now on), ``mode`` (it switches mode itself), ``silent`` (no pose this
     tick); the link: ``deaf`` (nothing the companion sends arrives this tick: kept in ``lost``).
@@ -181,6 +181,7 @@ class FakeVehicle:
     start_ms: int = 100_000
     step_ms: int = 25
     tick_timeout: float = 0.02
+    reboot_gap: float = 1.0
     setpoints: list[Any] = field(default_factory=list)
     commands: list[Any] = field(default_factory=list)
     sent_ms: list[tuple[int, str]] = field(default_factory=list)   # (time_boot_ms, note)
@@ -192,6 +193,7 @@ class FakeVehicle:
         self.mode, self.armed, self.streaming = 0, False, False
         self.system_status = 4                   # MAV_STATE_ACTIVE
         self.deaf, self.ms, self.booting = False, self.start_ms, False
+        self.rebooting_until = 0.0
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, daemon=True)
 
@@ -205,12 +207,18 @@ class FakeVehicle:
         self.conn.close()
 
     def _heartbeat(self) -> None:
+        if time.monotonic() < self.rebooting_until:
+            return                               # rebooting: silent
         base = 1 | (128 if self.armed else 0) | (8 if self.mode == 15 else 0)
         self.conn.mav.heartbeat_send(10, 3, base, self.mode, self.system_status)
 
     def _handle(self, msg: Any) -> bool:
         """True when the message is a setpoint (it answers the tick)."""
         kind = msg.get_type()
+        if time.monotonic() < self.rebooting_until:          # rebooting: hears nothing
+            if kind == "COMMAND_LONG":
+                self.commands.append(msg)
+            return False
         if self.deaf:
             self.lost.append(msg)
             return False
@@ -267,7 +275,7 @@ class FakeVehicle:
                 self.mode, self.armed = 0, False
                 if tick.get("reboot"):
                     self.streaming, self.ms, self.booting = False, ms, True
-                    self._heartbeat()
+                    self.rebooting_until = time.monotonic() + self.reboot_gap
                     continue
             self.ms = tick["ms"]
             self.deaf = bool(tick.get("deaf"))

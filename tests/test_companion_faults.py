@@ -180,3 +180,23 @@ def test_a_reboot_that_streams_nothing_is_told_from_a_pilot_by_its_clock(tmp_pat
     # not resumed: no GUIDED request nor arming after the clock was asked for
     after = fake.commands[fake.commands.index(asked[0]):]
     assert not any(is_mode_command(c, 15) or c.command == 400 for c in after)
+
+
+def test_a_pilot_who_takes_a_silent_vehicle_is_not_asked_anything(tmp_path):
+    """The mode changes while telemetry flowed (a pilot, as far as anyone can tell) and the
+    stream stops with it: the companion listens for the vehicle's clock but asks nothing of a
+    vehicle someone else now drives (no MAV_CMD_REQUEST_MESSAGE), and it ends as a pilot's."""
+    mission = ellipse_mission(tmp_path / "m.toml", 30.0)
+
+    def takeover(k, ms):
+        if k >= 80:
+            return {"mode": 0, "silent": True} if k == 80 else {"silent": True}
+        return None
+
+    port = free_udp_port()
+    with Companion(port, "--arm", "--json", "--mission", str(mission)) as comp, \
+            FakeVehicle(port, script=takeover) as fake:
+        assert comp.wait(30.0) == 4, comp.stderr
+        r = comp.result()
+    assert r["reason"] == "pilot_override: mode changed to MANUAL by someone else", r
+    assert not any(c.command == 512 for c in fake.commands)

@@ -68,7 +68,9 @@ REBOOTED = ("vehicle_restarted: time_boot_ms went back (the autopilot rebooted);
             "mission on a rebooted vehicle")
 # Before a mode change is called a pilot's, the vehicle's clock is read (a rebooted autopilot
 # comes back in its boot mode, disarmed, and after a reboot streams nothing it was asked for):
-# from its stream for CLOCK_LISTEN wall s, then asked for SYSTEM_TIME, for CLOCK_WAIT in all.
+# from its stream for CLOCK_LISTEN wall s, then, if it had fallen silent before the mode
+# change (a reboot's gap; never a vehicle a pilot took while it streamed), asked for
+# SYSTEM_TIME; CLOCK_WAIT in all.
 CLOCK_KINDS = ("SYSTEM_TIME", "ATTITUDE", "LOCAL_POSITION_NED")
 CLOCK_LISTEN = 0.5
 CLOCK_WAIT = 3.0
@@ -157,6 +159,7 @@ class Stopping:
     #                                       (the vehicle says ours stopped arriving), autopilot
     autopilot: str | None = None          # the autopilot's failsafe holding the vehicle (why)
     unjudged: str | None = None           # a pilot's doing? (why) until the clock is read
+    ask_clock: bool = False               # the vehicle was silent then: its clock may be asked
 
 
 @dataclass(slots=True)
@@ -798,6 +801,8 @@ class Runner:
         # The loop ends here; a rebooted autopilot looks the same (its boot mode, disarmed)
         # until its clock is read, after the loop (_judge_override).
         self.stopping.unjudged = why
+        self.stopping.ask_clock = (time.perf_counter() - self.heard.sample_wall
+                                   > self.config.stale_timeout)
         self.stopping.wants_hold = False
         self.state = State.DONE
         self.outcome = Outcome(f"pilot_override: {why}", ExitCode.PILOT_OVERRIDE, False,
@@ -806,7 +811,8 @@ class Runner:
     def _judge_override(self, why: str) -> None:
         """A pilot, or a reboot? The vehicle's clock decides; then end with that reason."""
         self.stopping.unjudged = None
-        last_ms, clock_ms = self.telemetry.last_ms, self._read_vehicle_clock()
+        last_ms = self.telemetry.last_ms
+        clock_ms = self._read_vehicle_clock(ask=self.stopping.ask_clock)
         if clock_ms is not None and clock_went_back(last_ms, clock_ms):
             self.log(f"the vehicle's clock reads {clock_ms / 1e3:.3f} s, its last sample said "
                      f"{(last_ms or 0) / 1e3:.3f} s: it rebooted (what looked like a pilot: {why})")
@@ -816,16 +822,17 @@ class Runner:
         self._emit(ev.PILOT_OVERRIDE, why)
         self._finish(f"pilot_override: {why}", ExitCode.PILOT_OVERRIDE, hold=False, stop=False)
 
-    def _read_vehicle_clock(self) -> int | None:
+    def _read_vehicle_clock(self, ask: bool) -> int | None:
         """The vehicle's time_boot_ms from the first of its messages that carries one, read
-        for CLOCK_LISTEN s, then asked for (SYSTEM_TIME), up to CLOCK_WAIT s; None if none."""
+        for CLOCK_LISTEN s, then (``ask``) asked for (SYSTEM_TIME), up to CLOCK_WAIT s; None
+        if none came."""
         link, clock = self.link, time.perf_counter
         start = clock()
         ask_at = start + CLOCK_LISTEN
         while (now := clock()) < start + CLOCK_WAIT:
             msg = link.recv()
             if msg is None:
-                if now >= ask_at:
+                if ask and now >= ask_at:
                     link.request_message(2)          # MAVLINK_MSG_ID_SYSTEM_TIME
                     ask_at = now + 0.5
                 link.wait(min(0.05, max(0.0, start + CLOCK_WAIT - now)))
