@@ -28,7 +28,6 @@ from field_harness import (
     simstate_xy,
 )
 from safety_harness import read_tlog
-from sitl_common import CANDIDATE
 
 SPEEDUP = 2
 BOOT_WALL = 120.0 / SPEEDUP + 30.0
@@ -269,7 +268,6 @@ def test_a_tcp_connection_the_autopilot_dropped_is_reopened(ardupilot, tmp_path)
     assert "reopened" in comp.stderr
 
 
-@CANDIDATE
 @pytest.mark.sitl
 @pytest.mark.slow
 @pytest.mark.parametrize("held", [TO_COMPANION, TO_VEHICLE])
@@ -332,7 +330,6 @@ def test_a_one_way_tcp_stall_stops_the_rover_and_the_mission_completes(ardupilot
         assert "our setpoints stopped arriving" in comp.stderr
 
 
-@CANDIDATE
 @pytest.mark.sitl
 @pytest.mark.slow
 def test_an_autopilot_reboot_mid_mission_ends_the_run_not_resumed(ardupilot, tmp_path):

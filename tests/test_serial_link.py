@@ -20,7 +20,7 @@ from companion.mav.connection import DEFAULT_BAUD, serial_target
 from companion_harness import ROOT, Companion
 from field_harness import held_reference, largest_error
 from serial_harness import PtyCable
-from sitl_common import CANDIDATE, ground_speed
+from sitl_common import ground_speed
 from test_companion_run import MISSION, batch_twin
 
 QUICK = ("--mission", "missions/circle.toml", "--no-zenoh", "--no-log",
@@ -278,7 +278,6 @@ def test_ardupilot_sitl_over_its_own_uart_driver(tmp_path):
           f"loop {r['loop_rate_hz']:.1f} Hz; bytes carried {cable.carried}")
 
 
-@CANDIDATE
 @pytest.mark.sitl
 @pytest.mark.slow
 def test_a_serial_link_stall_stops_the_rover_and_the_mission_completes(tmp_path):
