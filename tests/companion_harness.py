@@ -167,10 +167,13 @@ class FakeVehicle:
     LOCAL_POSITION_NED one tick at a time, going on when a setpoint answered the tick or after
     ``tick_timeout`` wall seconds. ``script(k, ms) -> dict`` can change tick k: keys ``x, vx``
     (LOCAL_POSITION_NED), ``yaw`` (ATTITUDE), ``ms`` (time_boot_ms), ``sysid`` (sender), or
-    ``restart`` (reboot: back to MANUAL, disarmed); the autopilot's own doings: ``ekf`` (an
+    ``restart`` (reboot: back to MANUAL, disarmed), ``reboot`` (the same as a real autopilot does it:
+    its clock from ``ms``, no heartbeat for ``reboot_gap`` s, then heartbeats only: nothing
+    streamed until asked again; it answers MAV_CMD_REQUEST_MESSAGE for SYSTEM_TIME); the autopilot's own doings: ``ekf`` (an
     EKF_STATUS_REPORT with these flags), ``text`` (a STATUSTEXT), ``status`` (the heartbeat's
     system_status from now on), ``mode`` (it switches mode itself), ``silent`` (no pose this
-    tick). Records every setpoint and command.
+    tick); the link: ``deaf`` (nothing the companion sends arrives this tick: kept in ``lost``).
+    Records every setpoint and command.
     """
 
     port: int
@@ -178,15 +181,19 @@ class FakeVehicle:
     start_ms: int = 100_000
     step_ms: int = 25
     tick_timeout: float = 0.02
+    reboot_gap: float = 1.0
     setpoints: list[Any] = field(default_factory=list)
     commands: list[Any] = field(default_factory=list)
     sent_ms: list[tuple[int, str]] = field(default_factory=list)   # (time_boot_ms, note)
+    lost: list[Any] = field(default_factory=list)     # what the companion sent while deaf
 
     def __post_init__(self):
         self.conn = mavutil.mavlink_connection(f"udpout:127.0.0.1:{self.port}", source_system=1,
                                                source_component=1, dialect="ardupilotmega")
         self.mode, self.armed, self.streaming = 0, False, False
         self.system_status = 4                   # MAV_STATE_ACTIVE
+        self.deaf, self.ms, self.booting = False, self.start_ms, False
+        self.rebooting_until = 0.0
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, daemon=True)
 
@@ -200,12 +207,21 @@ class FakeVehicle:
         self.conn.close()
 
     def _heartbeat(self) -> None:
+        if time.monotonic() < self.rebooting_until:
+            return                               # rebooting: silent
         base = 1 | (128 if self.armed else 0) | (8 if self.mode == 15 else 0)
         self.conn.mav.heartbeat_send(10, 3, base, self.mode, self.system_status)
 
     def _handle(self, msg: Any) -> bool:
         """True when the message is a setpoint (it answers the tick)."""
         kind = msg.get_type()
+        if time.monotonic() < self.rebooting_until:          # rebooting: hears nothing
+            if kind == "COMMAND_LONG":
+                self.commands.append(msg)
+            return False
+        if self.deaf:
+            self.lost.append(msg)
+            return False
         if kind == "SET_POSITION_TARGET_LOCAL_NED":
             self.setpoints.append(msg)
             return True
@@ -217,8 +233,14 @@ class FakeVehicle:
             return False
         if kind == "COMMAND_LONG":
             self.commands.append(msg)
+            if self.booting and msg.command in (176, 400):
+                # a rebooted autopilot still starting: no mode change, no arming yet
+                self.conn.mav.command_ack_send(msg.command, 4)        # MAV_RESULT_FAILED
+                return False
             if msg.command == 511:
                 self.streaming = True
+            elif msg.command == 512 and int(msg.param1) == 2:     # SYSTEM_TIME, once
+                self.conn.mav.system_time_send(0, self.ms)
             elif msg.command == 176:
                 self.mode = int(msg.param2)
             elif msg.command == 400:
@@ -247,10 +269,16 @@ class FakeVehicle:
             tick = {"x": 0.0, "y": 0.0, "vx": 0.0, "yaw": 0.0, "ms": ms, "sysid": 1}
             if self.script is not None:
                 tick.update(self.script(k, ms) or {})
-            if tick.get("restart"):
+            if tick.get("restart") or tick.get("reboot"):
                 ms = tick["ms"]
                 tick["ms"] = ms
                 self.mode, self.armed = 0, False
+                if tick.get("reboot"):
+                    self.streaming, self.ms, self.booting = False, ms, True
+                    self.rebooting_until = time.monotonic() + self.reboot_gap
+                    continue
+            self.ms = tick["ms"]
+            self.deaf = bool(tick.get("deaf"))
             mav = self.conn.mav
             if "status" in tick:
                 self.system_status = tick["status"]

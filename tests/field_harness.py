@@ -4,12 +4,16 @@ the simulator's truth (SIMSTATE) in metres, and the figures read from a companio
 The proxy listens on a free loopback port and keeps one upstream connection to the autopilot
 (opened with the first client, reused by the next: ArduPilot SITL's SERIAL0 serves one client).
 ``stall()`` stops reading both ways (a radio fade under TCP: what each side writes queues in the
-kernel and arrives in a burst on ``resume()``); ``drop()`` closes the companion's connection as
-an autopilot that dropped it would, and accepts the next one.
+kernel and arrives in a burst on ``resume()``); ``stall(TO_COMPANION)`` holds only what the
+vehicle sends (the companion hears nothing, its setpoints still arrive), ``stall(TO_VEHICLE)``
+only what the companion sends (it hears the vehicle, nothing of its own arrives); ``drop()``
+closes the companion's connection as an autopilot that dropped it would, and accepts the next
+one.
 """
 
 from __future__ import annotations
 
+import csv
 import math
 import select
 import socket
@@ -17,6 +21,7 @@ import threading
 from typing import Any
 
 EARTH = 6378100.0      # m: ArduPilot's flat-earth radius (AP_Common/Location.cpp)
+BOTH, TO_COMPANION, TO_VEHICLE = "both", "to_companion", "to_vehicle"   # what a stall holds
 
 
 class StallProxy:
@@ -30,6 +35,7 @@ class StallProxy:
         self.client: socket.socket | None = None
         self.upstream: socket.socket | None = None
         self.stalled = threading.Event()
+        self.held = BOTH                      # which way(s) a stall holds
         self.clients = 0                      # connections accepted
         self._stop = threading.Event()
         self._lock = threading.Lock()
@@ -50,7 +56,11 @@ class StallProxy:
             if s is not None:
                 s.close()
 
-    def stall(self) -> None:
+    def stall(self, direction: str = BOTH) -> None:
+        """Stop reading ``direction``: BOTH, TO_COMPANION (the vehicle's bytes) or TO_VEHICLE
+        (the companion's bytes); what is held queues in the kernel until :meth:`resume`."""
+        assert direction in (BOTH, TO_COMPANION, TO_VEHICLE), direction
+        self.held = direction
         self.stalled.set()
 
     def resume(self) -> None:
@@ -68,7 +78,10 @@ class StallProxy:
             with self._lock:
                 socks = [self.listener] + [s for s in (self.client, self.upstream) if s]
             if self.stalled.is_set():
-                socks = [self.listener]
+                # not read: the held side's bytes stay in the kernel (TCP's own back-pressure)
+                held = {BOTH: (self.client, self.upstream), TO_COMPANION: (self.upstream,),
+                        TO_VEHICLE: (self.client,)}[self.held]
+                socks = [s for s in socks if s not in held]
             ready, _, _ = select.select(socks, [], [], 0.02)
             for s in ready:
                 if s is self.listener:
@@ -111,6 +124,29 @@ def simstate_xy(msg: Any, origin: Any) -> tuple[float, float]:
     de = ((msg.lng - origin.lng) * 1e-7 * math.pi / 180 * EARTH
           * math.cos(origin.lat * 1e-7 * math.pi / 180))
     return dn, de
+
+
+def _tracked_rows(csv_path: str) -> list[tuple[float, float, float]]:
+    """(vehicle time, mission time, err_pos) of each tracked cycle in a companion's flight csv."""
+    with open(csv_path, newline="") as f:
+        return [(float(row["vehicle_time"]), float(row["mission_time"]), float(row["err_pos"]))
+                for row in csv.DictReader(f) if row["mission_time"]]
+
+
+def largest_error(csv_path: str, after_s: float) -> float:
+    """The companion's largest position error (its flight csv's ``err_pos``) from mission time
+    ``after_s`` on."""
+    return max((e for _, mt, e in _tracked_rows(csv_path) if mt >= after_s), default=math.nan)
+
+
+def held_reference(csv_path: str) -> tuple[float, float]:
+    """Across the longest pause in tracking (between two tracked cycles of the companion's csv):
+    (vehicle seconds it lasted, mission seconds the reference moved meanwhile). A reference
+    held while the rover was stopped moves by one cycle at most; one that ran on moves as far
+    as the vehicle's clock."""
+    rows = _tracked_rows(csv_path)
+    gaps = [(b[0] - a[0], b[1] - a[1]) for a, b in zip(rows, rows[1:], strict=False)]
+    return max(gaps, default=(0.0, 0.0))
 
 
 class UdpStallProxy:

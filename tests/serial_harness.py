@@ -5,7 +5,9 @@ end's slave device (``/dev/pts/N``) is what a process opens as its serial port. 
 cable moves at most ``baud / 10`` bytes a second each way (8N1: ten bits a byte) and holds at most
 ``buffer`` bytes in flight per direction: what a UART cannot carry is dropped and counted, as on
 a real wire whose receiver falls behind. The test keeps each slave open itself (raw mode, no echo)
-so the ptys never hang up between the processes' opens and closes.
+so the ptys never hang up between the processes' opens and closes. ``stall()`` loses every byte
+both ways until ``resume()`` (a telemetry radio's fade: the UARTs go on draining at their pace,
+nothing queues, nothing blocks a writer); what it lost is counted in ``lost``.
 """
 
 from __future__ import annotations
@@ -34,6 +36,8 @@ class PtyCable:
             self.paths.append(os.ttyname(slave))
         self.carried = [0, 0]     # bytes delivered: [end 0 -> end 1, end 1 -> end 0]
         self.dropped = [0, 0]
+        self.lost = [0, 0]        # bytes lost to a stall, per direction
+        self.stalled = threading.Event()
         self._queues: list[deque] = [deque(), deque()]   # (due time, bytes) per direction
         self._free_at = [0.0, 0.0]                        # when the wire is idle again
         self._stop = threading.Event()
@@ -58,6 +62,14 @@ class PtyCable:
             os.close(fd)
         self._fds = []
 
+    def stall(self) -> None:
+        """Lose every byte both ways from now on (read and thrown away, as a fading radio
+        does), and what is still on the wire."""
+        self.stalled.set()
+
+    def resume(self) -> None:
+        self.stalled.clear()
+
     def _queued(self, direction: int) -> int:
         return sum(len(chunk) for _, chunk in self._queues[direction])
 
@@ -79,6 +91,9 @@ class PtyCable:
         queue, out = self._queues[direction], self.masters[1 - direction]
         while queue and queue[0][0] <= now:
             _, chunk = queue.popleft()
+            if self.stalled.is_set():
+                self.lost[direction] += len(chunk)
+                continue
             try:
                 written = os.write(out, chunk)
             except BlockingIOError:
@@ -100,6 +115,9 @@ class PtyCable:
                     try:
                         data = os.read(master, 65536)
                     except (BlockingIOError, OSError):
+                        continue
+                    if self.stalled.is_set():
+                        self.lost[direction] += len(data)
                         continue
                     self._take(direction, data, now)
 

@@ -19,7 +19,14 @@ from pathlib import Path
 import pytest
 
 from ardupilot_harness import CompanionProcess, GroundStation, circle_mission, ground_speed
-from field_harness import StallProxy, simstate_xy
+from field_harness import (
+    TO_COMPANION,
+    TO_VEHICLE,
+    StallProxy,
+    held_reference,
+    largest_error,
+    simstate_xy,
+)
 from safety_harness import read_tlog
 
 SPEEDUP = 2
@@ -259,3 +266,107 @@ def test_a_tcp_connection_the_autopilot_dropped_is_reopened(ardupilot, tmp_path)
     assert code == 0 and r["reason"] == "mission_done", comp.stderr
     assert r["tcp_reconnects"] >= 1 and proxy.clients >= 2
     assert "reopened" in comp.stderr
+
+
+@pytest.mark.sitl
+@pytest.mark.slow
+@pytest.mark.parametrize("held", [TO_COMPANION, TO_VEHICLE])
+def test_a_one_way_tcp_stall_stops_the_rover_and_the_mission_completes(ardupilot, tmp_path,
+                                                                      held):
+    """10 s (vehicle) of one direction held. TO_COMPANION: the companion hears nothing, its own
+    zero setpoint and HOLD reach the vehicle at once; TO_VEHICLE: it hears everything and nothing
+    of its own arrives, so ArduPilot's guided timeout stops the rover after 3 s."""
+    stall_s = 10.0
+    sitl = ardupilot(speedup=SPEEDUP)
+    mission = circle_mission(tmp_path / "circle.toml", duration=50.0)
+    with StallProxy(("127.0.0.1", sitl.ports["serial0"])) as proxy, \
+            _companion(proxy.url, tmp_path, mission) as comp, GroundStation(sitl) as gs:
+        _watch(gs)
+        _tracking_for(gs, 15.0)
+        t_stall = time.monotonic()
+        proxy.stall(held)
+        _vehicle_seconds(gs, stall_s)
+        proxy.resume()
+        t_back = time.monotonic()
+        code = comp.wait(180.0)
+        r = comp.result()
+        poses = [(w, m) for w, m in _seen(gs, "LOCAL_POSITION_NED", t_stall) if w <= t_back]
+        after = [m for w, m in _seen(gs, "LOCAL_POSITION_NED", t_back)]
+        modes = [m.custom_mode for w, m in _seen(gs, "HEARTBEAT", t_stall) if w <= t_back]
+    t0 = poses[0][1].time_boot_ms
+    speeds = [ground_speed(m) for _, m in poses]
+    # the rover is stopped from here on (ms into the stall): TO_COMPANION by the companion's
+    # own zero setpoint and HOLD (its 0.5 s stale timeout, 1 s of vehicle time, then braking);
+    # TO_VEHICLE by ArduPilot's 3 s guided timeout, then braking
+    stop_from = 4000 if held == TO_COMPANION else 6000
+    late = [ground_speed(m) for _, m in poses if m.time_boot_ms >= t0 + stop_from]
+    stopped_at = next((m.time_boot_ms - t0 for _, m in poses
+                       if all(ground_speed(n) < 0.2 for _, n in poses
+                              if n.time_boot_ms >= m.time_boot_ms)), None)
+    after_max = max((ground_speed(m) for m in after), default=0.0)
+    err = largest_error(r["csv"], 5.0)
+    paused_s, ref_moved_s = held_reference(r["csv"])
+    print(f"\nTCP stall {stall_s:g} s, {held} held: speed at the start {speeds[0]:.2f} m/s, "
+          f"below 0.2 m/s from {stopped_at / 1e3 if stopped_at is not None else float('nan'):.1f}"
+          f" s into the stall, max {max(late):.2f} m/s from {stop_from / 1e3:g} s on; HOLD "
+          f"{'seen' if HOLD in modes else 'not seen'} during the stall; max speed after it "
+          f"{after_max:.2f} m/s; tracking paused {paused_s:.1f} s (vehicle), the reference moved "
+          f"{ref_moved_s:.3f} s meanwhile; largest tracking error from 5 s of mission on "
+          f"{err:.2f} m; exit {code}: {r['reason']}, failsafes {r['failsafes']}, "
+          f"{r['duration_s']:.1f} s of mission tracked")
+    assert code == 0 and r["reason"] == "mission_done", comp.stderr
+    assert "pilot took over" not in comp.stderr
+    assert r["duration_s"] >= 50.0 - 1e-6
+    assert max(late) < 0.2, late
+    assert max(speeds) <= 2.0 + 0.2, speeds
+    # the reference was held while the rover stood (TO_VEHICLE: from ArduPilot's guided
+    # timeout, 3 s in, when the companion hears of it); without the hold it ran on 10 s and
+    # the rover chased it at 1.7 m/s, 5.6 m behind
+    assert paused_s >= stall_s - 4.0 and ref_moved_s <= 0.1, (paused_s, ref_moved_s)
+    if held == TO_COMPANION:
+        assert "telemetry stale" in comp.stderr
+        assert HOLD in modes, modes        # the companion's own HOLD, obeyed during the stall
+    else:
+        assert "our setpoints stopped arriving" in comp.stderr
+
+
+@pytest.mark.sitl
+@pytest.mark.slow
+def test_an_autopilot_reboot_mid_mission_ends_the_run_not_resumed(ardupilot, tmp_path):
+    """A ground station reboots the armed autopilot (MAV_CMD_PREFLIGHT_REBOOT_SHUTDOWN with
+    ArduPilot's force value 20190226 in y: refused while armed without it). SITL re-executes
+    itself without -w (parameters kept), drops its TCP connections and boots again once the
+    companion has reopened SERIAL0. The companion must end the run with exit 7, not resume."""
+    sitl = ardupilot(speedup=SPEEDUP)
+    mission = circle_mission(tmp_path / "circle.toml", duration=60.0)
+    with _companion(sitl.url(0), tmp_path, mission, "--lost-timeout", "60") as comp, \
+            GroundStation(sitl) as gs:
+        _watch(gs)
+        ms_reboot = _tracking_for(gs, 15.0)
+        t_reboot = time.monotonic()
+        with gs._lock:
+            gs.mav.command_int_send(1, 1, 0, 246, 0, 0, 1.0, 0.0, 0.0, 0.0, 0, 20190226, 0.0)
+        code = comp.wait(180.0)
+        took = time.monotonic() - t_reboot
+        r = comp.result()
+        acks = [m.result for m in gs.messages("COMMAND_ACK", t_reboot) if m.command == 246]
+    frames, _ = read_tlog(Path(r["tlog"]))
+    # the companion's tlog from the vehicle's first message after the reboot that carries its
+    # clock (its clock behind the reboot's); what the companion asked for from there on
+    clocked = [(i, m.time_boot_ms) for i, (_, m) in enumerate(frames)
+               if m.get_type() in ("ATTITUDE", "LOCAL_POSITION_NED", "SYSTEM_TIME")
+               and m.get_srcComponent() == 1]
+    rebooted = next(j for j, (_, ms) in enumerate(clocked) if ms >= ms_reboot - 1000)
+    back = next((i for i, ms in clocked[rebooted:] if ms < ms_reboot - 5000), None)
+    asked = [m for _, m in frames[back or len(frames):]
+             if m.get_type() == "COMMAND_LONG" and m.get_srcComponent() == 191
+             and (m.command == 400 or (m.command == 176 and int(m.param2) == GUIDED))]
+    clock = (f"its clock read {frames[back][1].time_boot_ms / 1e3:.1f} s "
+             f"({frames[back][1].get_type()})" if back is not None else "its clock never read")
+    print(f"\nAutopilot rebooted {ms_reboot / 1e3:.1f} s after boot (ACK {acks}): exit {code} "
+          f"{took:.1f} s later ({clock}): {r['reason']}; reconnects {r.get('tcp_reconnects')}, "
+          f"failsafes {r['failsafes']}; GUIDED / arm requests after the reboot: {len(asked)}")
+    assert acks[:1] == [0], acks
+    assert code == 7 and r["reason"].startswith("vehicle_restarted"), comp.stderr
+    assert "pilot took over" not in comp.stderr and "it rebooted" in comp.stderr
+    assert back is not None and not asked, asked

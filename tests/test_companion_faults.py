@@ -156,3 +156,47 @@ def test_a_non_finite_command_is_never_sent(tmp_path):
     assert fake.setpoints and all(finite_setpoint(sp) for sp in fake.setpoints)
     assert all(is_zero(sp) for sp in fake.setpoints)
     assert any(is_mode_command(c, HOLD) for c in fake.commands)
+
+
+def test_a_reboot_that_streams_nothing_is_told_from_a_pilot_by_its_clock(tmp_path):
+    """As ArduPilot SITL reboots (tests/test_ardupilot_field_faults.py): back in MANUAL,
+    disarmed, streaming nothing (the companion's message rates died with it), refusing modes
+    while it starts. Its mode alone looks like a pilot's; the companion reads its clock
+    (MAV_CMD_REQUEST_MESSAGE SYSTEM_TIME) before saying who, and ends with exit 7."""
+    mission = ellipse_mission(tmp_path / "m.toml", 30.0)
+
+    def reboot(k, ms):
+        return {"reboot": True, "ms": 40} if k == 80 else None
+
+    port = free_udp_port()
+    with Companion(port, "--arm", "--json", "--mission", str(mission)) as comp, \
+            FakeVehicle(port, script=reboot) as fake:
+        assert comp.wait(30.0) == 7, comp.stderr
+        r = comp.result()
+    assert r["reason"].startswith("vehicle_restarted"), r
+    assert "pilot took over" not in comp.stderr and "it rebooted" in comp.stderr
+    asked = [c for c in fake.commands if c.command == 512 and int(c.param1) == 2]
+    assert asked, "the clock was never asked for"
+    # not resumed: no GUIDED request nor arming after the clock was asked for
+    after = fake.commands[fake.commands.index(asked[0]):]
+    assert not any(is_mode_command(c, 15) or c.command == 400 for c in after)
+
+
+def test_a_pilot_who_takes_a_silent_vehicle_is_not_asked_anything(tmp_path):
+    """The mode changes while telemetry flowed (a pilot, as far as anyone can tell) and the
+    stream stops with it: the companion listens for the vehicle's clock but asks nothing of a
+    vehicle someone else now drives (no MAV_CMD_REQUEST_MESSAGE), and it ends as a pilot's."""
+    mission = ellipse_mission(tmp_path / "m.toml", 30.0)
+
+    def takeover(k, ms):
+        if k >= 80:
+            return {"mode": 0, "silent": True} if k == 80 else {"silent": True}
+        return None
+
+    port = free_udp_port()
+    with Companion(port, "--arm", "--json", "--mission", str(mission)) as comp, \
+            FakeVehicle(port, script=takeover) as fake:
+        assert comp.wait(30.0) == 4, comp.stderr
+        r = comp.result()
+    assert r["reason"] == "pilot_override: mode changed to MANUAL by someone else", r
+    assert not any(c.command == 512 for c in fake.commands)

@@ -199,3 +199,35 @@ def test_a_position_that_never_comes_ends_the_run_with_exit_6_and_says_what_to_d
     assert "--estimate-wait" in r["reason"]
     assert not [c for c in fake.commands if c.command == 400 and c.param1 == 1]   # never armed
     assert all(is_zero(sp) for sp in fake.setpoints)
+
+
+def test_our_setpoints_lost_one_way_pause_until_the_vehicle_hears_us_again(tmp_path):
+    """The link is silent towards the vehicle only (telemetry flows): ArduPilot stops the rover
+    in GUIDED and says "target not received last 3secs, stopping". The companion pauses at
+    once (zero setpoint, HOLD asked, the reference held) and resumes only once the vehicle has
+    its HOLD (the link carries its messages again); the mission completes."""
+    def script(k, ms):
+        if 120 <= k < 200:
+            tick = {"deaf": True}
+            if k == 160:
+                tick["text"] = "target not received last 3secs, stopping"
+            return tick
+        return None
+
+    code, r, comp, fake = run(tmp_path, script)
+    assert code == 0 and r["reason"] == "mission_done", comp.stderr
+    assert "our setpoints stopped arriving" in comp.stderr and r["failsafes"] == 1
+    assert "pilot took over" not in comp.stderr
+    t_text = fake.sent_ms[160][0]
+    lost_after = [m for m in fake.lost if m.get_type() == "SET_POSITION_TARGET_LOCAL_NED"
+                  and m.time_boot_ms > t_text]
+    # from the text on, zero setpoints only while nothing arrives (the reference held) ...
+    assert lost_after and all(is_zero(sp) for sp in lost_after)
+    assert any(is_mode_command(c, HOLD) for c in fake.lost if c.get_type() == "COMMAND_LONG")
+    # ... and once it hears again: the HOLD, then GUIDED, then tracking from where it was held
+    heard = [c for c in fake.commands if c.command == 176]
+    first_hold = next(i for i, c in enumerate(heard) if is_mode_command(c, HOLD))
+    assert any(is_mode_command(c, GUIDED) for c in heard[first_hold:])
+    t_back = fake.sent_ms[200][0]
+    assert any(not is_zero(sp) for sp in fake.setpoints if sp.time_boot_ms > t_back)
+    assert r["duration_s"] >= 8.0 - 1e-6

@@ -161,3 +161,26 @@ def test_px4_offboard_loss_while_our_link_is_silent_is_the_link():
     # ArduPilot never leaves GUIDED on silence: HOLD while silent is ours
     a = fs(AP)
     assert a.who_left("HOLD", "HOLD", 0.0, True, True)[0] == health.OURS
+
+
+def test_a_guided_timeout_text_says_our_setpoints_stopped_arriving():
+    """ArduPilot stops the rover inside GUIDED when the setpoints stop for 3 s and says so:
+    the companion's link is silent towards the vehicle. PX4's offboard loss leaves OFFBOARD
+    instead, which its mode says (who_left), so its text is not read this way."""
+    fs = health.FailsafeWatch(AP.failsafe)
+    cause = fs.text("target not received last 3secs, stopping", now=1.0)
+    assert cause == "guided_timeout" and fs.setpoints_lost(cause)
+    assert not fs.setpoints_lost(fs.text("EKF failsafe", now=2.0))
+    assert not fs.setpoints_lost(fs.text("Throttle armed", now=3.0))      # no cause at all
+    px = health.FailsafeWatch(PX.failsafe)
+    cause = px.text("Connection to offboard lost", now=1.0)
+    assert cause in PX.failsafe.link_causes and not px.setpoints_lost(cause)
+
+
+def test_a_clock_more_than_a_second_back_is_a_reboot():
+    from companion.live.telemetry import RESTART_JUMP_MS, clock_went_back
+    assert clock_went_back(70_000, 3_000)
+    assert clock_went_back(70_000, 70_000 - RESTART_JUMP_MS - 1)
+    assert not clock_went_back(70_000, 70_000 - RESTART_JUMP_MS)      # reordering, not a reboot
+    assert not clock_went_back(70_000, 70_040)                        # the clock goes on
+    assert not clock_went_back(None, 3_000)                           # nothing to compare with

@@ -18,7 +18,9 @@ import pytest
 from companion.errors import UserError
 from companion.mav.connection import DEFAULT_BAUD, serial_target
 from companion_harness import ROOT, Companion
+from field_harness import held_reference, largest_error
 from serial_harness import PtyCable
+from sitl_common import ground_speed
 from test_companion_run import MISSION, batch_twin
 
 QUICK = ("--mission", "missions/circle.toml", "--no-zenoh", "--no-log",
@@ -235,27 +237,31 @@ def test_not_a_terminal_and_bad_baud_are_one_line(tmp_path):
     assert p.returncode == 2 and "argument --baud: must be > 0" in p.stderr, p.stderr
 
 
+def _serial_sitl(workdir: Path, device: str, speedup: float):
+    """ArduPilot SITL with its SERIAL2 (its own UART driver, MAVLink 2 at 921600) on
+    ``device``; SERIAL0 (TCP) is for a ground station, which SITL needs before it boots."""
+    from ardupilot_harness import ArduPilotSITL
+
+    class SerialSITL(ArduPilotSITL):
+        def argv(self) -> list[str]:
+            return super().argv() + ["--serial2", f"uart:{device}:921600"]
+
+    return SerialSITL(workdir, speedup=speedup,
+                      params={"SERIAL2_PROTOCOL": 2, "SERIAL2_BAUD": 921})
+
+
 @pytest.mark.sitl
 @pytest.mark.slow
 def test_ardupilot_sitl_over_its_own_uart_driver(tmp_path):
     """ArduPilot SITL's SERIAL2 is its UART driver on one end of the cable (a real autopilot's
     serial code, MAVLink 2 at 921600), the companion on the other; SERIAL0 (TCP) is a ground
     station, which SITL needs before it boots."""
-    from ardupilot_harness import ArduPilotSITL, GroundStation, circle_mission
-
-    class SerialSITL(ArduPilotSITL):
-        def __init__(self, workdir, device: str, **kw):
-            super().__init__(workdir, **kw)
-            self.device = device
-
-        def argv(self) -> list[str]:
-            return super().argv() + ["--serial2", f"uart:{self.device}:921600"]
+    from ardupilot_harness import GroundStation, circle_mission
 
     speedup = 2
     mission = circle_mission(tmp_path / "circle.toml", duration=20.0)
     with PtyCable(baud=921600) as cable, \
-            SerialSITL(tmp_path / "ardupilot", cable.paths[0], speedup=speedup,
-                       params={"SERIAL2_PROTOCOL": 2, "SERIAL2_BAUD": 921}).start() as sitl, \
+            _serial_sitl(tmp_path / "ardupilot", cable.paths[0], speedup).start() as sitl, \
             GroundStation(sitl, serial=0), \
             Companion(None, "--baud", "921600", "--mission", str(mission), "--arm", "--json",
                       "--no-zenoh", "--log-dir", str(tmp_path / "logs"), "--arm-timeout",
@@ -271,3 +277,65 @@ def test_ardupilot_sitl_over_its_own_uart_driver(tmp_path):
     print(f"\nArduPilot SITL over a 921600-baud pty: steady RMS {r['steady_rms']:.3f} m, "
           f"f_cost {r['f_cost']:.3f}, {r['cycles']} cycles, missed {r['missed_cycles']}, "
           f"loop {r['loop_rate_hz']:.1f} Hz; bytes carried {cable.carried}")
+
+
+@pytest.mark.sitl
+@pytest.mark.slow
+def test_a_serial_link_stall_stops_the_rover_and_the_mission_completes(tmp_path):
+    """Issue 21's link stall on a serial link: the cable between ArduPilot SITL's UART and the
+    companion loses every byte both ways for 10 s of vehicle time (a telemetry radio's fade:
+    nothing queues, unlike TCP), 15 s into tracking. ArduPilot's guided timeout stops the rover
+    3 s in; the companion's stale-telemetry failsafe holds its reference; once bytes flow again
+    it re-engages GUIDED and the mission completes. The ground station on SERIAL0 (TCP) watches
+    the pose and times the stall on the vehicle's clock."""
+    from ardupilot_harness import GUIDED, GroundStation, circle_mission
+
+    speedup, stall_s = 2, 10.0
+    mission = circle_mission(tmp_path / "circle.toml", duration=40.0)
+    with PtyCable(baud=921600) as cable, \
+            _serial_sitl(tmp_path / "ardupilot", cable.paths[0], speedup).start() as sitl, \
+            GroundStation(sitl, serial=0) as gs, \
+            Companion(None, "--baud", "921600", "--mission", str(mission), "--arm", "--json",
+                      "--no-zenoh", "--log-dir", str(tmp_path / "logs"), "--arm-timeout",
+                      "120", url=cable.paths[1]) as comp:
+        deadline = time.monotonic() + 60.0
+        while True:      # SITL may not answer at once on a loaded machine (set-up)
+            try:
+                assert gs.set_rate(32, 10.0) == 0          # LOCAL_POSITION_NED
+                break
+            except AssertionError:
+                assert time.monotonic() < deadline, sitl.log_tail()
+        gs.wait_for("HEARTBEAT", lambda m: m.custom_mode == GUIDED and m.base_mode & 128, 150.0)
+        moving = gs.wait_for("LOCAL_POSITION_NED", lambda m: ground_speed(m) > 0.5, 60.0)
+        gs.wait_for("LOCAL_POSITION_NED",
+                    lambda m: m.time_boot_ms >= moving.time_boot_ms + 15_000, 60.0)
+        t_stall = time.monotonic()
+        cable.stall()
+        first = gs.wait_for("LOCAL_POSITION_NED", timeout=10.0, after=t_stall)
+        gs.wait_for("LOCAL_POSITION_NED",
+                    lambda m: m.time_boot_ms >= first.time_boot_ms + 1000 * stall_s - 100, 60.0)
+        cable.resume()
+        t_back = time.monotonic()
+        code = comp.wait(180.0)
+        r = comp.result()
+        poses = gs.messages("LOCAL_POSITION_NED", t_stall)
+        poses = [m for m in poses if m.time_boot_ms <= first.time_boot_ms + 1000 * stall_s]
+        lost = list(cable.lost)
+    t0 = poses[0].time_boot_ms
+    late = [ground_speed(m) for m in poses if m.time_boot_ms >= t0 + 6000]
+    err = largest_error(r["csv"], 5.0)
+    paused_s, ref_moved_s = held_reference(r["csv"])
+    print(f"\nSerial stall {stall_s:g} s (921600-baud pty, both ways lost: {lost} bytes): speed "
+          f"at the start {ground_speed(poses[0]):.2f} m/s, max {max(late):.2f} m/s from 6 s on; "
+          f"tracking paused {paused_s:.1f} s (vehicle), the reference moved {ref_moved_s:.3f} s "
+          f"meanwhile; largest tracking error from 5 s of mission on {err:.2f} m (the rover ran "
+          f"on its last setpoint for ArduPilot's 3 s guided timeout); exit {code}: "
+          f"{r['reason']}, failsafes {r['failsafes']}, {r['duration_s']:.1f} s of mission "
+          f"tracked, {t_back - t_stall:.1f} s wall")
+    assert code == 0 and r["reason"] == "mission_done", comp.stderr + sitl.log_tail()
+    assert "telemetry stale" in comp.stderr and "pilot took over" not in comp.stderr
+    assert r["duration_s"] >= 40.0 - 1e-6
+    assert min(lost) > 0, lost
+    assert max(late) < 0.2, late
+    # resumed from the held reference: the mission clock stood still through the stall
+    assert paused_s >= stall_s - 1.0 and ref_moved_s <= 0.1, (paused_s, ref_moved_s)

@@ -135,6 +135,15 @@ class FailsafeWatch:
     def heartbeat(self, system_status: int) -> None:
         self.critical = system_status in self.facts.states
 
+    def setpoints_lost(self, cause: str | None) -> bool:
+        """A text of ``cause`` (:meth:`text`'s answer) says the companion's setpoints stopped
+        reaching the vehicle while it stays in the track mode (ArduPilot's guided timeout:
+        "target not received last 3secs, stopping"): the link is silent towards the vehicle
+        though telemetry still flows. An autopilot that leaves the track mode on that silence
+        (PX4's offboard loss) says so by its mode instead (:meth:`who_left`)."""
+        return (cause is not None and cause in self.facts.link_causes
+                and not self.facts.leaves_on_silence)
+
     def active(self, now: float) -> tuple[str, str] | None:
         """(cause, what says so) of the autopilot's failsafe holding the vehicle, or None.
         A failsafe text counts for :data:`TEXT_MEMORY` s unless a "cleared" text followed it;

@@ -331,6 +331,10 @@ class Link:
             raise UserError(f"the vehicle has no mode {name!r}")
         self.command(mavlink.MAV_CMD_DO_SET_MODE, *self.vehicle.profile.set_mode_params(mode))
 
+    def request_message(self, msg_id: int) -> None:
+        """MAV_CMD_REQUEST_MESSAGE: the vehicle sends ``msg_id`` once (not waiting for it)."""
+        self.command(mavlink.MAV_CMD_REQUEST_MESSAGE, msg_id)
+
     def mode_names(self) -> set[str]:
         return set(self._modes.names())
 

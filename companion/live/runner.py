@@ -63,11 +63,19 @@ from .config import RunnerConfig
 from .events import ControlChannel, ControlRequest, LoopRecord, Sink, StatusEvent
 from .link import Link
 from .stats import TrackingStats
-from .telemetry import Sample, TelemetryCheck
+from .telemetry import Sample, TelemetryCheck, clock_went_back
 
 _finite = math.isfinite
 REBOOTED = ("vehicle_restarted: time_boot_ms went back (the autopilot rebooted); not resuming a "
             "mission on a rebooted vehicle")
+# Before a mode change is called a pilot's, the vehicle's clock is read (a rebooted autopilot
+# comes back in its boot mode, disarmed, and after a reboot streams nothing it was asked for):
+# from its stream for CLOCK_LISTEN wall s, then, if it had fallen silent before the mode
+# change (a reboot's gap; never a vehicle a pilot took while it streamed), asked for
+# SYSTEM_TIME; CLOCK_WAIT in all.
+CLOCK_KINDS = ("SYSTEM_TIME", "ATTITUDE", "LOCAL_POSITION_NED")
+CLOCK_LISTEN = 0.5
+CLOCK_WAIT = 3.0
 TIMER_EVERY = 0.02     # wall s: timers run at least this often even while messages pour in
 MAX_WAIT = 0.05        # wall s: the longest sleep (so stop requests are seen promptly)
 # vehicle s of telemetry the first engagement waits for the estimator's first report (asked for
@@ -158,8 +166,11 @@ class Stopping:
     wants_hold: bool = False              # _finish asked for the hold mode
     hold_confirmed: bool = False          # by an ACK or a heartbeat
     cause: str = "telemetry"              # the failsafe's: telemetry, heartbeat, estimate,
-    #                                       link (the autopilot's setpoint-loss), autopilot
+    #                                       link (the autopilot's setpoint-loss), setpoints
+    #                                       (the vehicle says ours stopped arriving), autopilot
     autopilot: str | None = None          # the autopilot's failsafe holding the vehicle (why)
+    unjudged: str | None = None           # a pilot's doing? (why) until the clock is read
+    ask_clock: bool = False               # the vehicle was silent then: its clock may be asked
 
 
 @dataclass(slots=True)
@@ -276,6 +287,8 @@ class Runner:
             raise
         finally:
             gc.unfreeze()
+        if self.stopping.unjudged is not None:
+            self._judge_override(self.stopping.unjudged)
         self._wait_for_hold()
         assert self.outcome is not None   # the loop ends only through _finish
         self._emit(ev.STOPPED, self.outcome.reason,
@@ -326,7 +339,13 @@ class Runner:
             elif kind == "STATUSTEXT" and link.is_vehicle(msg):
                 text = "".join(c if c.isprintable() else "?" for c in msg.text)
                 self.log("vehicle says: " + text)
-                self.autopilot_fs.text(text, t_read)
+                cause = self.autopilot_fs.text(text, t_read)
+                if self.state is State.TRACKING and self.autopilot_fs.setpoints_lost(cause):
+                    # telemetry flows but our setpoints do not arrive: the reference is held
+                    # until the vehicle answers us again (our HOLD: see _may_recover)
+                    self._failsafe(t_read, f'the vehicle says our setpoints stopped arriving '
+                                   f'("{text}"): the link is silent towards it',
+                                   cause="setpoints")
             if t_read >= self.timers.next_timer:
                 self._timers(t_read)
 
@@ -585,7 +604,8 @@ class Runner:
         stopping = self.stopping
         out = time.perf_counter() - stopping.failsafe_since
         what = {"estimate": "estimate healthy again", "autopilot": "autopilot failsafe cleared",
-                "link": "link back"}.get(stopping.cause, "telemetry back")
+                "link": "link back", "setpoints": "the vehicle answers the companion again"
+                }.get(stopping.cause, "telemetry back")
         self.log(f"{what} after {out:.2f} s; "
                  f"re-engaging {self.track_mode} with the filter and integrators reset")
         need_ack = not stopping.hold_confirmed and stopping.cause != "autopilot"
@@ -601,6 +621,8 @@ class Runner:
         no autopilot failsafe holding it unless --retake-after-failsafe and it cleared)."""
         if not self._heartbeat_fresh(now) or not self.estimate.healthy(now):
             return False
+        if self.stopping.cause == "setpoints" and not self.stopping.hold_confirmed:
+            return False   # until the vehicle has our HOLD: our messages reach it again
         if self.stopping.autopilot is not None:
             return self.config.retake_after_failsafe and self.autopilot_fs.cleared(now)
         active = self.autopilot_fs.active(now)
@@ -696,6 +718,10 @@ class Runner:
             self._finish(f"autopilot_failsafe: {stopping.autopilot} and not cleared within "
                          f"{cfg.lost_timeout:g} s", ExitCode.AUTOPILOT_FAILSAFE, hold=False,
                          stop=False)
+        elif stopping.cause == "setpoints":
+            self._finish(f"failsafe: the vehicle did not answer the companion for "
+                         f"{cfg.lost_timeout:g} s (its setpoints stopped arriving)",
+                         ExitCode.FAULT)
         else:
             self._finish(f"failsafe: telemetry lost for {cfg.lost_timeout:g} s", ExitCode.FAULT)
 
@@ -799,9 +825,47 @@ class Runner:
         # The pilot has the vehicle: not one more setpoint (not even a zero one), no mode
         # request. Setpoints outside GUIDED / OFFBOARD are ignored anyway, but a companion
         # that keeps talking to a vehicle someone else drives is one bug away from fighting.
+        # The loop ends here; a rebooted autopilot looks the same (its boot mode, disarmed)
+        # until its clock is read, after the loop (_judge_override).
+        self.stopping.unjudged = why
+        self.stopping.ask_clock = (time.perf_counter() - self.heard.sample_wall
+                                   > self.config.stale_timeout)
+        self.stopping.wants_hold = False
+        self.state = State.DONE
+        self.outcome = Outcome(f"pilot_override: {why}", ExitCode.PILOT_OVERRIDE, False,
+                               self.counters.failsafes)
+
+    def _judge_override(self, why: str) -> None:
+        """A pilot, or a reboot? The vehicle's clock decides; then end with that reason."""
+        self.stopping.unjudged = None
+        last_ms = self.telemetry.last_ms
+        clock_ms = self._read_vehicle_clock(ask=self.stopping.ask_clock)
+        if clock_ms is not None and clock_went_back(last_ms, clock_ms):
+            self.log(f"the vehicle's clock reads {clock_ms / 1e3:.3f} s, its last sample said "
+                     f"{(last_ms or 0) / 1e3:.3f} s: it rebooted (what looked like a pilot: {why})")
+            self._finish(REBOOTED, ExitCode.VEHICLE_RESTARTED)
+            return
         self.log(f"pilot took over ({why}): no more setpoints")
         self._emit(ev.PILOT_OVERRIDE, why)
         self._finish(f"pilot_override: {why}", ExitCode.PILOT_OVERRIDE, hold=False, stop=False)
+
+    def _read_vehicle_clock(self, ask: bool) -> int | None:
+        """The vehicle's time_boot_ms from the first of its messages that carries one, read
+        for CLOCK_LISTEN s, then (``ask``) asked for (SYSTEM_TIME), up to CLOCK_WAIT s; None
+        if none came."""
+        link, clock = self.link, time.perf_counter
+        start = clock()
+        ask_at = start + CLOCK_LISTEN
+        while (now := clock()) < start + CLOCK_WAIT:
+            msg = link.recv()
+            if msg is None:
+                if ask and now >= ask_at:
+                    link.request_message(2)          # MAVLINK_MSG_ID_SYSTEM_TIME
+                    ask_at = now + 0.5
+                link.wait(min(0.05, max(0.0, start + CLOCK_WAIT - now)))
+            elif msg.get_type() in CLOCK_KINDS and link.is_vehicle(msg):
+                return int(msg.time_boot_ms)
+        return None
 
     def _wait_for_hold(self) -> None:
         """Until HOLD shows (ACK or heartbeat), answer telemetry with zero setpoints."""

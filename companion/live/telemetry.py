@@ -130,6 +130,12 @@ class TelemetryCheck:
         self.accepted += 1
         return Sample(ms, ms * 1e-3, x, y, self._yaw, vx, vy, self._yaw_rate)
 
+    @property
+    def last_ms(self) -> int | None:
+        """The time_boot_ms of the last accepted sample (None before one, or after
+        :meth:`restart_timeline`)."""
+        return self._last_ms
+
     def restart_timeline(self) -> None:
         """Accept the next sample whatever its time (after the vehicle rebooted on purpose)."""
         self._last_ms = self._att_ms = self._jump_ms = None
@@ -138,3 +144,10 @@ class TelemetryCheck:
     @property
     def rejected_total(self) -> int:
         return sum(self.rejected.values())
+
+
+def clock_went_back(last_ms: int | None, clock_ms: int) -> bool:
+    """The vehicle's clock read as ``clock_ms`` (a SYSTEM_TIME, ATTITUDE or LOCAL_POSITION_NED
+    it sent) is more than ``RESTART_JUMP_MS`` before ``last_ms``, the last accepted sample's:
+    it rebooted. Unknown (``last_ms`` None) is not a reboot."""
+    return last_ms is not None and clock_ms < last_ms - RESTART_JUMP_MS
