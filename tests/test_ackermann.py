@@ -26,7 +26,6 @@ from companion.profiles import ackermann, ardupilot, skid
 from companion.sim.plant import LAT_ACCEL_MIN_SPEED, RoverModel, RoverParams, RoverState
 from companion.sim.vehicle_file import VehicleFile, load, save
 from companion_harness import ROOT
-from sitl_common import CANDIDATE
 from sitl_plant.testing import Pilot, PlantProcess
 
 G = 9.80665
@@ -222,7 +221,6 @@ def test_live_identify_of_a_car_on_sitl_plant_flies_at_speed_and_finds_its_radiu
 # --------------------------------------------------------------------------- ArduPilot SITL
 
 @pytest.mark.sitl
-@CANDIDATE   # run once so far
 def test_live_identify_on_ardupilot_sitl_rover_finds_a_car(ardupilot, tmp_path):
     """Stock `rover` (ArduPilot's Ackermann frame, rover.parm alone) at 5 x real time: the
     companion reads SERVO1 26 / SERVO3 70, flies the car manoeuvre within 10 m (it turns on

@@ -30,6 +30,7 @@ from companion.sim.response import respond
 from companion.sim.vehicle_file import VehicleFile, load, save
 from companion_harness import ROOT, ellipse_mission, mavlink2
 from safety_harness import read_tlog
+from sitl_common import CANDIDATE
 from sitl_plant.testing import Pilot, PlantProcess, free_udp_port
 
 # A vehicle like ArduPilot's rover-skid: every part of the model switched on (the mixer takes
@@ -419,6 +420,7 @@ def test_log_or_connect_and_a_writable_out(tmp_path):
 
 @pytest.mark.sitl
 @pytest.mark.slow
+@CANDIDATE   # 9 of 10 on 2026-12-02: yaw-rate fit 0.18 rad/s once at 5 x real time, load 6
 def test_live_identify_on_ardupilot_sitl_finds_its_own_limits(ardupilot, tmp_path):
     """Stock rover-skid at 5 x real time: the manoeuvre within 10 m, HOLD at the end, and the
     acceleration and turn-rate acceleration limits within 15 % of ArduPilot's (ATC_ACCEL_MAX 1

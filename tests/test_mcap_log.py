@@ -22,7 +22,6 @@ from mcap.reader import NonSeekingReader, make_reader  # noqa: E402
 
 from companion_harness import ROOT, Companion, Proxy, ellipse_mission, is_zero  # noqa: E402
 from safety_harness import read_tlog  # noqa: E402
-from sitl_common import CANDIDATE
 from sitl_plant.testing import PlantProcess  # noqa: E402
 
 ENV = {**os.environ, "PYTHONPATH": str(ROOT)}
@@ -159,7 +158,6 @@ def test_sigkill_of_a_run_logging_mcap_loses_at_most_100_ms(tmp_path):
 
 @pytest.mark.sitl
 @pytest.mark.slow
-@CANDIDATE   # run once so far
 def test_export_round_trips_an_ardupilot_sitl_flights_tlog(ardupilot, tmp_path):
     """A 15 s circle flown on ArduPilot Rover SITL, logged as MCAP live; its .tlog exported:
     every MAVLink message of every type is in the MCAP, counted by the mcap library."""
