@@ -743,17 +743,25 @@ class Runner:
 
     def _engage(self, now: float) -> None:
         cfg, link, e = self.config, self.link, self.engagement
-        if e.first(self.state) and self.estimate.reports == 0 and (
+        first = e.first(self.state) and not cfg.wait_for_mode
+        if first and self.estimate.reports == 0 and (
                 e.warm_t0 is None or self.heard.vehicle_t - e.warm_t0 < FIRST_REPORT_GRACE):
             return
-        if (cfg.wait_for_mode or e.first(self.state)) and not self.estimate.healthy(now):
+        if cfg.wait_for_mode:
+            # --start-on-guided / --handover: the flags alone (AUTO may reach the hand-over
+            # item soon after they clear; waiting healthy_for more would miss it)
+            problem = self.estimate.problem(now)
+        elif first and not self.estimate.healthy(now):
             problem = (self.estimate.problem(now)
                        or f"not yet healthy for {cfg.estimate_healthy_for:g} s")
+        else:
+            problem = None
+        if problem is not None:
             if not e.said_estimate_wait:
                 e.said_estimate_wait = True
                 self.log(f"waiting for a healthy position estimate before "
                          f"{'tracking' if cfg.wait_for_mode else 'engaging'} ({problem})")
-            if not cfg.wait_for_mode and now - e.since > cfg.estimate_wait:
+            if first and now - e.since > cfg.estimate_wait:
                 self._finish(f"estimate_unhealthy: no healthy position estimate within "
                              f"{cfg.estimate_wait:g} s of start ({problem}): wait for the GPS "
                              "fix and the EKF, or raise --estimate-wait",
