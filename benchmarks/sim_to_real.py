@@ -58,21 +58,25 @@ def companion(argv: list[str], timeout: float) -> dict:
     return json.loads(p.stdout.strip().splitlines()[-1])
 
 
-def wait_ready(url: str, folder: Path, timeout: float = 300) -> float:
-    """A short stand-still mission flown first, so a timed command's clock starts on a booted
-    vehicle (GPS fix, EKF position, arming checks: about 45 s on a fresh SITL, not the
-    command's time). ``--lost-timeout 120``: the companion waits out the estimate a fresh EKF
-    has not yet got (with the default 30 s it gives up: exit 6, estimate_unhealthy). The wall
-    seconds it took."""
-    import time
+def ready_argv(url: str, folder: Path) -> list[str]:
+    """``companion`` arguments of a short stand-still mission (written into ``folder``), flown
+    first so that a timed command's clock starts on a booted vehicle (GPS fix, EKF position,
+    arming checks: about 45 s on a fresh SITL, not the command's time; the run waits for the
+    estimate itself, up to its --estimate-wait). The benchmarks that boot SITL share it."""
     mission = folder / "ready.toml"
     folder.mkdir(parents=True, exist_ok=True)
     mission.write_text('name = "ready"\nframe = "start"\nduration = 1\n[trajectory]\n'
                        'kind = "ellipse"\nf_r = 0.01\nax = 0\nbx = 0\nay = 0\nby = 0\n')
+    return ["run", "--connect", url, "--mission", str(mission), "--arm", "--json",
+            "--no-zenoh", "--no-log", "-q", "--telemetry-timeout", "90",
+            "--arm-timeout", "120", "--lost-timeout", "120"]
+
+
+def wait_ready(url: str, folder: Path, timeout: float = 300) -> float:
+    """The stand-still mission of :func:`ready_argv`, flown; the wall seconds it took."""
+    import time
     t0 = time.monotonic()
-    companion(["run", "--connect", url, "--mission", str(mission), "--arm", "--json",
-               "--no-zenoh", "--no-log", "-q", "--telemetry-timeout", "90",
-               "--arm-timeout", "120", "--lost-timeout", "120"], timeout)
+    companion(ready_argv(url, folder), timeout)
     return time.monotonic() - t0
 
 
