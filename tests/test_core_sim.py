@@ -161,9 +161,12 @@ def test_batch_vehicle_model_equals_one_vehicle_each():
         assert getattr(sb, key) == pytest.approx([getattr(s, key) for s in ss], abs=1e-12)
 
 
-def test_channel_response_is_the_full_models():
+@pytest.mark.parametrize("share", [0.0, -0.5, 0.7])
+def test_channel_response_is_the_full_models(share):
     from companion.sim.response import respond
-    params = ARDUPILOT_LIKE.with_(speed_delay=0.05, yaw_delay=0.02, speed_turn_coupling=0.2)
+    params = ARDUPILOT_LIKE.with_(speed_delay=0.05, yaw_delay=0.02, speed_turn_coupling=0.2,
+                                  speed_overshoot=0.3, speed_overshoot_s=0.8,
+                                  yaw_overshoot=share, yaw_overshoot_s=0.6)
     t = np.arange(0.0, 20.0, 0.025)
     u = np.where(t % 10 < 5, 2.0, -1.0)
     w = np.where(t % 7 < 3, 1.5, -1.5)
@@ -179,6 +182,30 @@ def test_channel_response_is_the_full_models():
     idx = np.minimum((t / 0.005 + 1e-9).astype(int), len(vs) - 1)
     assert v[:, 1] == pytest.approx(np.array(vs)[idx], abs=1e-12)
     assert om[:, 0] == pytest.approx(np.array(ws)[idx], abs=1e-12)
+
+
+@pytest.mark.parametrize("share", [-0.5, 0.7])
+def test_the_heading_integrates_a_two_time_scale_turn_rate(share):
+    # The rate loop's two time scales (yaw_overshoot): the heading a step gives is the integral
+    # of the turn rate the model reports (overshoot_integral), and 20 ms steps agree with
+    # 0.1 ms ones to the slow state's approximation (the channel's output at its step mean).
+    params = ARDUPILOT_LIKE.with_(yaw_overshoot=share, yaw_overshoot_s=0.6)
+    coarse, fine = RoverModel(params), RoverModel(params)
+    a = b = RoverState(0.0, 0.0, 0.3, 0.5, -0.2)
+    integral, peak = 0.0, 0.0
+    for k in range(400):                           # 8 s of turn-rate steps, +-1.5 rad/s
+        w = 1.5 if (k // 100) % 2 == 0 else -1.5
+        a = coarse.step(a, 1.0, w, 0.02)
+        for _ in range(200):
+            before = b.omega
+            b = fine.step(b, 1.0, w, 1e-4)
+            integral += 0.5 * (before + b.omega) * 1e-4
+        peak = max(peak, abs(b.omega))
+    assert b.yaw - 0.3 == pytest.approx(integral, abs=1e-6)
+    assert a.omega == pytest.approx(b.omega, abs=1e-3)
+    assert a.yaw == pytest.approx(b.yaw, abs=1e-3)
+    # the share beyond the change at once: overshoots the 1.5 rad/s, or comes late to it
+    assert (peak > 1.5 + 0.3) == (share > 0)
 
 
 def test_d_cen_moves_the_tracked_point_sideways_when_turning():

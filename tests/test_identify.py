@@ -90,7 +90,9 @@ def test_the_search_runs_respond_s_model_one_channel_at_a_time():
         max_decel=rng.uniform(0.5, 3, n), max_yaw_accel=rng.uniform(1, 5, n),
         max_yaw_decel=rng.uniform(1, 5, n), speed_delay=rng.uniform(0, 0.2, n),
         yaw_delay=rng.uniform(0, 0.2, n), turn_speed_coupling=rng.uniform(0, 0.8, n),
-        speed_turn_coupling=rng.uniform(0, 0.5, n))
+        speed_turn_coupling=rng.uniform(0, 0.5, n), speed_overshoot=rng.uniform(0, 0.6, n),
+        speed_overshoot_s=rng.uniform(0.3, 2, n), yaw_overshoot=rng.uniform(-0.8, 1.5, n),
+        yaw_overshoot_s=rng.uniform(0.2, 2, n))
     s = series
     for dt in (0.01, 0.02):
         v, w = respond(params, s.t, s.speed_cmd, s.yaw_rate_cmd, n, dt, v0=0.3, omega0=-0.2)
@@ -106,10 +108,12 @@ def test_the_search_runs_respond_s_model_one_channel_at_a_time():
                                       params.yaw_bandwidth, params.max_yaw_rate,
                                       params.max_yaw_accel, params.yaw_decel,
                                       params.speed_turn_coupling, v_grid[:g.steps],
-                                      params.max_speed)
+                                      params.max_speed, overshoot=params.yaw_overshoot,
+                                      overshoot_s=params.yaw_overshoot_s)
         v2 = channels.speed(s.t, s.speed_cmd, grid, n, dt, 0.3, params.speed_delay, params.w_c,
                             params.max_speed, params.max_accel, params.decel,
-                            params.turn_speed_coupling, params.max_yaw_rate)
+                            params.turn_speed_coupling, params.max_yaw_rate,
+                            params.speed_overshoot, params.speed_overshoot_s)
         np.testing.assert_allclose(w2, w, rtol=0, atol=1e-12)
         np.testing.assert_allclose(v2, v, rtol=0, atol=1e-12)
 
@@ -118,10 +122,12 @@ def test_fit_recovers_known_parameters_from_noisy_data():
     series = synthetic(TRUE, 60.0, speed_amp=4.5, rate_amp=2.6)
     result = fit(series, defaults())
     p = result.params
-    # (TRUE's speed loop does not overshoot: how long an overshoot would last is not seen)
-    status = {k: v for k, v in result.status.items() if k != "speed_overshoot_s"}
+    # (TRUE's loops do not overshoot: how long an overshoot would last is not seen)
+    status = {k: v for k, v in result.status.items()
+              if k not in ("speed_overshoot_s", "yaw_overshoot_s")}
     assert all(s == FITTED for s in status.values()), result.status
-    assert p.speed_overshoot < 0.02 and result.status["speed_overshoot_s"] == PRIOR
+    assert p.speed_overshoot < 0.03 and result.status["speed_overshoot_s"] == PRIOR
+    assert abs(p.yaw_overshoot) < 0.03 and result.status["yaw_overshoot_s"] == PRIOR
     for name in ("max_accel", "max_decel", "max_yaw_accel", "max_yaw_decel", "max_yaw_rate"):
         assert within(getattr(p, name), getattr(TRUE, name), 0.05), (name, getattr(p, name))
     assert within(p.max_speed, TRUE.max_speed, 0.1)
@@ -133,6 +139,24 @@ def test_fit_recovers_known_parameters_from_noisy_data():
     # The RMS is the noise's (0.02), not the model's error.
     assert result.speed_rms < 0.026 and result.yaw_rate_rms < 0.026
     assert rms(TRUE, series)[0] <= result.speed_rms * 1.05
+
+
+@pytest.mark.parametrize("share", [-0.45, 0.6])
+def test_fit_finds_the_turn_rate_loops_two_time_scales(share):
+    """A rate loop whose feed-forward under-drives (share < 0: a late tail the integrator pulls
+    up, ATC_STR_RAT_FF too low) or over-drives it (> 0: an overshoot it takes back): the fit
+    finds the share and the slow time constant, and the model explains the log to the noise."""
+    truth = TRUE.with_(yaw_overshoot=share, yaw_overshoot_s=0.8)
+    series = synthetic(truth, 60.0, speed_amp=4.5, rate_amp=2.6)
+    result = fit(series, defaults())
+    p = result.params
+    assert result.status["yaw_overshoot"] == FITTED
+    assert result.status["yaw_overshoot_s"] == FITTED
+    assert abs(p.yaw_overshoot - share) < 0.08, p.yaw_overshoot
+    assert within(p.yaw_overshoot_s, 0.8, 0.25), p.yaw_overshoot_s
+    assert result.yaw_rate_rms < 0.026
+    # the same model with one time scale does not explain the log: what the term is for
+    assert rms(p.with_(yaw_overshoot=0.0), series)[1] > 2.0 * result.yaw_rate_rms
 
 
 def test_logs_fitted_together_determine_what_each_leaves_to_its_prior():

@@ -68,9 +68,6 @@ def _folder(text: str) -> Path:
 
 REFINE_S = 30.0             # s of tracking flown to refine the model
 REFINE_F_R = 0.08           # Hz: the paper's ellipse at the speed that tests the inner loops
-# m/s, rad/s: the joint fit must explain each flight this well (the held-out standard the
-# identification is held to: issue 11's 0.15 m/s and 0.15 rad/s)
-CHECK_LIMIT = (0.15, 0.15)
 
 
 def _refine_mission(space: float):
@@ -189,8 +186,11 @@ def _refine(options, args, vehicle: Path, report, log, gains_file: Path,
            "fit_speed_rms_m_s": joint.fit.speed_rms,
            "fit_yaw_rate_rms_rad_s": joint.fit.yaw_rate_rms}
     why = None
-    if max(on_manoeuvre[0], on_track[0]) > CHECK_LIMIT[0] or \
-            max(on_manoeuvre[1], on_track[1]) > CHECK_LIMIT[1]:
+    # each flight explained as well as the profile asks of a manoeuvre (explain_limit)
+    from .. import profiles
+    limit = profiles.from_setpoints(report.series.vector).ident.explain_limit
+    if max(on_manoeuvre[0], on_track[0]) > limit[0] or \
+            max(on_manoeuvre[1], on_track[1]) > limit[1]:
         why = "the joint fit does not explain both flights"
     elif on_track[0] >= before[0]:
         why = "the joint fit predicts the track no better than the manoeuvre's model"
@@ -201,22 +201,34 @@ def _refine(options, args, vehicle: Path, report, log, gains_file: Path,
     return {**out, "refined": True}
 
 
-def check_identified(report, space: float) -> None:
-    """A manoeuvre that did not excite a channel, or a model that does not explain it: one
-    line saying which and what to do (UserError, exit 2), before anything is tuned."""
+EXCITED = {"speed": 0.3, "turn rate": 0.3}    # m/s, rad/s: a channel's setpoints span at least
+
+
+def check_identified(report, space: float, log=lambda text: None) -> None:
+    """A manoeuvre that did not excite a channel (its setpoints hardly moved), or a model that
+    does not explain it (above the profile's ``explain_limit``): one line saying which and
+    what to do (UserError, exit 2), before anything is tuned. A channel that was driven and is
+    explained, but whose parameters the log does not pin, keeps its priors and says so."""
+    import numpy as np
+
     from .. import profiles
     from ..ident.fit import FITTED
     from ..ident.priors import SPEED_FIELDS, YAW_FIELDS
-    f = report.fit
-    hints = profiles.from_setpoints(report.series.vector).ident.model_hints
-    for channel, fields in (("turn rate", YAW_FIELDS), ("speed", SPEED_FIELDS)):
-        if not any(f.status.get(name) == FITTED for name in fields):
+    f, series = report.fit, report.series
+    ident = profiles.from_setpoints(series.vector).ident
+    hints, limits = ident.model_hints, ident.explain_limit
+    commands = {"turn rate": series.yaw_rate_cmd, "speed": series.speed_cmd}
+    if series.vector:       # PX4: the course loop makes the turn-rate setpoints of the heading
+        commands["turn rate"] = np.unwrap(series.course_cmd)
+    for channel in ("turn rate", "speed"):
+        span = float(np.ptp(commands[channel]))
+        if span < EXCITED[channel]:
             raise UserError(
-                f"calibrate: the manoeuvre did not excite the {channel} channel (no parameter "
-                f"of it determined by {report.log}): give it more room (--space, now "
+                f"calibrate: the manoeuvre did not excite the {channel} channel (its setpoints "
+                f"in {report.log} span {span:.2f}): give it more room (--space, now "
                 f"{space:g} m) or check that the vehicle follows GUIDED {channel} setpoints")
-    for channel, value, limit, unit in (("speed", f.speed_rms, CHECK_LIMIT[0], "m/s"),
-                                        ("turn rate", f.yaw_rate_rms, CHECK_LIMIT[1], "rad/s")):
+    for channel, value, limit, unit in (("speed", f.speed_rms, limits[0], "m/s"),
+                                        ("turn rate", f.yaw_rate_rms, limits[1], "rad/s")):
         if value > limit:
             raise UserError(
                 f"calibrate: the model does not explain the manoeuvre's {channel} (RMS "
@@ -224,6 +236,10 @@ def check_identified(report, space: float) -> None:
                 f"vehicle does something the model lacks; check "
                 f"{hints.get(channel, 'its inner-loop tuning')}, or fly another manoeuvre "
                 f"(companion identify --connect ...) and look at --plot")
+    for channel, fields in (("turn rate", YAW_FIELDS), ("speed", SPEED_FIELDS)):
+        if not any(f.status.get(name) == FITTED for name in fields):
+            log(f"the manoeuvre determined none of the {channel} channel's parameters: its "
+                f"model keeps the priors (the vehicle file's [determined] says which)")
 
 
 OVERSHOOT = 1.25        # a limit identified this far above the autopilot's own: it overshoots
@@ -275,7 +291,7 @@ def run(args) -> int:
         return code or ExitCode.FAULT
     timings["fit"] = report.fit_time_s
     cpu["fit"] = report.fit_cpu_s
-    check_identified(report, args.space)
+    check_identified(report, args.space, log)
     timings["manoeuvre_flight"] = time.monotonic() - t_start - report.fit_time_s
     rate = args.rate or DEFAULT_RATE
     command = "companion " + shlex.join(sys.argv[1:]) if sys.argv[1:2] == ["calibrate"] \

@@ -56,14 +56,16 @@ def _delayed(commands: np.ndarray, delay, n: int, dt: float):
 def turn_rate(t: np.ndarray, yaw_rate_cmd: np.ndarray, n: int, dt: float, omega0: float,
               delay, bandwidth, max_rate, accel, decel, coupling=0.0,
               speed_grid: np.ndarray | None = None, max_speed=np.inf, turn_radius=0.0,
-              lat_accel=np.inf) -> tuple[np.ndarray, np.ndarray]:
+              lat_accel=np.inf, overshoot=0.0, overshoot_s=1.0) -> tuple[np.ndarray, np.ndarray]:
     """The turn rate of ``n`` models at the samples ``t``, and on the grid (shape (steps, n)).
 
     With ``coupling`` (``speed_turn_coupling``, c_w) the clamp shrinks with the speed on the
     grid ``speed_grid`` (one value per grid step, or one column per model):
     ``max_rate (1 - c_w min(1, |v| / max_speed))``; with ``turn_radius`` R (Ackermann) it is
     at most ``|v| / R`` and with ``lat_accel`` a at most ``a / max(|v|, 1 m/s)``, as
-    :meth:`companion.sim.plant.RoverModel.clamp_command`."""
+    :meth:`companion.sim.plant.RoverModel.clamp_command`; with ``overshoot`` (the rate loop's
+    two time scales, may be negative) the channel's output passes
+    :func:`companion.sim.plant.overshoot_step`, as respond's."""
     g = Grid.of(t, dt)
     m = ops.for_size(n)
     command = _delayed(np.asarray(yaw_rate_cmd, dtype=float)[g.held], delay, n, dt)
@@ -88,13 +90,21 @@ def turn_rate(t: np.ndarray, yaw_rate_cmd: np.ndarray, n: int, dt: float, omega0
                                            np.inf))
         if lateral:
             top = np.minimum(top, lat_accel / np.maximum(speed, LAT_ACCEL_MIN_SPEED))
+    over = bool(np.any(np.asarray(overshoot) != 0))
     w = np.full(n, float(omega0))
+    x = w                                # the channel's output (the turn rate without overshoot)
+    z = w
     out = np.empty((g.steps, n))
     for k in range(g.steps):
         out[k] = w
         limit = top[k] if by_speed else max_rate
         u = m.clip(command(k), -limit, limit)
-        _, w, _, _ = _channel(m, w, u, bandwidth, accel, decel, dt, both=False)
+        _, x1, _, _ = _channel(m, x, u, bandwidth, accel, decel, dt, both=False)
+        if over:
+            w, z = overshoot_step(m, x, x1, z, overshoot, overshoot_s, dt)
+        else:
+            w = x1
+        x = x1
     return out[g.sample_step], out
 
 

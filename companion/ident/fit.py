@@ -58,6 +58,7 @@ COUPLING = "turn_speed_coupling"
 TURN_COUPLING = "speed_turn_coupling"
 COUPLINGS = {COUPLING, TURN_COUPLING}
 OVERSHOOT = "speed_overshoot"     # a share, stepped as the couplings are
+YAW_OVERSHOOT = "yaw_overshoot"   # a signed share (the rate loop's two time scales)
 TURN_RADIUS = "min_turn_radius"   # a car's (speed / turn-rate setpoints): fitted in its channel
 MIN_COMMAND = 1e-3        # a channel whose setpoints never exceed this was not driven at all
 
@@ -161,6 +162,7 @@ class Search:
     shrink: float = 0.72           # search width (unit box) x this per round, from 0.3
     tol: float = 0.02              # relative RMS change below which a parameter is not seen
     seed: int = 0
+    polish: int = 0                # rounds of coordinate polishing after the search (at most)
 
 
 @dataclass(frozen=True)
@@ -218,6 +220,8 @@ class _Dim:
             return value + 0.05, max(value - 0.05, 0.0)
         if self.name in COUPLINGS or self.name == OVERSHOOT:
             return min(value + 0.15, 1.0), max(value - 0.15, 0.0)
+        if self.name == YAW_OVERSHOOT:
+            return min(value + 0.15, self.hi), max(value - 0.15, self.lo)
         return value * 1.5, value / 1.5
 
 
@@ -238,6 +242,7 @@ def _dims(fields: tuple[str, ...], series: Series) -> list[_Dim]:
         COUPLING: (0.0, 1.0, False), TURN_COUPLING: (0.0, 1.0, False),
         TURN_RADIUS: (0.05, 20.0, True),
         OVERSHOOT: (0.0, 1.0, False), "speed_overshoot_s": (0.2, 10.0, True),
+        YAW_OVERSHOOT: (-0.9, 2.0, False), "yaw_overshoot_s": (0.1, 10.0, True),
     }
     return [_Dim(name, *ranges[name]) for name in fields]
 
@@ -271,7 +276,7 @@ class _Channel:
                                   p.yaw_delay, p.yaw_bandwidth, p.max_yaw_rate,
                                   p.max_yaw_accel, p.yaw_decel, p.speed_turn_coupling,
                                   self._speed_grid(dt), self.speed_scale, p.min_turn_radius,
-                                  p.max_lat_accel)
+                                  p.max_lat_accel, p.yaw_overshoot, p.yaw_overshoot_s)
 
     def _omega_grid(self, dt: float) -> np.ndarray:
         if dt not in self._omega:
@@ -341,7 +346,42 @@ def _search(channel: _Channel, dims: list[_Dim], u0: np.ndarray, cfg: Search,
         costs = np.split(evaluate(np.vstack(us), dt), chains)
     best_chain = int(np.argmin([c.min() for c in costs]))
     k = int(np.argmin(costs[best_chain]))
-    return us[best_chain][k], float(costs[best_chain][k])
+    best, cost = us[best_chain][k], float(costs[best_chain][k])
+    for r in range(cfg.polish):
+        best, cost, moved = _polish_round(best, cost, evaluate, 0.1 * 0.6 ** r, cfg.schedule[-1][1])
+        if not moved and r > 2:
+            break
+    return best, cost
+
+
+def _polish_round(best: np.ndarray, cost: float, evaluate, width: float, dt: float,
+                  ) -> tuple[np.ndarray, float, bool]:
+    """One round of coordinate polishing: every parameter alone moved to 8 points within
+    ``width`` (unit box) of the best, all in one batch; each parameter's best move that helps is
+    taken together with the others' when that helps more (else the single best move alone).
+    What the cross-entropy search leaves one clamp or one lag off by a little (clamps make the
+    valley's floor a staircase)."""
+    d = len(best)
+    offsets = width * np.array([-1.0, -0.5, -0.25, -0.1, 0.1, 0.25, 0.5, 1.0])
+    rows = np.repeat(best[None, :], d * len(offsets) + 1, axis=0)
+    for i in range(d):
+        rows[1 + i * len(offsets): 1 + (i + 1) * len(offsets), i] += offsets
+    rows = np.clip(rows, 0.0, 1.0)
+    costs = evaluate(rows, dt)
+    base = float(costs[0])
+    per_dim = costs[1:].reshape(d, len(offsets))
+    step = np.zeros(d)
+    for i in range(d):
+        j = int(np.argmin(per_dim[i]))
+        if per_dim[i, j] < base:
+            step[i] = rows[1 + i * len(offsets) + j, i] - best[i]
+    if not np.any(step):
+        return best, min(cost, base), False
+    single = rows[1 + int(np.argmin(per_dim))]
+    joint = np.clip(best + step, 0.0, 1.0)
+    both = evaluate(np.vstack([joint, single]), dt)
+    k = int(np.argmin(both))
+    return (joint, single)[k], float(both[k]), True
 
 
 def _settle(channel: _Channel, dims: list[_Dim], best: dict[str, float], prior: RoverParams,
@@ -425,6 +465,8 @@ def _scan(dim: _Dim, value: float) -> np.ndarray:
         return np.maximum(value + 0.1 * k, 0.0)
     if dim.name in COUPLINGS:
         return np.clip(value + 0.3 * k, 0.0, 1.0)
+    if dim.name == YAW_OVERSHOOT:
+        return np.clip(value + 0.3 * k, dim.lo, dim.hi)
     return value * 2.0 ** k
 
 
@@ -484,12 +526,14 @@ def _speed_scale(series: Series, prior: RoverParams) -> float:
 
 def _fit_channel(series: Series, base: RoverParams, prior: RoverParams, fields: tuple[str, ...],
                  which: int, cfg: Search, rng: np.random.Generator,
-                 extra: tuple[str, ...] = (),
+                 extra: tuple[str, ...] = (), wide_extra: bool = False,
                  ) -> tuple[dict[str, float], dict[str, str], int, dict[str, Determined]]:
     """One channel's search over ``fields``; then, with ``extra``, a second search over all
     of them from the first's best (the extras at their priors), kept only when it explains
     the log better by more than ``tol`` (so a vehicle without what the extras describe fits
-    exactly as without them, and the first search keeps its budget for the usual fields)."""
+    exactly as without them, and the first search keeps its budget for the usual fields).
+    ``wide_extra``: that second search is a whole one (random start, ``cfg.schedule``), for
+    extras the first search's fields can imitate from far away (a slow lag for a late tail)."""
     channel = _Channel(series, base, which, _speed_scale(series, prior))
     commands = series.yaw_rate_cmd if which == 1 else series.speed_cmd
     start: dict[str, float] = {}
@@ -504,8 +548,14 @@ def _fit_channel(series: Series, base: RoverParams, prior: RoverParams, fields: 
     best = {dim.name: float(dim.value(u_best[i])) for i, dim in enumerate(dims)}
     if extra:
         wide = _dims(fields + extra, series)
-        u1 = np.array([dim.unit({**start, **best}[dim.name]) for dim in wide])
-        u_more, more = _search(channel, wide, u1, replace(cfg, schedule=EXTRA_SCHEDULE), rng)
+        # (a whole search starts from the priors: the first's best sits in the valley the
+        # extras' effect was imitated in, a slow lag for a late tail, and holds a chain there)
+        u1 = np.array([dim.unit((start if wide_extra else {**start, **best})[dim.name])
+                       for dim in wide])
+        u_more, more = _search(channel, wide, u1,
+                               replace(cfg, schedule=WIDE_SCHEDULE, shrink=WIDE_SHRINK,
+                                       polish=WIDE_POLISH) if wide_extra
+                               else replace(cfg, schedule=EXTRA_SCHEDULE), rng)
         if more < cost * (1.0 - cfg.tol):
             best = {dim.name: float(dim.value(u_more[i])) for i, dim in enumerate(wide)}
         else:
@@ -525,6 +575,9 @@ def _fit_channel(series: Series, base: RoverParams, prior: RoverParams, fields: 
 # The second search of a channel with extra fields: from the first's best, narrower each round
 # (the first round keeps the best among random sets, the rest sample around it).
 EXTRA_SCHEDULE = ((60, 0.02),) + ((60, 0.02),) * 6 + ((40, 0.01),)
+# ... and a whole second search (``wide_extra``), longer than the first: two more dimensions
+WIDE_SCHEDULE = ((1000, 0.02),) + ((300, 0.02),) * 20 + ((60, 0.01),)
+WIDE_SHRINK, WIDE_POLISH = 0.8, 8
 
 
 def _derived(params: RoverParams, series: Series) -> Series:
@@ -623,13 +676,18 @@ def _fit_channels(series: Series, prior: RoverParams, search: Search,
                   progress: Callable[[str], None], overshoot: bool = True) -> Fit:
     rng = np.random.default_rng(search.seed)
     progress("turn-rate channel")
-    yaw_fields: tuple[str, ...] = YAW_FIELDS
+    yaw_fields: tuple[str, ...] = YAW_FIELDS[:-2]
     if not series.vector and float(np.max(prior.min_turn_radius)) > 0:
         # A car driven by turn-rate setpoints (ArduPilot's Ackermann rover): its turning radius
         # clamps the turn rate by the measured speed, so the turn-rate channel fits it.
-        yaw_fields = YAW_FIELDS + (TURN_RADIUS,)
+        yaw_fields = yaw_fields + (TURN_RADIUS,)
+    # The rate loop's two time scales (a feed-forward that over- or under-drives the steering,
+    # the integrator doing the rest): searched after the usual fields, for turn-rate setpoints
+    # only (PX4's course loop is fitted on its own grid).
+    yaw_extra = YAW_FIELDS[-2:] if overshoot and not series.vector else ()
     yaw, yaw_status, n_yaw, yaw_det = _fit_channel(series, prior, prior, yaw_fields, 1,
-                                                    search, rng)
+                                                    search, rng, extra=yaw_extra,
+                                                    wide_extra=True)
     progress("speed channel")
     base = prior.with_(**yaw)
     # the speed loop's overshoot: searched only once the usual fields are (the second search)

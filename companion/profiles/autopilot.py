@@ -186,6 +186,9 @@ class IdentFacts:
     # per channel ("speed", "turn rate"): the parameters to check when the model does not
     # explain a manoeuvre (companion calibrate's one line)
     model_hints: Mapping[str, str] = field(default_factory=dict)
+    # (speed m/s, turn rate rad/s): the RMS up to which the model is taken to explain a flight
+    # (companion calibrate stops above it; issue 11's held-out standard on ArduPilot)
+    explain_limit: tuple[float, float] = (0.15, 0.15)
 
 
 # --------------------------------------------------------------------------- the plant

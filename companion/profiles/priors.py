@@ -38,7 +38,8 @@ def defaults() -> RoverParams:
         # and the turn rate it gives up at full speed: 2.1 rad/s in place, about 1.8 at full
         # throttle on ArduPilot SITL rover-skid (the cautious side of none)
         speed_turn_coupling=0.15,
-        speed_overshoot=0.0, speed_overshoot_s=1.0)       # none: what most speed loops do
+        speed_overshoot=0.0, speed_overshoot_s=1.0,       # none: what most speed loops do
+        yaw_overshoot=0.0, yaw_overshoot_s=1.0)           # one time scale: a matched feed-forward
 
 
 @dataclass(frozen=True)

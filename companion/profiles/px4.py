@@ -236,7 +236,14 @@ PROFILE = AutopilotProfile(
     ident=IdentFacts(params=PRIOR_PARAMS, priors=priors, headroom=1.0, params_label="PX4",
                      model_hints={"speed": "RO_SPEED_P / RO_SPEED_I and RO_MAX_THR_SPEED",
                                   "turn rate": "RO_YAW_RATE_P / RO_YAW_RATE_I and "
-                                               "RO_YAW_P"}),
+                                               "RO_YAW_P"},
+                     # PX4 SITL's SIH Ackermann rover (2026-12-02, two manoeuvres): its speed
+                     # runs 0.3-0.6 m/s above the setpoint through turns and does not start
+                     # below about 0.6 m/s, which the speed channel lacks (RMS 0.40-0.41 m/s;
+                     # turn rate 0.26 rad/s through the course loop); calibrated on such a
+                     # model it tracked at a fifth to a half of PX4's own following
+                     # (docs/benchmarks.md), so calibrate goes on up to these
+                     explain_limit=(0.5, 0.35)),
     plant=PlantFacts(
         modes=("MANUAL", "POSCTL", "LOITER", "OFFBOARD"),
         unsettable=(),

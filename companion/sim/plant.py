@@ -22,6 +22,15 @@ Speed overshoot (``speed_overshoot`` g, ``speed_overshoot_s`` tau): the speed ch
 ``v = x + g (x - z)``, ``z' = (x - z) / tau`` (:func:`overshoot_step`: ArduPilot's PI speed loop
 behind a throttle feed-forward that over-drives, as on SITL's Ackermann ``rover``).
 
+The turn rate's two time scales (``yaw_overshoot`` g_w, ``yaw_overshoot_s`` tau_w): the same
+form on the turn-rate channel, ``omega = x + g_w (x - z)``, where g_w may be negative.
+ArduPilot's rate loop (``AR_AttitudeControl::get_steering_out_rate``) answers a target change at
+once through its feed-forward ``ATC_STR_RAT_FF`` (and P), and the integrator does the rest over
+a slower time scale: the fast share 1 + g_w is above one when the feed-forward over-drives the
+steering (an overshoot the I term takes back) and below one when it under-drives (a late tail
+the I term pulls up). The heading integrates that turn rate exactly over a step
+(:func:`overshoot_integral`).
+
 ``d_cen`` is the paper's distance between the centre of mass (the tracked point p) and the wheel
 axle; ``w_c`` the paper's actuator bandwidth omega_c (k_c). The commands are clamped to the
 vehicle's top speed and turn rate and held over each step. Works on floats (one rover, e.g. the
@@ -98,6 +107,8 @@ class RoverParams:
     max_lat_accel: Num = math.inf         # m/s^2: |omega| <= a / max(|v|, 1 m/s) (ATC_TURN_MAX_G g)
     speed_overshoot: Num = 0.0            # g: v = (1 + g) x - g z, the speed loop's overshoot
     speed_overshoot_s: Num = 1.0          # tau, s: z' = (x - z) / tau (how long it takes back)
+    yaw_overshoot: Num = 0.0              # g_w > -1: omega = (1 + g_w) x - g_w z (the rate loop's FF)
+    yaw_overshoot_s: Num = 1.0            # tau_w, s: z' = (x - z) / tau_w (its integrator's pace)
 
     @property
     def yaw_bandwidth(self) -> Num:
@@ -119,7 +130,8 @@ class RoverParams:
             and not any(_any_positive(v) for v in (self.speed_delay, self.yaw_delay,
                                                    self.turn_speed_coupling,
                                                    self.speed_turn_coupling,
-                                                   self.speed_overshoot))
+                                                   self.speed_overshoot)) \
+            and not _any_nonzero(self.yaw_overshoot)
 
     @property
     def velocity_vector(self) -> bool:
@@ -154,10 +166,15 @@ def _any_positive(value: Num) -> bool:
     return bool(np.any(np.asarray(value) > 0))
 
 
+def _any_nonzero(value: Num) -> bool:
+    return bool(np.any(np.asarray(value) != 0))
+
+
 @dataclass(slots=True)
 class RoverState:
     """Pose of the tracked point (x, y, yaw) and actuator outputs (speed v, yaw rate omega);
-    ``v_slow`` is the speed overshoot's slow state z (unused without ``speed_overshoot``)."""
+    ``v_slow`` is the speed overshoot's slow state z (unused without ``speed_overshoot``),
+    ``w_slow`` the turn rate's (unused without ``yaw_overshoot``)."""
 
     x: Num = 0.0
     y: Num = 0.0
@@ -165,6 +182,7 @@ class RoverState:
     v: Num = 0.0
     omega: Num = 0.0
     v_slow: Num = 0.0
+    w_slow: Num = 0.0
 
 
 class RoverModel:
@@ -181,6 +199,7 @@ class RoverModel:
         self._curvature = _any_positive(params.min_turn_radius)
         self._lateral = _any_finite(params.max_lat_accel)
         self._overshoot = _any_positive(params.speed_overshoot)
+        self._yaw_overshoot = _any_nonzero(params.yaw_overshoot)
         self.delay = CommandDelay(params.speed_delay, params.yaw_delay, n) if params.has_delay else None
         self._trig_yaw: Num = None                           # no heading is None: no hit yet
         self._trig_cs: tuple[Num, Num] = (1.0, 0.0)
@@ -262,7 +281,8 @@ class RoverModel:
 
     def _step_limited(self, s: RoverState, u: Num, w: Num, h: float) -> RoverState:
         """Rate-limited channels, exact per channel (:func:`_channel`), Simpson for x and y;
-        with the speed overshoot, the channel's output x passes :func:`overshoot_step`."""
+        with an overshoot, the channel's output x passes :func:`overshoot_step` (and, for the
+        turn rate, the heading takes its integral, :func:`overshoot_integral`)."""
         m, p = self._m, self.params
         v0, z_end = s.v, s.v_slow
         if self._overshoot:
@@ -272,10 +292,23 @@ class RoverModel:
             (v_mid, _), (v_end, z_end) = (
                 overshoot_step(m, v0, x, s.v_slow, p.speed_overshoot, p.speed_overshoot_s, t)
                 for x, t in ((v_mid, 0.5 * h), (v_end, h)))
-        w_mid, w_end, i_mid, i_end = _channel(m, s.omega, w, p.yaw_bandwidth, p.max_yaw_accel,
-                                              p.yaw_decel, h)
-        return self._simpson(s, s.yaw + i_mid, s.yaw + i_end, v_mid, v_end, w_mid, w_end, h,
-                             z_end)
+        if not self._yaw_overshoot:
+            w_mid, w_end, i_mid, i_end = _channel(m, s.omega, w, p.yaw_bandwidth,
+                                                  p.max_yaw_accel, p.yaw_decel, h)
+            return self._simpson(s, s.yaw + i_mid, s.yaw + i_end, v_mid, v_end, w_mid, w_end, h,
+                                 z_end)
+        g, tau = p.yaw_overshoot, p.yaw_overshoot_s
+        x0 = overshoot_target(s.omega, s.w_slow, g)
+        x_mid, x_end, ix_mid, ix_end = _channel(m, x0, w, p.yaw_bandwidth, p.max_yaw_accel,
+                                                p.yaw_decel, h)
+        (w_mid, _), (w_end, wz_end) = (overshoot_step(m, x0, x, s.w_slow, g, tau, t)
+                                       for x, t in ((x_mid, 0.5 * h), (x_end, h)))
+        i_mid = overshoot_integral(x0, x_mid, ix_mid, s.w_slow, g, tau, 0.5 * h, m)
+        i_end = overshoot_integral(x0, x_end, ix_end, s.w_slow, g, tau, h, m)
+        out = self._simpson(s, s.yaw + i_mid, s.yaw + i_end, v_mid, v_end, w_mid, w_end, h,
+                            z_end)
+        out.w_slow = wz_end
+        return out
 
     def _decays(self, h: float) -> tuple[Num, Num, Num, Num]:
         """e^{-w_c h/2}, e^{-w_c h} and the yaw-loop equivalents, cached for the step size."""
@@ -310,7 +343,8 @@ class RoverModel:
         h6 = h / 6.0
         x = s.x + h6 * ((s.v * c0 - lat0 * s0) + 4.0 * (v_mid * c1 - lat1 * s1) + (v_end * c2 - lat2 * s2))
         y = s.y + h6 * ((s.v * s0 + lat0 * c0) + 4.0 * (v_mid * s1 + lat1 * c1) + (v_end * s2 + lat2 * c2))
-        return RoverState(x, y, yaw_end, v_end, w_end, s.v_slow if v_slow is None else v_slow)
+        return RoverState(x, y, yaw_end, v_end, w_end, s.v_slow if v_slow is None else v_slow,
+                          s.w_slow)
 
     def step_rk4(self, s: RoverState, u: Num, w: Num, dt: float) -> RoverState:
         """Classic RK4 on all five states with (u, w) already delayed and clamped: a reference."""
@@ -347,6 +381,16 @@ def overshoot_step(m: _ops.Ops, x0: Num, x1: Num, z0: Num, g: Num, tau: Num, t: 
     k = 1.0 - m.exp(-t / tau)
     z1 = z0 + k * (0.5 * (x0 + x1) - z0)
     return (1.0 + g) * x1 - g * z1, z1
+
+
+def overshoot_integral(x0: Num, x1: Num, x_integral: Num, z0: Num, g: Num, tau: Num, t: float,
+                       m: _ops.Ops) -> Num:
+    """The integral over ``t`` s of the output ``(1 + g) x - g z`` of :func:`overshoot_step`,
+    given the channel's own integral of x: z as that function has it (x at its mean,
+    ``z(s) = xm + (z0 - xm) e^{-s / tau}``), so the heading and the turn rate agree."""
+    xm = 0.5 * (x0 + x1)
+    z_integral = xm * t - (xm - z0) * tau * (1.0 - m.exp(-t / tau))
+    return (1.0 + g) * x_integral - g * z_integral
 
 
 def _rate_bounds(m: _ops.Ops, x: Num, up: Num, down: Num) -> tuple[Num, Num]:

@@ -3,7 +3,7 @@
 What identification fits and what the plant's tests check: given the setpoints an autopilot was
 sent (speed ``v_ref``, turn rate ``omega_ref``, held between samples) this runs only the two
 channels of :class:`companion.sim.plant.RoverModel` (delay -> clamp with both couplings -> rate
-limit -> lag -> the speed's overshoot), without the pose, for ``n`` parameter sets side by side (any :class:`RoverParams` field may
+limit -> lag -> the overshoot of each), without the pose, for ``n`` parameter sets side by side (any :class:`RoverParams` field may
 be an array of length ``n``). The same channel solution (:func:`companion.sim.plant._channel`) and
 delay line as the full model, so a fitted model is the model the simulations run.
 """
@@ -50,6 +50,9 @@ def respond(params: RoverParams, t: ArrayLike, speed_cmd: ArrayLike,
     z = v
     over = bool(np.any(np.asarray(p.speed_overshoot) > 0))
     w = np.full(n, float(omega0))
+    xw = w                              # the turn-rate channel's output (omega without overshoot)
+    zw = w
+    over_w = bool(np.any(np.asarray(p.yaw_overshoot) != 0))
     v_out = np.empty((steps, n))
     w_out = np.empty((steps, n))
     for k in range(steps):
@@ -64,5 +67,11 @@ def respond(params: RoverParams, t: ArrayLike, speed_cmd: ArrayLike,
         else:
             v = x1
         x = x1
-        _, w, _, _ = _channel(m, w, w_k, p.yaw_bandwidth, p.max_yaw_accel, p.yaw_decel, dt, both=False)
+        _, xw1, _, _ = _channel(m, xw, w_k, p.yaw_bandwidth, p.max_yaw_accel, p.yaw_decel, dt,
+                                both=False)
+        if over_w:
+            w, zw = overshoot_step(m, xw, xw1, zw, p.yaw_overshoot, p.yaw_overshoot_s, dt)
+        else:
+            w = xw1
+        xw = xw1
     return v_out[sample_step], w_out[sample_step]

@@ -167,7 +167,7 @@ def _stack_params(vehicles: Sequence[RoverParams], repeat: int, tile: int) -> Ro
               ("d_cen", "w_c", "max_speed", "max_yaw_rate", "max_accel", "max_yaw_accel",
                "speed_delay", "yaw_delay", "turn_speed_coupling", "speed_turn_coupling",
                "course_gain", "min_turn_radius", "max_lat_accel", "speed_overshoot",
-               "speed_overshoot_s")}
+               "speed_overshoot_s", "yaw_overshoot", "yaw_overshoot_s")}
     values["w_c_yaw"] = [float(v.yaw_bandwidth) for v in vehicles]
     values["max_decel"] = [float(v.decel) for v in vehicles]
     values["max_yaw_decel"] = [float(v.yaw_decel) for v in vehicles]

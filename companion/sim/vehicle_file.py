@@ -23,6 +23,8 @@ A small TOML file, units in the key names, a header saying how it was made::
     accel_max_rad_s2 = 2.09
     decel_max_rad_s2 = 2.09
     lat_accel_max_m_s2 = 5.88     # turn rate <= this / max(|v|, 1 m/s) (ATC_TURN_MAX_G x g)
+    overshoot = -0.3              # the rate loop's two time scales: share beyond (> 0) or short
+    overshoot_s = 0.8             # of (< 0) the change at once; the rest at this time constant
 
     [coupling]
     turn_speed = 0.3              # share of top speed lost at full turn rate (skid-steer mixing)
@@ -65,7 +67,8 @@ SCHEMA = "pzc-rover/vehicle/1"
 MIN_LAG = 1e-3          # s: a lag shorter than a plant step is no lag
 
 # section -> key -> (RoverParams field, kind); kinds: "lag" (s -> bandwidth), "limit" (> 0, may
-# be inf as "inf"), "delay" (>= 0), "share" (0..1), "length" (any finite).
+# be inf as "inf"), "delay" (>= 0), "share" (0..1), "signed" (-0.9..3: a share beyond or short
+# of one), "length" (any finite).
 _CHANNELS: dict[str, dict[str, tuple[str, str]]] = {
     "speed": {"delay_s": ("speed_delay", "delay"), "lag_s": ("w_c", "lag"),
               "max_m_s": ("max_speed", "limit"), "accel_max_m_s2": ("max_accel", "limit"),
@@ -76,7 +79,9 @@ _CHANNELS: dict[str, dict[str, tuple[str, str]]] = {
                   "max_rad_s": ("max_yaw_rate", "limit"),
                   "accel_max_rad_s2": ("max_yaw_accel", "limit"),
                   "decel_max_rad_s2": ("max_yaw_decel", "limit"),
-                  "lat_accel_max_m_s2": ("max_lat_accel", "limit")},
+                  "lat_accel_max_m_s2": ("max_lat_accel", "limit"),
+                  "overshoot": ("yaw_overshoot", "signed"),
+                  "overshoot_s": ("yaw_overshoot_s", "limit")},
     "coupling": {"turn_speed": ("turn_speed_coupling", "share"),
                  "speed_turn": ("speed_turn_coupling", "share")},
     "course": {"gain_1_s": ("course_gain", "nonneg"),
@@ -104,10 +109,12 @@ def _value(where: str, key: str, value: Any, kind: str) -> float:
         raise UserError(f"{where}.{key}: must be a finite number, not {value!r}")
     value = float(value)
     bad = {"lag": value < 0, "limit": value <= 0, "delay": value < 0 or value > 5.0,
-           "share": not 0.0 <= value <= 1.0, "length": False, "nonneg": value < 0}[kind]
+           "share": not 0.0 <= value <= 1.0, "signed": not -0.9 <= value <= 3.0,
+           "length": False, "nonneg": value < 0}[kind]
     if bad:
         want = {"lag": ">= 0", "limit": "> 0 (or \"inf\")", "delay": "between 0 and 5 s",
-                "share": "between 0 and 1", "length": "", "nonneg": ">= 0"}[kind]
+                "share": "between 0 and 1", "signed": "between -0.9 and 3", "length": "",
+                "nonneg": ">= 0"}[kind]
         raise UserError(f"{where}.{key}: must be {want}, not {value!r}")
     return value
 
@@ -171,7 +178,8 @@ def dumps(vehicle: VehicleFile) -> str:
               "turn_speed_coupling": p.turn_speed_coupling,
               "speed_turn_coupling": p.speed_turn_coupling, "course_gain": p.course_gain,
               "min_turn_radius": p.min_turn_radius, "max_lat_accel": p.max_lat_accel,
-              "speed_overshoot": p.speed_overshoot, "speed_overshoot_s": p.speed_overshoot_s}
+              "speed_overshoot": p.speed_overshoot, "speed_overshoot_s": p.speed_overshoot_s,
+              "yaw_overshoot": p.yaw_overshoot, "yaw_overshoot_s": p.yaw_overshoot_s}
     for section, keys in _CHANNELS.items():
         if section in _OPTIONAL and not any(float(values[name]) for name, _ in keys.values()):
             continue
