@@ -32,6 +32,7 @@ sys.path.insert(0, str(ROOT / "benchmarks"))
 
 MISSIONS = {0.04: "paper_ellipse_004.toml", 0.08: "paper_ellipse_008.toml",
             0.12: "paper_ellipse_012.toml"}
+KANAYAMA_GAINS = ROOT / "benchmarks" / "kanayama_gains.toml"
 
 
 def at_limit_share(csv_path: str, limit: float, duration: float = 60.0) -> float:
@@ -70,6 +71,17 @@ def ready_argv(url: str, folder: Path) -> list[str]:
     return ["run", "--connect", url, "--mission", str(mission), "--arm", "--json",
             "--no-zenoh", "--no-log", "-q", "--telemetry-timeout", "90",
             "--arm-timeout", "120", "--lost-timeout", "120"]
+
+
+def kanayama_argv(frame: str) -> list[str]:
+    """``companion run`` arguments flying Kanayama's law with the gains picked by hand for the
+    vehicle kind ``frame`` ("skid" or "ackermann", :data:`KANAYAMA_GAINS`): the classical
+    baseline issue 20 compares with, not its defaults, which limit-cycle on ArduPilot's rovers.
+    The benchmarks that fly it share it."""
+    import tomllib
+    gains = tomllib.loads(KANAYAMA_GAINS.read_text())[frame]
+    return ["--controller", "kanayama", "--controller-gains",
+            ",".join(f"{name}={float(value):g}" for name, value in gains.items())]
 
 
 def wait_ready(url: str, folder: Path, timeout: float = 300) -> float:

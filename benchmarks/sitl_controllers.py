@@ -14,8 +14,11 @@ pose) at each ``--f-r``, 40 Hz telemetry, in two configurations:
   ``companion calibrate`` identified on this very SITL model (pzc: the gains file beside it; the
   vehicle's own limits).
 
-PID and Kanayama fly their default gains in both (the paper's PID k_P 3.5, k_I 0.5, k_D 0.5;
-Kanayama's chosen by hand), within the same limits as pzc. Then ArduPilot's own GUIDED
+PID flies its default gains in both (the paper's k_P 3.5, k_I 0.5, k_D 0.5); Kanayama its
+defaults in ``defaults`` and, in ``calibrated``, the gains picked by hand for the frame
+(``benchmarks/kanayama_gains.toml``: ``[skid]`` for ``rover-skid``, ``[ackermann]`` for
+``rover``; the classical baseline of issue 20, whose defaults limit-cycle on these rovers), all
+within the same limits as pzc. Then ArduPilot's own GUIDED
 position-target following (:mod:`native_follow`) flies each speed. Scored as
 ``benchmarks/sitl_tracking.py`` scores: the steady RMS of |p_ref - p| over the last 30 s and
 f_cost, both from the vehicle's own LOCAL_POSITION_NED; and the share of that time the yaw-rate
@@ -46,20 +49,30 @@ sys.path.insert(0, str(ROOT / "tests"))
 sys.path.insert(0, str(ROOT / "benchmarks"))
 
 from companion.core import controllers  # noqa: E402
-from sim_to_real import MISSIONS, at_limit_share  # noqa: E402
+from sim_to_real import MISSIONS, at_limit_share, kanayama_argv  # noqa: E402
 
 CALIBRATED = "companion/sim/vehicles/ardupilot_skid.toml"
 CONFIGS = {"defaults": [], "calibrated": ["--vehicle", CALIBRATED]}
 NATIVE = "ardupilot-guided"     # the controller column of ArduPilot's own following
+FRAMES = {"rover-skid": "skid", "rover": "ackermann"}   # SITL --model -> kanayama_gains.toml
+
+
+def controller_argv(controller: str, config: str, model: str) -> list[str]:
+    """``--controller C``, and for Kanayama in the calibrated configuration the gains picked by
+    hand for the SITL model's frame (its defaults on a model without any)."""
+    if controller == "kanayama" and CONFIGS[config] and model in FRAMES:
+        return kanayama_argv(FRAMES[model])
+    return ["--controller", controller]
 
 
 def fly(url: str, controller: str, f_r: float, config: str, logs: Path,
-        vehicle: str = CALIBRATED) -> dict:
+        vehicle: str = CALIBRATED, model: str = "rover-skid") -> dict:
     """One ``companion run``: its JSON result, or the exit code and the tail of its stderr.
-    ``vehicle``: the calibrated configuration's vehicle file."""
+    ``vehicle``: the calibrated configuration's vehicle file; ``model``: the SITL frame."""
     flags = ["--vehicle", vehicle] if CONFIGS[config] else []
     argv = [sys.executable, "-m", "companion", "run", "--connect", url, "--mission",
-            str(ROOT / "missions" / MISSIONS[f_r]), *flags, "--controller", controller,
+            str(ROOT / "missions" / MISSIONS[f_r]), *flags,
+            *controller_argv(controller, config, model),
             "--arm", "--json", "--no-zenoh", "--log-dir", str(logs), "-q",
             # the first run waits for SITL's boot (GPS, EKF origin, arming: about 40 s)
             "--telemetry-timeout", "90", "--arm-timeout", "120"]
@@ -88,6 +101,14 @@ def number(value, fmt: str) -> str:
     return "n/a" if value is None or not math.isfinite(value) else format(value, fmt)
 
 
+def kanayama_text(out: dict) -> str:
+    """What Kanayama flew in the calibrated configuration, as its rows' results say."""
+    flown = {r.get("gains_source") for r in out["rows"]
+             if r["controller"] == "kanayama" and r["config"] == "calibrated"}
+    flown.discard(None)
+    return "; ".join(sorted(flown)) or "n/a"
+
+
 def table(out: dict) -> str:
     """The markdown table, with its header (what was flown, the gains, the limits) and command."""
     rows = out["rows"]
@@ -107,8 +128,9 @@ def table(out: dict) -> str:
         "yaw-rate setpoint at its limit.",
         "",
         f"Gains: pzc as `companion run` picks them (defaults: the shipped tuned gains; "
-        f"calibrated: the gains file beside `{out.get('vehicle', CALIBRATED)}`); pid and kanayama their defaults, "
-        f"not tuned for this vehicle: {pid.defaults_source()}; {kan.defaults_source()}. "
+        f"calibrated: the gains file beside `{out.get('vehicle', CALIBRATED)}`); pid its defaults, "
+        f"not tuned for this vehicle: {pid.defaults_source()}; kanayama in defaults: "
+        f"{kan.defaults_source()}, in calibrated: {kanayama_text(out)}. "
         f"Limits, the same for all three controllers: {lim_text or 'n/a'}.",
         "",
         "| f_r (Hz) | configuration | controller | steady RMS (m) | f_cost | yaw@limit | exit |",
@@ -167,8 +189,8 @@ def main() -> int:
             for f_r in speeds:
                 for config in configs:
                     for name in names:
-                        row = row_of(fly(url, name, f_r, config, logs, args.vehicle), name, f_r,
-                                     config)
+                        row = row_of(fly(url, name, f_r, config, logs, args.vehicle,
+                                         args.model), name, f_r, config)
                         out["rows"].append(row)
                         print(json.dumps(row), file=sys.stderr, flush=True)
                 if args.native:

@@ -7,8 +7,10 @@ fresh ``ardurover`` is booted and
    (its wall time and its own per-step timings are kept);
 2. ``companion run --vehicle DIR/vehicle.toml`` flies the paper's ellipse (60 s, 40 Hz, anchored
    at the start pose) at each ``--f-r``;
-3. ``companion run --controller kanayama --vehicle DIR/vehicle.toml`` flies the same, the
-   classical law live within the same vehicle's limits;
+3. ``companion run --controller kanayama --controller-gains ... --vehicle DIR/vehicle.toml``
+   flies the same, the classical law live within the same vehicle's limits, with the gains
+   picked by hand for the frame (``benchmarks/kanayama_gains.toml``, ``[skid]`` or
+   ``[ackermann]``: not its defaults, which limit-cycle on these rovers);
 4. ArduPilot's own GUIDED position-target following (:mod:`native_follow`) flies the same.
 
 Scored from the vehicle's own LOCAL_POSITION_NED: the steady RMS of |p_ref - p| over the last
@@ -47,7 +49,7 @@ sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "tests"))
 sys.path.insert(0, str(ROOT / "benchmarks"))
 
-from sim_to_real import MISSIONS, ready_argv  # noqa: E402
+from sim_to_real import MISSIONS, kanayama_argv, ready_argv  # noqa: E402
 
 # name -> the ArduPilot parameters set over the frame's defaults (stock ArduPilot values in
 # the comments: ATC_ACCEL_MAX 1 (SITL rover-skid), ATC_DECEL_MAX 0 (= accel), ATC_STR_ACC_MAX
@@ -123,8 +125,7 @@ def one(name: str, params: dict[str, float], frame: str, speeds: list[float], wo
             mission = str(ROOT / "missions" / MISSIONS[f_r])
             base = ["run", "--connect", url, "--vehicle", vehicle, "--mission", mission, "--arm",
                     "--json", "--no-zenoh", "--log-dir", str(logs), "-q"]
-            flown = [("pzc", [])] + ([("kanayama", ["--controller", "kanayama"])] if kanayama
-                                     else [])
+            flown = [("pzc", [])] + ([("kanayama", kanayama_argv(frame))] if kanayama else [])
             for label, extra in flown:
                 r, _, err = companion(base + extra, 600)
                 row["runs"][f"{label}@{f_r:g}"] = {

@@ -4,6 +4,7 @@ feed-forward, and ``simulate`` and the live loop build the same tracker for the 
 
 from __future__ import annotations
 
+import json
 import math
 import subprocess
 import sys
@@ -159,7 +160,7 @@ def test_pzc_gains_for_a_baseline_are_one_clear_line():
     assert p.returncode == 2 and "Traceback" not in p.stderr
     assert p.stderr.strip().splitlines() == [
         "companion simulate: error: --gains sets the filter + PZC gains; --controller pid "
-        "flies its own defaults"]
+        "flies its own gains (--controller-gains)"]
 
 
 def test_pzc_gain_flags_for_a_baseline_on_run_are_refused_before_connecting():
@@ -171,4 +172,135 @@ def test_pzc_gain_flags_for_a_baseline_on_run_are_refused_before_connecting():
     assert p.returncode == 2 and "Traceback" not in p.stderr
     assert p.stderr.strip().splitlines()[-1].endswith(
         "--k-dc and --lambda-c set the filter + PZC gains; --controller kanayama flies its own "
-        "defaults")
+        "gains (--controller-gains)")
+
+
+# --- --controller-gains: a baseline's own gains, set field by field -------------------------
+
+SKID = "companion/sim/vehicles/ardupilot_skid.toml"
+
+
+def _simulate(*args: str) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "companion", "simulate", *args],
+                          capture_output=True, text=True, cwd=ROOT, timeout=60)
+
+
+def test_own_gains_are_set_field_by_field_over_the_defaults_and_reach_the_tracker():
+    from companion.core.baselines import KanayamaGains, PIDGains
+    kan, pid = controllers.get("kanayama"), controllers.get("pid")
+    gains = kan.with_gains({"kx": 1.0, "kth": 1.2})
+    assert gains == KanayamaGains(kx=1.0, ky=4.0, kth=1.2)         # ky stays at its default
+    assert controllers.build("kanayama", LIMITS, own_gains=gains).gains is gains
+    assert controllers.build("kanayama", LIMITS, own_gains=gains, n=3).gains is gains
+    assert pid.with_gains({"ki": 0.0, "speed_law": "paper"}) == PIDGains(ki=0.0, speed_law="paper")
+    assert kan.describe(gains, "--controller-gains") == (
+        "kanayama --controller-gains (Kanayama et al. (1990), gains chosen by hand): "
+        "kx 1, ky 4, kth 1.2")
+    # the wrong kind of gains, or own gains for pzc, is refused rather than ignored
+    with pytest.raises(ValueError, match="flies KanayamaGains, not PIDGains"):
+        controllers.build("kanayama", LIMITS, own_gains=PIDGains())
+    with pytest.raises(ValueError, match="none of its own"):
+        controllers.build("pzc", LIMITS, own_gains=gains)
+
+
+def test_the_live_loop_and_simulate_fly_the_gains_given():
+    """policy.build_tracker (run, demo and simulate alike) flies ``--controller-gains`` and its
+    result names them; check_controller refuses them for a controller they are not for."""
+    from companion.errors import UserError
+    from companion.live import policy
+    from companion.mission import paper_ellipse
+
+    own = controllers.get("kanayama").with_gains({"kx": 1.0, "ky": 0.5, "kth": 1.2})
+    options = policy.GainOptions(controller_gains=own)
+    policy.check_controller("kanayama", options)
+    resolved = policy.resolve(paper_ellipse(), options)
+    tracker, values, source = policy.build_tracker("kanayama", resolved.gains, LIMITS, own)
+    assert tracker.gains is own and values == {"kx": 1.0, "ky": 0.5, "kth": 1.2}
+    assert source.startswith("kanayama --controller-gains (") and source.endswith(
+        ": kx 1, ky 0.5, kth 1.2")
+    default = controllers.build("kanayama", LIMITS)
+    assert [(c.speed, c.yaw_rate) for c in _fly(tracker, 40)] != \
+        [(c.speed, c.yaw_rate) for c in _fly(default, 40)]
+    for name in ("pzc", "pid"):
+        with pytest.raises(UserError, match=f"--controller-gains .* --controller {name}"):
+            policy.check_controller(name, options)
+
+
+def test_simulate_flies_controller_gains_deterministically_and_shows_them():
+    """Kanayama's defaults limit-cycle on the identified ArduPilot skid-steer (the yaw-rate
+    setpoint at its limit); the gains picked for it (benchmarks/kanayama_gains.toml) track,
+    the same every time, and the JSON names them."""
+    base = ["--vehicle", SKID, "--mission", "missions/paper_ellipse_004.toml",
+            "--controller", "kanayama", "--json"]
+    flag = ["--controller-gains", "kx=1,ky=0.5,kth=1.2"]
+    defaults, picked, again = (_simulate(*base), _simulate(*base, *flag),
+                               _simulate(*base, *flag))
+    for p in (defaults, picked, again):
+        assert p.returncode == 0, p.stderr
+    d, r, r2 = (json.loads(p.stdout) for p in (defaults, picked, again))
+    assert d["gains"].startswith("kanayama defaults (") and d["gains_values"] == \
+        {"kx": 3.0, "ky": 4.0, "kth": 3.0}
+    assert r["gains"] == ("kanayama --controller-gains (Kanayama et al. (1990), gains chosen by "
+                          "hand): kx 1, ky 0.5, kth 1.2")
+    assert r["gains_values"] == {"kx": 1.0, "ky": 0.5, "kth": 1.2}
+    assert r["steady_rms"] == r2["steady_rms"] and r["f_cost"] == r2["f_cost"]
+    assert d["steady_rms"] > 1.0 and r["steady_rms"] < 0.1
+
+
+def test_demo_flies_controller_gains_live(tmp_path):
+    """The live loop (demo: the companion against the bundled plant over MAVLink) flies them
+    too, and its result says so."""
+    p = subprocess.run([sys.executable, "-m", "companion", "demo", "--json", "--controller",
+                        "pid", "--controller-gains", "kp=2,kd=0", "--duration", "5",
+                        "--no-plot", "--no-log", "-q"],
+                       capture_output=True, text=True, cwd=ROOT, timeout=120)
+    assert p.returncode == 0, p.stderr
+    r = json.loads(p.stdout)
+    assert r["controller"] == "pid" and r["reason"] == "mission_done"
+    assert r["gains"] == {"kp": 2.0, "ki": 0.5, "kd": 0.0, "speed_law": "projected"}
+    assert r["gains_source"].startswith("pid --controller-gains (")
+
+
+@pytest.mark.parametrize("controller, value, message", [
+    ("kanayama", "kz=1", "kanayama has no gain 'kz' (its gains: kx, ky, kth)"),
+    ("kanayama", "kx=fast", "kx must be a number, not 'fast'"),
+    ("kanayama", "kx=1,ky=0", "ky must be a finite number > 0, not 0"),
+    ("kanayama", "kth=nan", "kth must be a finite number > 0, not nan"),
+    ("kanayama", "kx=1,kx=2", "kx given twice"),
+    ("kanayama", "kx", "'kx' is not NAME=VALUE (e.g. kx=1.5; kanayama's gains: kx, ky, kth)"),
+    ("pid", "kd=-0.1", "kd must be a finite number >= 0, not -0.1"),
+    ("pid", "speed_law=fast", "speed_law must be one of projected, paper, not 'fast'"),
+])
+def test_bad_controller_gains_are_one_line_naming_the_flag_and_the_field(controller, value,
+                                                                          message):
+    p = _simulate("--controller", controller, "--controller-gains", value)
+    assert p.returncode == 2 and "Traceback" not in p.stderr
+    assert p.stderr.strip().splitlines() == [
+        f"companion simulate: error: --controller-gains: {message}"]
+
+
+@pytest.mark.parametrize("command", ["run", "simulate"])
+def test_controller_gains_with_pzc_are_refused_before_anything_flies(command):
+    extra = (["--connect", "udpin:127.0.0.1:9", "--mission", "missions/paper_ellipse_004.toml",
+              "--no-log"] if command == "run" else [])
+    p = subprocess.run([sys.executable, "-m", "companion", command, *extra,
+                        "--controller-gains", "kx=1"],
+                       capture_output=True, text=True, cwd=ROOT, timeout=60)
+    assert p.returncode == 2 and "Traceback" not in p.stderr
+    assert p.stderr.strip().splitlines()[-1] == (
+        f"companion {command}: error: --controller-gains sets the own gains of a baseline "
+        "(pid, kanayama); --controller pzc flies the filter + PZC gains (--gains, --k-df, "
+        "--lambda-f, --k-dc, --lambda-c)")
+
+
+@pytest.mark.parametrize("command", ["run", "demo", "simulate"])
+def test_controller_gains_help_names_every_field(command):
+    """The help text is built without importing the controllers (instant --help), so it names
+    their fields itself: held here to the dataclasses."""
+    help_text = " ".join(subprocess.run(
+        [sys.executable, "-m", "companion", command, "--help"], capture_output=True, text=True,
+        cwd=ROOT, timeout=60).stdout.split())
+    assert "--controller-gains NAME=VALUE[,...]" in help_text
+    for name in ("pid", "kanayama"):
+        fields = ", ".join(controllers.get(name).gain_defaults())
+        assert f"{name}: {fields}" in help_text

@@ -11,7 +11,9 @@ from __future__ import annotations
 import argparse
 import math
 import re
+from typing import Any
 
+from ..errors import UserError
 from ..live.config import BAD_ESTIMATE_ACTIONS, LINK, ORIGIN, RUNNER
 
 CONNECT_HELP = ("pymavlink connection string or serial device, e.g. /dev/ttyAMA0 or "
@@ -134,12 +136,66 @@ def add_origin_arguments(p: argparse.ArgumentParser) -> None:
     allow_negative_pairs(p)
 
 
-def add_gain_arguments(p: argparse.ArgumentParser) -> None:
+def controller_gains(controller: str, text: str | None) -> Any:
+    """``--controller-gains NAME=VALUE[,NAME=VALUE...]`` for ``--controller controller``: an
+    instance of that controller's own gains dataclass, the fields named set and the rest at
+    their defaults (``None``: the flag not given, the defaults fly).
+
+    Parsed after argparse, once the controller is known (the fields are its gains'), so every
+    mistake is one line naming the flag and the field (UserError, exit 2): a missing ``=``, a
+    field named twice, a word for a number; unknown fields and values out of range are the
+    gains' own checks (:meth:`companion.core.controllers.Controller.with_gains`).
+    """
+    if text is None:
+        return None
+    from ..core import controllers
+    entry = controllers.get(controller)
+    if entry.uses_pzc_gains:
+        raise UserError(f"--controller-gains sets the own gains of a baseline (pid, kanayama); "
+                        f"--controller {controller} flies the filter + PZC gains (--gains, "
+                        "--k-df, --lambda-f, --k-dc, --lambda-c)")
+    defaults = entry.gain_defaults()
+    values: dict[str, float | str] = {}
+    for item in text.split(","):
+        name, eq, raw = (part.strip() for part in item.partition("="))
+        if not eq or not name or not raw:
+            raise UserError(f"--controller-gains: {item.strip()!r} is not NAME=VALUE (e.g. "
+                            f"{next(iter(defaults))}=1.5; {controller}'s gains: "
+                            f"{', '.join(defaults)})")
+        if name in values:
+            raise UserError(f"--controller-gains: {name} given twice")
+        if name in defaults and isinstance(defaults[name], str):
+            values[name] = raw                    # a word (pid's speed_law)
+            continue
+        try:
+            values[name] = float(raw)
+        except ValueError:
+            if name not in defaults:              # the unknown name is the mistake to report
+                values[name] = raw
+                continue
+            raise UserError(f"--controller-gains: {name} must be a number, not {raw!r}") from None
+    try:
+        return entry.with_gains(values)
+    except ValueError as exc:
+        raise UserError(f"--controller-gains: {exc}") from None
+
+
+def add_controller_arguments(g) -> None:
+    """--controller and --controller-gains (run, demo, simulate): which law flies, and a
+    baseline's own gains (read back by :func:`controller_gains`)."""
     from ..core.controllers import DEFAULT, NAMES  # names only: no numpy to build the CLI
-    g = p.add_argument_group("gains and limits")
     g.add_argument("--controller", choices=NAMES, default=DEFAULT,
                    help=f"the tracker to fly (default {DEFAULT}); pid and kanayama fly their "
-                        "own default gains within the same limits")
+                        "own gains (default, or --controller-gains) within the same limits")
+    g.add_argument("--controller-gains", dest="controller_gains", metavar="NAME=VALUE[,...]",
+                   help="pid and kanayama only: set fields of the controller's own gains, the "
+                        "rest at their defaults, e.g. kx=1,ky=0.5,kth=1.2 (kanayama: kx, ky, "
+                        "kth; pid: kp, ki, kd, speed_law)")
+
+
+def add_gain_arguments(p: argparse.ArgumentParser) -> None:
+    g = p.add_argument_group("gains and limits")
+    add_controller_arguments(g)
     g.add_argument("--rate", type=positive, metavar="HZ",
                    help="telemetry / control rate to ask for (default: the mission's, else 40)")
     g.add_argument("--gains", metavar="FILE", help="tuned-gains TOML file (companion tune)")

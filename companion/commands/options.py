@@ -117,9 +117,11 @@ def origin_config(args: argparse.Namespace) -> OriginConfig:
 
 def gain_options(args: argparse.Namespace, vehicle: bool = True) -> GainOptions:
     """add_gain_arguments (+ add_vehicle_arguments' --w-c and --d-cen when ``vehicle``)."""
+    from .arguments import controller_gains
     return GainOptions(rate=args.rate, gains_file=args.gains, k_df=args.k_df,
                        lambda_f=args.lambda_f, k_dc=args.k_dc, lambda_c=args.lambda_c,
                        max_speed=args.max_speed, max_yaw_rate=args.max_yaw_rate,
+                       controller_gains=controller_gains(args.controller, args.controller_gains),
                        w_c=args.w_c if vehicle else None, d_cen=args.d_cen if vehicle else None)
 
 

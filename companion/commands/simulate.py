@@ -20,6 +20,7 @@ import sys
 from ..core.tracker import Tracker
 from ..errors import ExitCode, UserError, require_positive
 from ..live.config import DEFAULT_RATE
+from .arguments import add_controller_arguments
 
 
 def register(subparsers) -> None:
@@ -43,10 +44,7 @@ def register(subparsers) -> None:
                    help="speed limit of every command (m/s)")
     p.add_argument("--max-yaw-rate", type=float, dest="max_yaw_rate", metavar="RAD_S",
                    help="turn-rate limit of every command (rad/s)")
-    from ..core.controllers import DEFAULT, NAMES  # names only: no numpy to build the CLI
-    p.add_argument("--controller", choices=NAMES, default=DEFAULT,
-                   help=f"the tracker to fly (default {DEFAULT}); pid and kanayama fly their "
-                        "own default gains within the same limits")
+    add_controller_arguments(p)
     p.add_argument("--origin", metavar="LAT,LON", help="EKF origin for geodetic missions")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.add_argument("--plot", metavar="OUT.png", help="draw the run (path and error)")
@@ -115,7 +113,7 @@ def run(args) -> int:
         params = params.with_(d_cen=args.d_cen)
 
     tracker, gains_values, gains_note = policy.build_tracker(args.controller, resolved.gains,
-                                                             limits)
+                                                             limits, options.controller_gains)
     if args.plot:
         tracker = _Recorder(tracker)
 
@@ -149,5 +147,7 @@ def run(args) -> int:
 def sim_gain_options(args):
     """simulate's flags as the policy reads them (the same as run's for the same values)."""
     from ..live.policy import GainOptions
+    from .arguments import controller_gains
     return GainOptions(rate=args.rate, gains_file=args.gains, max_speed=args.max_speed,
-                       max_yaw_rate=args.max_yaw_rate, w_c=args.w_c, d_cen=args.d_cen)
+                       max_yaw_rate=args.max_yaw_rate, w_c=args.w_c, d_cen=args.d_cen,
+                       controller_gains=controller_gains(args.controller, args.controller_gains))

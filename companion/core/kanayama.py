@@ -34,7 +34,10 @@ from .tracker import raw_estimate
 
 @dataclass(frozen=True)
 class KanayamaGains:
-    """K_x (1/s), K_y (1/m^2), K_th (1/m); chosen by hand on the paper's f_r 0.04 Hz ellipse."""
+    """K_x (1/s), K_y (1/m^2), K_th (1/m); chosen by hand on the paper's f_r 0.04 Hz ellipse
+    (its ideal plant: on a real vehicle's lag and limits they limit-cycle, so a fair comparison
+    flies gains picked for that vehicle, ``--controller-gains``; benchmarks/kanayama_gains.toml).
+    All must be > 0 (the law's Lyapunov proof)."""
 
     kx: Num = 3.0
     ky: Num = 4.0
@@ -76,6 +79,8 @@ class KanayamaTracker:
 DEFAULT_GAINS = KanayamaGains()
 
 
-def build(limits: Limits, n: int | None = None) -> KanayamaTracker:
-    """The registry's builder (:mod:`companion.core.controllers`): the hand-picked gains."""
-    return KanayamaTracker(DEFAULT_GAINS, limits, n)
+def build(limits: Limits, n: int | None = None,
+          gains: KanayamaGains | None = None) -> KanayamaTracker:
+    """The registry's builder (:mod:`companion.core.controllers`): ``gains``, else the
+    defaults."""
+    return KanayamaTracker(DEFAULT_GAINS if gains is None else gains, limits, n)

@@ -12,22 +12,29 @@ There is no filter: the pose the law uses (``estimate``) is the measurement itse
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 from . import ops as _ops
-from .limits import Limits, clamp, keep_if, speed_from_up
+from .controllers import MAY_BE_ZERO
+from .limits import SPEED_LAWS, Limits, clamp, keep_if, speed_from_up
 from .signals import Command, Estimate, Measurement, Num, Reference
 from .tracker import raw_estimate
 
 
 @dataclass(frozen=True)
 class PIDGains:
-    """The paper's "well-tuned" PID gains (Section 5), tuned there for f_r 0.04 Hz, d_cen 0."""
+    """The paper's "well-tuned" PID gains (Section 5), tuned there for f_r 0.04 Hz, d_cen 0.
+    k_I and k_D may be 0 (a PD or PI law is still one); k_P must be > 0."""
 
     kp: Num = 3.5
-    ki: Num = 0.5
-    kd: Num = 0.5
+    ki: Num = field(default=0.5, metadata={MAY_BE_ZERO: True})
+    kd: Num = field(default=0.5, metadata={MAY_BE_ZERO: True})
     speed_law: str = "projected"
+
+    def __post_init__(self) -> None:
+        if self.speed_law not in SPEED_LAWS:
+            raise ValueError(f"speed_law must be one of {', '.join(SPEED_LAWS)}, "
+                             f"not {self.speed_law!r}")
 
 
 class PIDTracker:
@@ -77,6 +84,7 @@ class PIDTracker:
 DEFAULT_GAINS = PIDGains()
 
 
-def build(limits: Limits, n: int | None = None) -> PIDTracker:
-    """The registry's builder (:mod:`companion.core.controllers`): the paper's gains."""
-    return PIDTracker(DEFAULT_GAINS, limits, n)
+def build(limits: Limits, n: int | None = None, gains: PIDGains | None = None) -> PIDTracker:
+    """The registry's builder (:mod:`companion.core.controllers`): ``gains``, else the
+    paper's."""
+    return PIDTracker(DEFAULT_GAINS if gains is None else gains, limits, n)

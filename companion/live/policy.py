@@ -51,6 +51,8 @@ class GainOptions:
     max_yaw_rate: float | None = None      # --max-yaw-rate
     w_c: float | None = None               # --w-c: the vehicle's, to pick shipped gains
     d_cen: float | None = None             # --d-cen
+    controller_gains: Any = None           # --controller-gains: a baseline's own gains (its
+                                           # gains dataclass, e.g. KanayamaGains; None: defaults)
 
 
 @dataclass(frozen=True)
@@ -186,7 +188,8 @@ def _finite_or_none(x: float) -> float | None:
 
 
 def check_controller(controller: str, options: GainOptions) -> None:
-    """A known controller, and no PZC gains asked of one that flies its own (a user error)."""
+    """A known controller, no PZC gains asked of one that flies its own, and no own gains
+    asked of one that flies PZC gains or of another kind than its own (a user error)."""
     try:
         entry = controllers.get(controller)
     except ValueError as exc:
@@ -197,17 +200,27 @@ def check_controller(controller: str, options: GainOptions) -> None:
                                       ("--lambda-c", o.lambda_c)) if value is not None]
     if given and not entry.uses_pzc_gains:
         raise UserError(f"{' and '.join(given)} set{'s' if len(given) == 1 else ''} the filter "
-                        f"+ PZC gains; --controller {controller} flies its own defaults")
+                        f"+ PZC gains; --controller {controller} flies its own gains "
+                        "(--controller-gains)")
+    own = o.controller_gains
+    if own is not None and (entry.uses_pzc_gains
+                            or type(own) is not type(entry.default_gains)):
+        raise UserError(f"--controller-gains ({type(own).__name__}) are not the gains "
+                        f"--controller {controller} flies")
 
 
-def build_tracker(controller: str, choice: Choice,
-                  limits: Limits) -> tuple[Any, dict[str, Any], str]:
+def build_tracker(controller: str, choice: Choice, limits: Limits,
+                  own_gains: Any = None) -> tuple[Any, dict[str, Any], str]:
     """(the tracker ``controller`` names, its gains for the result, where they came from), for
     ``run``, ``demo`` and ``simulate`` alike: the policy's ``choice`` for a controller that
-    flies the filter + PZC gains, the controller's own defaults otherwise."""
+    flies the filter + PZC gains; for one with gains of its own, ``own_gains``
+    (``--controller-gains``, checked by :func:`check_controller`), else its defaults. The
+    result names the gains actually flown, so a comparison shows which baseline it beat."""
     entry = controllers.get(controller)
     if not entry.uses_pzc_gains:
-        return controllers.build(controller, limits), entry.gains_dict(), entry.defaults_source()
+        source = "defaults" if own_gains is None else "--controller-gains"
+        return (controllers.build(controller, limits, own_gains=own_gains),
+                entry.gains_dict(own_gains), entry.describe(own_gains, source))
     return (controllers.build(controller, limits, filter_gains=choice.filter,
                               pzc_gains=choice.pzc),
             gains_dict(choice.filter, choice.pzc), choice.source)

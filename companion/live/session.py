@@ -4,7 +4,8 @@ Connect, wait for the vehicle, negotiate the telemetry rate, recognise a bundled
 nothing says what it is (:mod:`companion.live.presets`), resolve gains and limits for the
 rate the vehicle actually accepted (:mod:`companion.live.policy`, the one policy), build the
 tracker ``--controller`` names (:mod:`companion.core.controllers`: pzc flies the policy's gains,
-pid and kanayama their own defaults, all within the policy's limits), run the loop
+pid and kanayama their own, ``--controller-gains`` or defaults, all within the policy's
+limits), run the loop
 (:mod:`companion.live.runner`).
 """
 
@@ -143,7 +144,8 @@ def fly(s: RunSettings, sinks: Sequence[Sink] = (), control: ControlChannel | No
                        f"yaw rate {limits.max_yaw_rate:g} rad/s")
         choice = policy.choose_gains(mission, s.gains, known, accepted or rate)
         if make_tracker is None:
-            tracker, gains, gains_source = policy.build_tracker(s.controller, choice, limits)
+            tracker, gains, gains_source = policy.build_tracker(s.controller, choice, limits,
+                                                                s.gains.controller_gains)
             log(f"controller {tracker.name}; gains: {gains_source}; {limits_text}")
         else:
             gains, gains_source = policy.gains_dict(choice.filter, choice.pzc), choice.source
