@@ -193,6 +193,40 @@ def test_a_car_s_vehicle_file_round_trips(tmp_path):
     assert "lat_accel_max_m_s2" in text and "min_turn_radius_m = 0.9" in text
 
 
+def test_a_car_is_never_asked_to_turn_tighter_than_its_radius():
+    # The companion's commands to a car (ArduPilot's Ackermann rover) keep |omega| <= |v| / R,
+    # at the commanded speed, and hold the yaw integrator while that clamp bites (anti-windup);
+    # a skid-steer rover (R 0) and PX4's velocity vectors keep the old clamps.
+    from companion.core import ops
+    from companion.core.limits import clamp
+    from companion.core.pzc import PZCGains, PZCLaw
+    from companion.core.signals import Estimate
+    from companion.live.policy import GainOptions, KnownVehicle, choose_limits, limits_dict
+    from companion.sim.vehicle_gains import vehicle_limits
+    lim = vehicle_limits(CAR)
+    assert lim.min_turn_radius == pytest.approx(0.9)
+    assert vehicle_limits(CAR.with_(course_gain=3.0)).min_turn_radius == 0.0   # PX4's
+    assert vehicle_limits(CAR.with_(min_turn_radius=0.0)).min_turn_radius == 0.0
+    cmd, speed_free, rate_free = clamp(ops.scalar, lim, 0.9, 2.0, 0.9, 0.0, 0.9)
+    assert cmd.yaw_rate == pytest.approx(1.0) and speed_free and not rate_free
+    cmd, _, rate_free = clamp(ops.scalar, lim, -0.45, -2.0, -0.45, 0.0, 0.45)   # reversing
+    assert cmd.yaw_rate == pytest.approx(-0.5) and not rate_free
+    cmd, _, rate_free = clamp(ops.scalar, lim, 0.0, 1.0, 0.0, 0.0, 0.0)        # at rest: none
+    assert cmd.yaw_rate == 0.0 and not rate_free
+    batch, _, free = clamp(ops.array, lim, np.array([0.9, 3.0]), np.array([2.0, 2.0]),
+                           np.zeros(2), np.zeros(2), np.ones(2))
+    assert batch.yaw_rate == pytest.approx([1.0, 2.0]) and list(free) == [False, True]
+    # the limits a run flies and reports: the vehicle's radius kept under a mission's limits
+    flown = choose_limits(None, GainOptions(), KnownVehicle(limits=lim))
+    assert flown.min_turn_radius == pytest.approx(0.9)
+    assert limits_dict(flown)["min_turn_radius"] == pytest.approx(0.9)
+    # the law never commands past it, at any step of a run towards a point behind the car
+    law = PZCLaw(PZCGains(k_dc=2.0, lambda_c=1.0), lim)
+    for k in range(200):
+        cmd = law.step(0.025 * k, Estimate(0.0, 0.0, 0.0, 0.0, 0.0, 0.0), Reference(-3.0, 2.0))
+        assert abs(cmd.yaw_rate) <= abs(cmd.speed) / 0.9 + 1e-12
+
+
 # --------------------------------------------------------------------------- live, sitl-plant
 
 def test_live_identify_of_a_car_on_sitl_plant_flies_at_speed_and_finds_its_radius(tmp_path):

@@ -55,7 +55,10 @@ class ActuatorLead:
         gain = m.where(self.tau > 0, gain, 1.0)
         speed = m.clip(self.speed_model + gain * (cmd.speed - self.speed_model),
                        -lim.max_speed, lim.max_speed)
+        top_rate = lim.max_yaw_rate
+        if lim.min_turn_radius:      # a car: no tighter than its turning radius (Limits)
+            top_rate = m.minimum(top_rate, abs(speed) / lim.min_turn_radius)
         rate = m.clip(self.rate_model + gain * (cmd.yaw_rate - self.rate_model),
-                      -lim.max_yaw_rate, lim.max_yaw_rate)
+                      -top_rate, top_rate)
         self.speed_sent, self.rate_sent = speed, rate
         return Command(speed, rate, cmd.ux, cmd.uy)

@@ -17,16 +17,28 @@ SPEED_LAWS = ("projected", "paper")
 
 @dataclass(frozen=True)
 class Limits:
-    """Command limits: |v_ref| <= max_speed (m/s), |omega_ref| <= max_yaw_rate (rad/s)."""
+    """Command limits: |v_ref| <= max_speed (m/s), |omega_ref| <= max_yaw_rate (rad/s), and for
+    a car driven by speed / turn-rate setpoints (ArduPilot's Ackermann rover) a command no
+    tighter than its turning radius: |omega_ref| <= |v_ref| / min_turn_radius (m; 0: none).
+
+    Why the car's: ArduPilot's turn-rate target is not held to what the steering can give at the
+    speed of the moment, so a setpoint above |v| / R leaves the steering at full lock while the
+    rate loop's integrator winds up, and the target, accelerating at ATC_STR_ACC_MAX from far
+    above, takes most of a second to come back through the turn rate flown when the setpoint
+    reverses (SITL ``rover``, 2026-12-02: 0.6 s at 0.59 rad/s after a full reversal at
+    0.5 m/s). Held to the command's own speed: the one the vehicle is asked to fly."""
 
     max_speed: float = math.inf
     max_yaw_rate: float = math.inf
+    min_turn_radius: float = 0.0
 
     def __post_init__(self) -> None:
         for name in ("max_speed", "max_yaw_rate"):
             value = getattr(self, name)
             if not value > 0:
                 raise ValueError(f"{name} must be > 0, not {value!r}")
+        if not (math.isfinite(self.min_turn_radius) and self.min_turn_radius >= 0):
+            raise ValueError(f"min_turn_radius must be >= 0, not {self.min_turn_radius!r}")
 
 
 # The companion's ceiling for a vehicle whose limits nobody gave: above what the paper's ellipse
@@ -53,12 +65,16 @@ def clamp(m: Ops, lim: Limits, speed: Num, yaw_rate: Num, ux: Num, uy: Num,
     Returns ``(command, speed_free, rate_free)``; the two flags are False where a clamp bit, and
     the caller must then hold the matching integrator (conditional-integration anti-windup).
     """
-    if lim.max_speed == math.inf and lim.max_yaw_rate == math.inf:
+    if lim.max_speed == math.inf and lim.max_yaw_rate == math.inf and not lim.min_turn_radius:
         return Command(speed, yaw_rate, ux, uy), True, True     # nothing to clamp or hold
     speed_free = abs(speed) <= lim.max_speed
-    rate_free = abs(yaw_rate) <= lim.max_yaw_rate
     speed = m.clip(speed, -lim.max_speed, lim.max_speed)
-    yaw_rate = m.clip(yaw_rate, -lim.max_yaw_rate, lim.max_yaw_rate)
+    top_rate = lim.max_yaw_rate
+    if lim.min_turn_radius:
+        # a car's turn at the commanded speed (the clamped one: what it is asked to drive)
+        top_rate = m.minimum(top_rate, abs(speed) / lim.min_turn_radius)
+    rate_free = abs(yaw_rate) <= top_rate
+    yaw_rate = m.clip(yaw_rate, -top_rate, top_rate)
     # u_p for a velocity-vector autopilot (PX4) obeys the same speed limit.
     scale = m.minimum(1.0, lim.max_speed / m.maximum(norm_up, 1e-12))
     return Command(speed, yaw_rate, ux * scale, uy * scale), speed_free, rate_free

@@ -159,13 +159,15 @@ def choose_limits(mission: Any, options: GainOptions,
     mission_limits = mission.limits if mission is not None else None
     known = [lim for lim in (mission_limits, vehicle.limits) if lim is not None]
     base = (Limits(max_speed=min(lim.max_speed for lim in known),
-                   max_yaw_rate=min(lim.max_yaw_rate for lim in known))
+                   max_yaw_rate=min(lim.max_yaw_rate for lim in known),
+                   min_turn_radius=max(lim.min_turn_radius for lim in known))
             if known else DEFAULT_LIMITS)
     try:
         return Limits(max_speed=options.max_speed if options.max_speed is not None
                       else base.max_speed,
                       max_yaw_rate=(options.max_yaw_rate if options.max_yaw_rate is not None
-                                    else base.max_yaw_rate))
+                                    else base.max_yaw_rate),
+                      min_turn_radius=base.min_turn_radius)
     except ValueError as exc:
         raise UserError(str(exc)) from None
 
@@ -179,8 +181,11 @@ def gains_dict(filt: FilterGains, pzc: PZCGains) -> dict[str, Any]:
 
 def limits_dict(limits: Limits) -> dict[str, float | None]:
     """The limits for a JSON result (``None``: no limit)."""
-    return {"max_speed": _finite_or_none(limits.max_speed),
-            "max_yaw_rate": _finite_or_none(limits.max_yaw_rate)}
+    out = {"max_speed": _finite_or_none(limits.max_speed),
+           "max_yaw_rate": _finite_or_none(limits.max_yaw_rate)}
+    if limits.min_turn_radius:
+        out["min_turn_radius"] = limits.min_turn_radius
+    return out
 
 
 def _finite_or_none(x: float) -> float | None:

@@ -46,9 +46,13 @@ def vehicle_limits(vehicle: RoverParams, max_speed: float | None = None,
     def pick(flag: float | None, own: float, ceiling: float) -> float:
         own = own if math.isfinite(own) else ceiling    # none known: the companion's ceiling
         return min(flag, own) if flag is not None else own
+    # a car driven by turn-rate setpoints: no command tighter than its turning radius (PX4's
+    # velocity vectors leave that to PX4's own course loop)
+    radius = 0.0 if vehicle.velocity_vector else float(vehicle.min_turn_radius)
     return Limits(max_speed=pick(max_speed, float(vehicle.max_speed), DEFAULT_LIMITS.max_speed),
                   max_yaw_rate=pick(max_yaw_rate, float(vehicle.max_yaw_rate),
-                                    DEFAULT_LIMITS.max_yaw_rate))
+                                    DEFAULT_LIMITS.max_yaw_rate),
+                  min_turn_radius=radius)
 
 
 def config_for(vehicle_path: str | Path, rate: float,
