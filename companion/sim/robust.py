@@ -109,7 +109,8 @@ class RobustConfig:
     chatter_weight: float = 0.05       # objective per (m/s + rad/s) per s of setpoint variation
     plant_dt: float = 0.02             # s: one exact step per ArduPilot tick (within 3 % of 1 ms)
     seed: int = 1
-    min_progress: float = 0.0          # the law's progress floor for every candidate (PX4)
+    min_progress: float = 0.0          # the law's progress floor for every candidate (PX4, a car)
+    speed_law: str = "projected"       # every candidate's (a car: "paper", it turns only moving)
     # processes that simulate each round's candidates (this one and workers - 1 spawned): the
     # same gains at any count (:func:`evaluate`), in less wall time where cores are free
     workers: int = 1
@@ -228,7 +229,7 @@ def _extension_values(cands: Candidates, scales: tuple[float, float]) -> dict[st
 
 def _tracker(cands: Candidates, repeat: int, limits: Limits,
              scales: tuple[float, float] = DEFAULT_BRAKE_SCALE,
-             min_progress: float = 0.0) -> PZCTracker:
+             min_progress: float = 0.0, speed_law: str = "projected") -> PZCTracker:
     p, f = cands.params, cands.flags
     rep = lambda a: np.repeat(a, repeat)  # noqa: E731
     separate = f["separate_yaw"] > 0.5
@@ -249,7 +250,7 @@ def _tracker(cands: Candidates, repeat: int, limits: Limits,
                  brake_accel=rep(ext["brake_accel"]) if np.any(ext["brake_accel"] > 0) else 0.0,
                  brake_yaw_accel=(rep(ext["brake_yaw_accel"])
                                   if np.any(ext["brake_yaw_accel"] > 0) else 0.0),
-                 min_progress=min_progress),
+                 min_progress=min_progress, speed_law=speed_law),
         limits, n=len(cands) * repeat)
 
 
@@ -282,7 +283,7 @@ def _simulate_part(cands: Candidates, cfg: RobustConfig, vehicles: Sequence[Rove
                     noise_slice=(total * n_v * n_r, first * n_v * n_r))
     with np.errstate(all="ignore"):
         result = simulate(_tracker(cands, n_v * n_r, cfg.limits, brake_scales(cfg.vehicle),
-                                   cfg.min_progress), params,
+                                   cfg.min_progress, cfg.speed_law), params,
                           _reference(refs, n_c, n_v), n, sim, progress)
     shape = (n_c, n_v, n_r)
     return (np.asarray(result.steady_rms).reshape(shape),
@@ -465,7 +466,7 @@ def tune(cfg: RobustConfig, progress: Callable[[float], None] | None = None) -> 
     ev = evaluate(winner, cfg, vehicles,
                   None if progress is None else (lambda f: progress((cfg.rounds + f) / total)))
     fg, pg = candidate_gains(winner, 0, brake_scales(cfg.vehicle))
-    pg = replace(pg, min_progress=cfg.min_progress)
+    pg = replace(pg, min_progress=cfg.min_progress, speed_law=cfg.speed_law)
     labels = [label for label, _ in cfg.reference_list()]
     if not math.isfinite(float(ev.objective[0])):
         raise RuntimeError("no gain set held on every neighbour: widen the search "

@@ -31,6 +31,7 @@ class NothingRobust(UserError):
 
 
 PX4_MIN_PROGRESS = 0.3  # share of the reference speed u_p keeps along it on a PX4 vehicle
+CAR_MIN_PROGRESS = 0.3  # ... and on a car driven by turn-rate setpoints
 
 
 def digest(vehicle_path: str | Path) -> str:
@@ -65,6 +66,14 @@ def config_for(vehicle_path: str | Path, rate: float,
         # PX4 (velocity vector, its own course loop): the progress floor keeps an Ackermann
         # rover from turning round when it gets ahead (core.pzc, min_progress)
         search.setdefault("min_progress", PX4_MIN_PROGRESS)
+    elif float(vehicle.min_turn_radius) > 0:
+        # A car on speed / turn-rate setpoints (ArduPilot's Ackermann rover) turns only while it
+        # drives: the projected speed law slows it to nothing when its heading is far off and
+        # the turning-radius clamp (Limits) then leaves it no turn at all (SITL rover,
+        # 2026-12-02: 1.6 rad off for 10 s, 15 m from the 0.08 Hz ellipse). The paper's |u_p|
+        # keeps it driving forward, the progress floor keeps u_p from vanishing.
+        search.setdefault("min_progress", CAR_MIN_PROGRESS)
+        search.setdefault("speed_law", "paper")
     return RobustConfig(vehicle=vehicle, rate_hz=rate, tick=0.02 if rate < 50 else None,
                         references=tuple(references), duration=duration,
                         limits=vehicle_limits(vehicle), **search)
