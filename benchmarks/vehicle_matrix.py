@@ -142,13 +142,19 @@ def one(name: str, params: dict[str, float], frame: str, speeds: list[float], wo
 
 
 def floor_for(row: dict, f_r: float) -> float | None:
-    """The reach floor at ``f_r`` for the identified top speed (None below 1 cm)."""
+    """The reach floor at ``f_r`` for the identified top speed, or along the reference's path
+    with its acceleration and deceleration too (:func:`reach_floor.path_floor`), the larger
+    (None below 1 cm)."""
     try:
-        top = float(row["identified"]["speed"]["max_m_s"])
+        speed = row["identified"]["speed"]
+        top = float(speed["max_m_s"])
+        accel = float(speed["accel_max_m_s2"])
+        decel = float(speed["decel_max_m_s2"] or accel)
     except (KeyError, TypeError, ValueError):
         return None
-    from reach_floor import floor
+    from reach_floor import floor, path_floor
     value, _ = floor(f_r, top, iterations=4000)
+    value = max(value, path_floor(f_r, top, accel, decel, iterations=4000)[0])
     return value if value >= 0.01 else None
 
 
