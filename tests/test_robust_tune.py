@@ -225,3 +225,19 @@ def test_gains_files_keep_every_law_parameter(tmp_path):
     path = tmp_path / "g.toml"
     gains_mod.TunedGains(FilterGains(900.0, 50.0), pzc, rate_hz=40.0, w_c=5.0).save(path)
     assert gains_mod.load(path).pzc == pzc
+
+
+def test_the_tuner_leaves_out_references_the_vehicle_cannot_turn_through():
+    # ATC_STR_RAT_MAX 60 deg/s (SITL rover-skid, 2026-12-02): the 0.12 Hz ellipse's 1.51 rad/s
+    # held every candidate that followed it at the limit, the limit-cycle rule rejected them
+    # all and the tuner kept gains that followed nothing (1.15 m at 0.08 Hz on SITL)
+    from companion.sim.robust import PAPER_F_R, RobustConfig, ellipse_turn_rate
+    assert ellipse_turn_rate(0.08) == pytest.approx(1.005, abs=0.002)
+    assert ellipse_turn_rate(0.12) == pytest.approx(1.508, abs=0.003)
+    stock = RoverParams(max_yaw_rate=2.09)
+    slow = RoverParams(max_yaw_rate=1.055)
+    crawl = RoverParams(max_yaw_rate=0.1)
+    labels = lambda vehicle: [label for label, _ in RobustConfig(vehicle=vehicle).reference_list()]  # noqa: E731
+    assert labels(stock) == [f"ellipse {f:g} Hz" for f in PAPER_F_R]
+    assert labels(slow) == ["ellipse 0.02 Hz", "ellipse 0.04 Hz", "ellipse 0.08 Hz"]
+    assert labels(crawl) == ["ellipse 0.02 Hz"]                 # the slowest is always kept

@@ -116,9 +116,26 @@ class RobustConfig:
     workers: int = 1
 
     def reference_list(self) -> tuple[tuple[str, Trajectory], ...]:
+        """The references given, else the paper's ellipses this vehicle can turn through: one
+        whose own turn rate passes the vehicle's turn-rate limit holds every candidate that
+        follows it at that limit, which the limit-cycle rule rejects, so only gains too slow to
+        follow anything survived (SITL rover-skid with ATC_STR_RAT_MAX 60 deg/s, 2026-12-02:
+        1.15 m at 0.08 Hz, Kanayama 0.13). The slowest is always kept."""
         if self.references:
             return self.references
-        return tuple((f"ellipse {f:g} Hz", Ellipse.paper(f)) for f in PAPER_F_R)
+        top = float(np.min(self.vehicle.max_yaw_rate))
+        kept = [f for f in PAPER_F_R if f == min(PAPER_F_R) or ellipse_turn_rate(f) <= top]
+        return tuple((f"ellipse {f:g} Hz", Ellipse.paper(f)) for f in kept)
+
+
+def ellipse_turn_rate(f_r: float, samples: int = 2000) -> float:
+    """The paper's ellipse's peak turn rate at ``f_r`` (rad/s; 1.13 at 0.08 Hz)."""
+    ellipse = Ellipse.paper(f_r)
+    peak = 0.0
+    for t in np.linspace(0.0, 1.0 / f_r, samples, endpoint=False):
+        r = ellipse.sample(float(t))
+        peak = max(peak, abs(r.vx * r.ay - r.vy * r.ax) / max(r.vx * r.vx + r.vy * r.vy, 1e-12))
+    return peak
 
 
 def ensemble(vehicle: RoverParams, count: int, spread: Spread, sample_period: float,
