@@ -239,5 +239,6 @@ def test_the_tuner_leaves_out_references_the_vehicle_cannot_turn_through():
     crawl = RoverParams(max_yaw_rate=0.1)
     labels = lambda vehicle: [label for label, _ in RobustConfig(vehicle=vehicle).reference_list()]  # noqa: E731
     assert labels(stock) == [f"ellipse {f:g} Hz" for f in PAPER_F_R]
-    assert labels(slow) == ["ellipse 0.02 Hz", "ellipse 0.04 Hz", "ellipse 0.08 Hz"]
+    # (and the 0.08 Hz one's 1.005 rad/s leaves it no room to correct: 1.80 m on SITL)
+    assert labels(slow) == ["ellipse 0.02 Hz", "ellipse 0.04 Hz"]
     assert labels(crawl) == ["ellipse 0.02 Hz"]                 # the slowest is always kept
