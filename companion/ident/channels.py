@@ -24,7 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..core import ops
-from ..sim.plant import LAT_ACCEL_MIN_SPEED, _channel, overshoot_step
+from ..sim.plant import LAT_ACCEL_MIN_SPEED, lag_step
 
 
 @dataclass(frozen=True)
@@ -99,12 +99,7 @@ def turn_rate(t: np.ndarray, yaw_rate_cmd: np.ndarray, n: int, dt: float, omega0
         out[k] = w
         limit = top[k] if by_speed else max_rate
         u = m.clip(command(k), -limit, limit)
-        _, x1, _, _ = _channel(m, x, u, bandwidth, accel, decel, dt, both=False)
-        if over:
-            w, z = overshoot_step(m, x, x1, z, overshoot, overshoot_s, dt)
-        else:
-            w = x1
-        x = x1
+        w, x, z = lag_step(m, x, z, u, bandwidth, accel, decel, dt, overshoot, overshoot_s, over)
     return out[g.sample_step], out
 
 
@@ -131,10 +126,5 @@ def speed(t: np.ndarray, speed_cmd: np.ndarray, omega_grid: np.ndarray, n: int, 
         if coupled:
             top = top * (1.0 - coupling * m.minimum(abs(omega[k]) / max_yaw_rate, 1.0))
         u = m.clip(command(k), -top, top)
-        _, x1, _, _ = _channel(m, x, u, bandwidth, accel, decel, dt, both=False)
-        if over:
-            v, z = overshoot_step(m, x, x1, z, overshoot, overshoot_s, dt)
-        else:
-            v = x1
-        x = x1
+        v, x, z = lag_step(m, x, z, u, bandwidth, accel, decel, dt, overshoot, overshoot_s, over)
     return out[g.sample_step]

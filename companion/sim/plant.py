@@ -383,6 +383,18 @@ def overshoot_step(m: _ops.Ops, x0: Num, x1: Num, z0: Num, g: Num, tau: Num, t: 
     return (1.0 + g) * x1 - g * z1, z1
 
 
+def lag_step(m: _ops.Ops, x: Num, z: Num, u: Num, b: Num, up: Num, down: Num, dt: float,
+             g: Num, tau: Num, over: bool) -> tuple[Num, Num, Num]:
+    """One grid step of a channel for the fit and :mod:`companion.sim.response`: the
+    rate-limited lag's output x from ``x`` towards ``u`` (:func:`_channel`), then, ``over``,
+    its overshoot (:func:`overshoot_step`). Returns (what is measured, x, z)."""
+    _, x1, _, _ = _channel(m, x, u, b, up, down, dt, both=False)
+    if not over:
+        return x1, x1, z
+    y, z1 = overshoot_step(m, x, x1, z, g, tau, dt)
+    return y, x1, z1
+
+
 def overshoot_integral(x0: Num, x1: Num, x_integral: Num, z0: Num, g: Num, tau: Num, t: float,
                        m: _ops.Ops) -> Num:
     """The integral over ``t`` s of the output ``(1 + g) x - g z`` of :func:`overshoot_step`,

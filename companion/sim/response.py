@@ -13,7 +13,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike
 
-from .plant import CommandDelay, RoverModel, RoverParams, _channel, overshoot_step
+from .plant import CommandDelay, RoverModel, RoverParams, lag_step
 
 
 def respond(params: RoverParams, t: ArrayLike, speed_cmd: ArrayLike,
@@ -61,17 +61,8 @@ def respond(params: RoverParams, t: ArrayLike, speed_cmd: ArrayLike,
         if delay is not None:
             u_k, w_k = delay.push(u_k + np.zeros(n), w_k + np.zeros(n), dt)
         u_k, w_k = model.clamp_command(u_k, w_k, w, v)
-        _, x1, _, _ = _channel(m, x, u_k, p.w_c, p.max_accel, p.decel, dt, both=False)
-        if over:
-            v, z = overshoot_step(m, x, x1, z, p.speed_overshoot, p.speed_overshoot_s, dt)
-        else:
-            v = x1
-        x = x1
-        _, xw1, _, _ = _channel(m, xw, w_k, p.yaw_bandwidth, p.max_yaw_accel, p.yaw_decel, dt,
-                                both=False)
-        if over_w:
-            w, zw = overshoot_step(m, xw, xw1, zw, p.yaw_overshoot, p.yaw_overshoot_s, dt)
-        else:
-            w = xw1
-        xw = xw1
+        v, x, z = lag_step(m, x, z, u_k, p.w_c, p.max_accel, p.decel, dt, p.speed_overshoot,
+                           p.speed_overshoot_s, over)
+        w, xw, zw = lag_step(m, xw, zw, w_k, p.yaw_bandwidth, p.max_yaw_accel, p.yaw_decel, dt,
+                             p.yaw_overshoot, p.yaw_overshoot_s, over_w)
     return v_out[sample_step], w_out[sample_step]
