@@ -58,6 +58,14 @@ def speed_from_up(m: Ops, speed_law: str, norm_up: Num, heading_error: Num) -> N
     return norm_up * m.cos(heading_error)
 
 
+def yaw_rate_limit(m: Ops, lim: Limits, speed: Num) -> Num:
+    """The turn-rate limit of a command at ``speed`` (the clamped speed: what the vehicle is
+    asked to drive): ``max_yaw_rate``, and for a car no more than ``|speed| / min_turn_radius``."""
+    if not lim.min_turn_radius:
+        return lim.max_yaw_rate
+    return m.minimum(lim.max_yaw_rate, abs(speed) / lim.min_turn_radius)
+
+
 def clamp(m: Ops, lim: Limits, speed: Num, yaw_rate: Num, ux: Num, uy: Num,
           norm_up: Num) -> tuple[Command, Num, Num]:
     """Clamp a raw command to the limits.
@@ -69,10 +77,7 @@ def clamp(m: Ops, lim: Limits, speed: Num, yaw_rate: Num, ux: Num, uy: Num,
         return Command(speed, yaw_rate, ux, uy), True, True     # nothing to clamp or hold
     speed_free = abs(speed) <= lim.max_speed
     speed = m.clip(speed, -lim.max_speed, lim.max_speed)
-    top_rate = lim.max_yaw_rate
-    if lim.min_turn_radius:
-        # a car's turn at the commanded speed (the clamped one: what it is asked to drive)
-        top_rate = m.minimum(top_rate, abs(speed) / lim.min_turn_radius)
+    top_rate = yaw_rate_limit(m, lim, speed)
     rate_free = abs(yaw_rate) <= top_rate
     yaw_rate = m.clip(yaw_rate, -top_rate, top_rate)
     # u_p for a velocity-vector autopilot (PX4) obeys the same speed limit.

@@ -139,6 +139,12 @@ class RoverParams:
         return _any_positive(self.course_gain)
 
     @property
+    def steered_by_radius(self) -> bool:
+        """A car on speed / turn-rate setpoints (ArduPilot's Ackermann rover): a turning radius
+        and no velocity-vector interface (PX4's course loop keeps its own radius)."""
+        return _any_positive(self.min_turn_radius) and not self.velocity_vector
+
+    @property
     def has_delay(self) -> bool:
         return _any_positive(self.speed_delay) or _any_positive(self.yaw_delay)
 

@@ -43,7 +43,7 @@ import numpy as np
 
 from ..core.filter import FilterGains
 from ..core.limits import Limits
-from ..core.pzc import PZCGains, PZCTracker
+from ..core.pzc import PZCGains, PZCTracker, reference_heading_rate
 from ..core.signals import Num, Reference
 from ..core.trajectory import Ellipse, Trajectory
 from .batch import SimConfig, simulate
@@ -135,11 +135,8 @@ class RobustConfig:
 def ellipse_turn_rate(f_r: float, samples: int = 2000) -> float:
     """The paper's ellipse's peak turn rate at ``f_r`` (rad/s; 1.13 at 0.08 Hz)."""
     ellipse = Ellipse.paper(f_r)
-    peak = 0.0
-    for t in np.linspace(0.0, 1.0 / f_r, samples, endpoint=False):
-        r = ellipse.sample(float(t))
-        peak = max(peak, abs(r.vx * r.ay - r.vy * r.ax) / max(r.vx * r.vx + r.vy * r.vy, 1e-12))
-    return peak
+    return max(abs(reference_heading_rate(ellipse.sample(float(t))))
+               for t in np.linspace(0.0, 1.0 / f_r, samples, endpoint=False))
 
 
 def ensemble(vehicle: RoverParams, count: int, spread: Spread, sample_period: float,

@@ -49,7 +49,7 @@ def vehicle_limits(vehicle: RoverParams, max_speed: float | None = None,
         return min(flag, own) if flag is not None else own
     # a car driven by turn-rate setpoints: no command tighter than its turning radius (PX4's
     # velocity vectors leave that to PX4's own course loop)
-    radius = 0.0 if vehicle.velocity_vector else float(vehicle.min_turn_radius)
+    radius = float(vehicle.min_turn_radius) if vehicle.steered_by_radius else 0.0
     return Limits(max_speed=pick(max_speed, float(vehicle.max_speed), DEFAULT_LIMITS.max_speed),
                   max_yaw_rate=pick(max_yaw_rate, float(vehicle.max_yaw_rate),
                                     DEFAULT_LIMITS.max_yaw_rate),
@@ -66,7 +66,7 @@ def config_for(vehicle_path: str | Path, rate: float,
         # PX4 (velocity vector, its own course loop): the progress floor keeps an Ackermann
         # rover from turning round when it gets ahead (core.pzc, min_progress)
         search.setdefault("min_progress", PX4_MIN_PROGRESS)
-    elif float(vehicle.min_turn_radius) > 0:
+    elif vehicle.steered_by_radius:
         # A car on speed / turn-rate setpoints (ArduPilot's Ackermann rover) turns only while it
         # drives: the projected speed law slows it to nothing when its heading is far off and
         # the turning-radius clamp (Limits) then leaves it no turn at all (SITL rover,
