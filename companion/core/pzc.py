@@ -33,7 +33,9 @@ Extensions beyond the paper, each off by default (the paper's law exactly) and c
            = sign(e) sqrt(2 alpha (|e| - alpha / (2 K_P^2)))  beyond;
 * ``min_progress`` = gamma: with t = p_ref' / |p_ref'|, u_p += max(0, gamma |p_ref'| - u_p . t) t,
   the position integrators held while it acts (nothing changes where |p_ref'| = 0);
-* ``lead_tau``, ``lead_max_gain``: the actuator lead of :mod:`companion.core.lead`.
+* ``lead_tau``, ``lead_max_gain``: the actuator lead of :mod:`companion.core.lead`;
+* ``course_tau`` (s): the law steers the course over ground, phi-hat + beta-hat, beta-hat the
+  angle from the heading to the filter's velocity, low-passed (:mod:`companion.core.course`).
 
 Limits: speed and yaw rate are clamped; while either output is clamped its integrator is held
 (conditional integration), so nothing winds up in saturation.
@@ -48,6 +50,7 @@ import math
 from dataclasses import dataclass, replace
 
 from . import ops as _ops
+from .course import CourseCorrection
 from .filter import FilterGains, PoseFilter
 from .lead import ActuatorLead
 from .limits import SPEED_LAWS, Limits, clamp, keep_if, speed_from_up
@@ -79,11 +82,13 @@ class PZCGains:
     brake_accel: Num = 0.0
     brake_yaw_accel: Num = 0.0
     min_progress: Num = 0.0
+    course_tau: Num = 0.0
 
     def __post_init__(self) -> None:
         if self.speed_law not in SPEED_LAWS:
             raise ValueError(f"speed_law must be one of {SPEED_LAWS}, not {self.speed_law!r}")
-        for name in ("accel_ff_turn", "brake_accel", "brake_yaw_accel", "min_progress"):
+        for name in ("accel_ff_turn", "brake_accel", "brake_yaw_accel", "min_progress",
+                     "course_tau"):
             value = getattr(self, name)
             if value is not None and _any_negative(value):
                 raise ValueError(f"{name} must be >= 0, not {value!r}")
@@ -240,7 +245,8 @@ class PZCLaw:
 
 
 class PZCTracker:
-    """Measurement -> model-free filter -> PZC law -> command: the paper's Figure 2."""
+    """Measurement -> model-free filter -> PZC law -> command: the paper's Figure 2 (with the
+    course correction between filter and law when ``course_tau`` > 0)."""
 
     name = "pzc"
 
@@ -248,6 +254,7 @@ class PZCTracker:
                  limits: Limits = Limits(), n: int | None = None):
         self.filter = PoseFilter(filter_gains, n)
         self.law = PZCLaw(gains, limits, n)
+        self.course = CourseCorrection(gains.course_tau, n)
         self.lead = ActuatorLead(gains.lead_tau, gains.lead_max_gain, limits, n)
         self.estimate: Estimate | None = None
 
@@ -255,12 +262,14 @@ class PZCTracker:
         """Forget everything: the next sample re-initialises the filter and the integrators."""
         self.filter = PoseFilter(self.filter.gains, self.filter.n)
         self.law.reset()
+        self.course.reset()
         self.lead.reset()
         self.estimate = None
 
     def step(self, t: float, meas: Measurement, ref: Reference) -> Command:
         self.estimate = self.filter.step(t, meas)
-        return self.lead.step(t, self.law.step(t, self.estimate, ref))
+        steered = self.course.step(t, self.estimate)
+        return self.lead.step(t, self.law.step(t, steered, ref))
 
 
 def with_paper_speed_law(gains: PZCGains) -> PZCGains:
