@@ -73,8 +73,7 @@ class CourseCorrection:
             heading = last.yaw + 0.5 * m.wrap(est.yaw - last.yaw)
             c, s = m.cos(heading), m.sin(heading)
             along, across = dx * c + dy * s, dy * c - dx * s
-            learn = (along > self.min_speed * dt) & (self.tau > 0) if m is _ops.array else (
-                along > self.min_speed * dt and self.tau > 0)
+            learn = (along > self.min_speed * dt) & (self.tau > 0)    # bools or bool arrays
             keep = m.where(learn, m.exp(-dt / m.maximum(self.tau, 1e-9)), 1.0)
             self.along = keep * self.along + m.where(learn, along, 0.0)
             self.across = keep * self.across + m.where(learn, across, 0.0)

@@ -35,7 +35,8 @@ Extensions beyond the paper, each off by default (the paper's law exactly) and c
   the position integrators held while it acts (nothing changes where |p_ref'| = 0);
 * ``lead_tau``, ``lead_max_gain``: the actuator lead of :mod:`companion.core.lead`;
 * ``course_tau`` (s): the law steers the course over ground, phi-hat + beta-hat, beta-hat the
-  angle from the heading to the filter's velocity, low-passed (:mod:`companion.core.course`).
+  angle from the heading to the filtered pose's displacement, summed with forgetting time
+  ``course_tau`` (:mod:`companion.core.course`).
 
 Limits: speed and yaw rate are clamped; while either output is clamped its integrator is held
 (conditional integration), so nothing winds up in saturation.

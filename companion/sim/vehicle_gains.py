@@ -67,14 +67,14 @@ def config_for(vehicle_path: str | Path, rate: float,
     """The robust tuner's configuration for a vehicle file at a loop rate (ArduPilot's 50 Hz
     scheduler ticks below 50 Hz), on the references given or the paper's ellipses."""
     vehicle = vehicle_file.load(vehicle_path).params
-    if not vehicle.velocity_vector:
-        # PX4 steers its own course from the velocity vector u_p, which the correction leaves be
-        search.setdefault("course_tau", COURSE_TAU)
     if vehicle.velocity_vector:
         # PX4 (velocity vector, its own course loop): the progress floor keeps an Ackermann
-        # rover from turning round when it gets ahead (core.pzc, min_progress)
+        # rover from turning round when it gets ahead (core.pzc, min_progress). PX4 steers its
+        # own course from u_p, which the course correction leaves be: none here.
         search.setdefault("min_progress", PX4_MIN_PROGRESS)
-    elif vehicle.steered_by_radius:
+    else:
+        search.setdefault("course_tau", COURSE_TAU)
+    if vehicle.steered_by_radius:     # (never a velocity-vector vehicle)
         # A car on speed / turn-rate setpoints (ArduPilot's Ackermann rover) turns only while it
         # drives: the projected speed law slows it to nothing when its heading is far off and
         # the turning-radius clamp (Limits) then leaves it no turn at all (SITL rover,
