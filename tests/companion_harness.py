@@ -44,6 +44,7 @@ class Companion:
                      "--connect", url or f"udpin:127.0.0.1:{port}", *args]
         self.proc: subprocess.Popen | None = None
         self.stdout = self.stderr = ""
+        self._early_err = ""      # stderr read by wait_for_stderr before wait()
         self.started_at = 0.0
 
     def __enter__(self) -> Companion:
@@ -57,13 +58,29 @@ class Companion:
             self.proc.kill()
             self.proc.communicate()
 
+    def wait_for_stderr(self, needle: str, timeout: float) -> None:
+        """Read stderr until ``needle`` appears (what the run says, not a guess at how long it
+        takes on a loaded machine); what was read is kept and ends up in ``stderr``."""
+        fd = self.proc.stderr.fileno()
+        deadline = time.monotonic() + timeout
+        while needle not in self._early_err:
+            left = deadline - time.monotonic()
+            if left <= 0 or self.proc.poll() is not None:
+                raise AssertionError(f"{needle!r} not said within {timeout} s "
+                                     f"(exit {self.proc.poll()}):\n{self._early_err}")
+            ready, _, _ = select.select([fd], [], [], min(left, 0.2))
+            if ready:
+                self._early_err += os.read(fd, 65536).decode(errors="replace")
+
     def wait(self, timeout: float) -> int:
         try:
             self.stdout, self.stderr = self.proc.communicate(timeout=timeout)
         except subprocess.TimeoutExpired:
             self.proc.kill()
             self.stdout, self.stderr = self.proc.communicate()
-            raise AssertionError(f"companion still running after {timeout} s:\n{self.stderr}") from None
+            raise AssertionError(f"companion still running after {timeout} s:\n"
+                                 f"{self._early_err}{self.stderr}") from None
+        self.stderr = self._early_err + self.stderr
         return self.proc.returncode
 
     def result(self) -> dict[str, Any]:
