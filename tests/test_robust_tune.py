@@ -8,7 +8,6 @@ import math
 import subprocess
 import sys
 from dataclasses import replace
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -219,7 +218,7 @@ def test_gains_files_keep_every_law_parameter(tmp_path):
     pzc = PZCGains(0.7, 0.6, k_dc_yaw=2.0, lambda_c_yaw=2.5, velocity_ff=True,
                    heading_rate_ff=True, accel_ff=0.34, lead_tau=0.2, lead_max_gain=3.0,
                    speed_law="paper", accel_ff_turn=0.005, brake_accel=0.21, brake_yaw_accel=0.98,
-                   min_progress=0.3, course_tau=2.0, predict_s=0.5)
+                   min_progress=0.3, course_tau=2.0)
     defaults = PZCGains(0.7, 0.6)
     changed = [f.name for f in fields(PZCGains) if getattr(pzc, f.name) != getattr(defaults, f.name)]
     assert len(changed) == len(fields(PZCGains)) - 2          # all but k_dc, lambda_c
@@ -243,15 +242,3 @@ def test_the_tuner_leaves_out_references_the_vehicle_cannot_turn_through():
     # (and the 0.08 Hz one's 1.005 rad/s leaves it no room to correct: 1.80 m on SITL)
     assert labels(slow) == ["ellipse 0.02 Hz", "ellipse 0.04 Hz"]
     assert labels(crawl) == ["ellipse 0.02 Hz"]                 # the slowest is always kept
-
-
-def test_each_vehicle_file_gets_the_law_its_inner_loops_need():
-    # What config_for fixes for every candidate, from the vehicle file alone: the skid rover
-    # (speed delay 0.19 s) keeps the present; SITL's car (0.5 s) has its speed predicted.
-    from companion.sim.vehicle_gains import PREDICT_MIN_DELAY, config_for
-    root = Path(__file__).resolve().parents[1]
-    skid = config_for(root / "companion/sim/vehicles/ardupilot_skid.toml", 40.0)
-    car = config_for(root / "benchmarks/vehicles/ardupilot_car_sitl.toml", 40.0)
-    assert skid.predict_s == 0.0 and skid.course_tau == 2.0 and skid.speed_law == "projected"
-    assert car.predict_s == pytest.approx(0.5) and car.predict_s >= PREDICT_MIN_DELAY
-    assert car.course_tau == 2.0 and car.speed_law == "paper" and car.min_progress == 0.3

@@ -69,8 +69,7 @@ class TunedGains:
                   f"lambda_f = {float(self.filter.lambda_f)!r}", "", "[pzc]"]
         for f in fields(PZCGains):
             value = getattr(self.pzc, f.name)
-            if value is None or (f.name in ("min_progress", "course_tau", "predict_s")
-                                 and not value):
+            if value is None or (f.name in ("min_progress", "course_tau") and not value):
                 continue              # off: not written (older files stay as they were)
             if f.name in ("velocity_ff", "heading_rate_ff"):
                 lines.append(f"{f.name} = {'true' if value else 'false'}")
@@ -128,7 +127,7 @@ def parse(data: dict, where: str) -> TunedGains:
                                 f"not {kwargs[key]!r}")
     # seconds and accelerations that are off at 0 (accel_ff_turn absent: as accel_ff)
     for key in ("accel_ff", "accel_ff_turn", "brake_accel", "brake_yaw_accel", "min_progress",
-                "course_tau", "predict_s"):
+                "course_tau"):
         if key in pzc:
             kwargs[key] = _number(pzc, key, f"{where}: pzc", positive=False)
             if kwargs[key] < 0:

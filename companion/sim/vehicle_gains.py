@@ -37,10 +37,6 @@ CAR_MIN_PROGRESS = 0.3  # ... and on a car driven by turn-rate setpoints
 # refining flight, 0.04 rad five flights later, both frames, 2026-12-02), which ran the stock
 # skid rover 6 cm inside the 0.08 Hz ellipse; a real rover's compass does the same.
 COURSE_TAU = 2.0
-# s: a speed loop this late (SITL's car: 0.5 s; the skid rover's 0.19 s is left as it was) has the
-# law see the pose its speed commands in flight lead to, the identified delay ahead (core.predict).
-# In the model of SITL's car, tuned 96 x 3 either way, 0.08 Hz went from 0.46 to 0.28 m with it.
-PREDICT_MIN_DELAY = 0.25
 
 
 def digest(vehicle_path: str | Path) -> str:
@@ -78,9 +74,6 @@ def config_for(vehicle_path: str | Path, rate: float,
         search.setdefault("min_progress", PX4_MIN_PROGRESS)
     else:
         search.setdefault("course_tau", COURSE_TAU)
-        delay = float(vehicle.speed_delay)
-        if delay >= PREDICT_MIN_DELAY:
-            search.setdefault("predict_s", delay)
     if vehicle.steered_by_radius:     # (never a velocity-vector vehicle)
         # A car on speed / turn-rate setpoints (ArduPilot's Ackermann rover) turns only while it
         # drives: the projected speed law slows it to nothing when its heading is far off and
