@@ -30,6 +30,7 @@ from safety_harness import read_tlog
 from sitl_common import process_gone, sent_by_companion, started_by_a_dying_process
 
 BOOT_WALL = 60.0                         # s: PX4 up to armed in OFFBOARD, with margin
+CREEP = 0.6                              # m/s: above what PX4's Hold lets the SIH rover creep at
 LOCAL_POSITION_NED = 32
 MASK_VELOCITY = 3559                     # use vx, vy only: PX4's velocity vector
 LOCAL_NED = 1
@@ -110,19 +111,26 @@ def test_sigterm_mid_mission_stops_the_rover_in_hold_and_exits_0(px4, tmp_path):
         r = comp.result()
         first = gs.wait_for("LOCAL_POSITION_NED", timeout=5.0, after=t_term)
         t0 = first.time_boot_ms
-        gs.wait_for("LOCAL_POSITION_NED", lambda m: m.time_boot_ms >= t0 + 6000, 15.0, t_term)
+        # watched for longer than the bound below (it watched 6 s against an 8 s bound, so a
+        # stop in 6-8 s, loaded CI, failed as "never slow" instead of being measured)
+        gs.wait_for("LOCAL_POSITION_NED", lambda m: m.time_boot_ms >= t0 + 10000, 25.0, t_term)
         hold = gs.wait_mode(HOLD, timeout=5.0, after=t_term)
         samples = [m for m in gs.messages("LOCAL_POSITION_NED", t_term)
-                   if m.time_boot_ms <= t0 + 6000]
+                   if m.time_boot_ms <= t0 + 10000]
+        hold_after = next(w for w, m in list(gs.seen) if w >= t_term and gs.from_vehicle(m)
+                          and m.get_type() == "HEARTBEAT" and m.custom_mode == HOLD) - t_term
     assert code == 0, comp.stderr
     assert r["reason"] == "SIGTERM" and r["hold_confirmed"], r
     assert hold.custom_mode == HOLD and hold.base_mode & 128, "Hold, still armed"
     assert ground_speed(first) > 0.3, "the rover was not moving when the companion was stopped"
-    slow = [m for m in samples if ground_speed(m) < 0.2]
+    # "stopped": below the creep of PX4's own Hold (SIH rover, up to about 0.5 m/s, see below;
+    # with 0.2 m/s here, a rover braked from 3.6 to 0.54 m/s in 3 s and then crept at 0.4 was
+    # judged stopped only after 7.4 s, and failed a loaded CI run: 2026-12-02)
+    slow = [m for m in samples if ground_speed(m) < CREEP]
     assert slow, [round(ground_speed(m), 2) for m in samples]
     stopped_after = (slow[0].time_boot_ms - t0) / 1e3
     # PX4 brakes at RO_DECEL_LIM 3 m/s^2 (about 1 s from 3 m/s) after the zero vectors and Hold;
-    # seen 3.1-3.2 s on an idle machine, 5.4 s with the whole suite and others on two cores
+    # below 0.6 m/s 2.9-3.1 s after the signal in seven runs beside an ArduPilot calibrate
     assert stopped_after <= 8.0, stopped_after
     # what the companion sent last: zero vectors (then PX4's Hold has the rover; the SIH rover
     # creeps in Hold by itself, up to about 0.5 m/s seen: PX4's, not the companion's doing)
@@ -131,8 +139,10 @@ def test_sigterm_mid_mission_stops_the_rover_in_hold_and_exits_0(px4, tmp_path):
     last_moving = max(i for i, m in enumerate(sps) if m.vx or m.vy)
     assert last_moving < len(sps) - 1 and all(m.vx == 0 and m.vy == 0
                                                for m in sps[last_moving + 1:])
-    print(f"\nSIGTERM at {ground_speed(first):.2f} m/s: below 0.2 m/s {stopped_after:.2f} s later, "
-          f"Hold, companion exit {code} after {r['wall_s']:.1f} s")
+    print(f"\nSIGTERM at {ground_speed(first):.2f} m/s: below {CREEP} m/s {stopped_after:.2f} s later, "
+          f"Hold seen {hold_after:.2f} s after the signal (wall), companion exit {code} after "
+          f"{r['wall_s']:.1f} s; speeds over the 10 s: "
+          f"{[round(ground_speed(m), 2) for m in samples[::max(1, len(samples) // 10)]]}")
 
 
 @pytest.mark.px4
