@@ -308,6 +308,11 @@ class GroundStation:
             return [m for w, m in self.seen if w >= after and m.get_type() == kind
                     and (not vehicle or self.from_vehicle(m))]
 
+    def arrival(self, msg: Any) -> float:
+        """The wall time (time.monotonic) at which ``msg``, a message this station saw, came."""
+        with self._lock:
+            return next(w for w, m in self.seen if m is msg)
+
     def wait_for(self, kind: str, cond: Callable[[Any], bool] = lambda m: True,
                  timeout: float = 10.0, after: float | None = None) -> Any:
         """The first vehicle message of ``kind`` meeting ``cond`` that arrived after ``after``

@@ -104,7 +104,7 @@ def test_an_unplugged_device_stops_the_run_with_exit_3():
     with PtyCable(baud=115200) as cable, plant_on(cable.paths[0]), \
             Companion(None, "--mission", MISSION, "--arm", "--json", "--no-log",
                       "--lost-timeout", "2", url=cable.paths[1]) as comp:
-        # Cut once it says it is tracking, then a second more (a fixed 8 s sleep cut one
+        # Cut once it says it is tracking, then 1.5 s more (a fixed 8 s sleep cut one
         # loaded CI run after 29 cycles). Checked below: cycles.
         comp.wait_for_stderr("GUIDED and armed: tracking", 60.0)
         time.sleep(1.5)
