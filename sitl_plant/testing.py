@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import math
 import os
+import random
 import socket
 import subprocess
 import sys
@@ -27,10 +28,39 @@ FRAME_LOCAL_NED, FRAME_BODY_NED = 1, 8
 GUIDED, HOLD, MANUAL = 15, 4, 0
 
 
-def free_udp_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+def _ephemeral_low() -> int:
+    """The lowest port the kernel hands out to sockets bound to port 0 (Linux default 32768)."""
+    try:
+        with open("/proc/sys/net/ipv4/ip_local_port_range") as f:
+            return int(f.read().split()[0])
+    except (OSError, ValueError, IndexError):
+        return 32768
+
+
+def free_port(kind: int = socket.SOCK_DGRAM) -> int:
+    """A loopback port free now, for a process about to bind it.
+
+    Picked at random below the kernel's ephemeral range and checked by binding it: a port the
+    kernel hands out (bind to 0) may be handed out again, to any implicit bind of any process,
+    in the moment between this check and the real bind (tests in parallel workers start
+    hundreds of such sockets), while nothing binds below that range unless it asks."""
+    high = _ephemeral_low() - 1
+    low = max(1024, high - 12000)
+    for _ in range(200):
+        port = random.randint(low, high)
+        with socket.socket(socket.AF_INET, kind) as s:
+            try:
+                s.bind(("127.0.0.1", port))
+            except OSError:
+                continue
+            return port
+    with socket.socket(socket.AF_INET, kind) as s:      # crowded below: let the kernel pick
         s.bind(("127.0.0.1", 0))
         return s.getsockname()[1]
+
+
+def free_udp_port() -> int:
+    return free_port(socket.SOCK_DGRAM)
 
 
 class PlantProcess:

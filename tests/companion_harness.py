@@ -36,7 +36,11 @@ def ellipse_mission(path: Path, duration: float, f_r: float = 0.12) -> Path:
 
 class Companion:
     """``python -m companion run --connect udpin:127.0.0.1:PORT ARGS`` (or ``url=``) for a
-    ``with`` block; killed on exit if still running."""
+    ``with`` block; killed on exit if still running.
+
+    Two threads drain its stdout and stderr as it writes them, so a chatty run never blocks on
+    a full pipe while the test waits on something else, and a failed wait can say what the run
+    said so far (``said()``)."""
 
     def __init__(self, port: int | None, *args: str, command: str = "run",
                  url: str | None = None):
@@ -44,49 +48,78 @@ class Companion:
                      "--connect", url or f"udpin:127.0.0.1:{port}", *args]
         self.proc: subprocess.Popen | None = None
         self.stdout = self.stderr = ""
-        self._early_err = ""      # stderr read by wait_for_stderr before wait()
+        self._out: list[str] = []
+        self._err: list[str] = []
+        self._drains: list[threading.Thread] = []
         self.started_at = 0.0
 
     def __enter__(self) -> Companion:
         self.proc = subprocess.Popen(self.argv, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                                      text=True, cwd=ROOT)
         self.started_at = time.monotonic()
+        self._drains = [threading.Thread(target=_drain, args=(pipe, into), daemon=True)
+                        for pipe, into in ((self.proc.stdout, self._out),
+                                           (self.proc.stderr, self._err))]
+        for t in self._drains:
+            t.start()
         return self
 
     def __exit__(self, *exc) -> None:
         if self.proc is not None and self.proc.poll() is None:
             self.proc.kill()
-            self.proc.communicate()
+            self.proc.wait()
+        self._collect()
+
+    def said(self) -> str:
+        """What the run has written to stderr so far."""
+        return "".join(self._err)
+
+    def _collect(self) -> None:
+        for t in self._drains:
+            t.join(5.0)
+        self.stdout, self.stderr = "".join(self._out), "".join(self._err)
 
     def wait_for_stderr(self, needle: str, timeout: float) -> None:
-        """Read stderr until ``needle`` appears (what the run says, not a guess at how long it
-        takes on a loaded machine); what was read is kept and ends up in ``stderr``."""
-        fd = self.proc.stderr.fileno()
+        """Wait until the run has said ``needle`` on stderr (what the run says, not a guess at
+        how long it takes on a loaded machine)."""
+        self.wait_until(lambda: needle in self.said(), timeout, f"{needle!r} said")
+
+    def wait_until(self, predicate, timeout: float, what: str = "condition") -> None:
+        """Wait for ``predicate()`` while the run is alive; if it ends or ``timeout`` passes
+        first, fail with its exit code and what it said."""
         deadline = time.monotonic() + timeout
-        while needle not in self._early_err:
-            left = deadline - time.monotonic()
-            if left <= 0 or self.proc.poll() is not None:
-                raise AssertionError(f"{needle!r} not said within {timeout} s "
-                                     f"(exit {self.proc.poll()}):\n{self._early_err}")
-            ready, _, _ = select.select([fd], [], [], min(left, 0.2))
-            if ready:
-                self._early_err += os.read(fd, 65536).decode(errors="replace")
+        while not predicate():
+            code = self.proc.poll()
+            if code is not None or time.monotonic() > deadline:
+                if code is not None:
+                    self._collect()
+                raise AssertionError(f"{what}: not met within {timeout} s (companion "
+                                     f"{'exited ' + str(code) if code is not None else 'running'})"
+                                     f":\n{self.said()}")
+            time.sleep(0.02)
 
     def wait(self, timeout: float) -> int:
         try:
-            self.stdout, self.stderr = self.proc.communicate(timeout=timeout)
+            self.proc.wait(timeout)
         except subprocess.TimeoutExpired:
             self.proc.kill()
-            self.stdout, self.stderr = self.proc.communicate()
+            self.proc.wait()
+            self._collect()
             raise AssertionError(f"companion still running after {timeout} s:\n"
-                                 f"{self._early_err}{self.stderr}") from None
-        self.stderr = self._early_err + self.stderr
+                                 f"{self.stderr}") from None
+        self._collect()
         return self.proc.returncode
 
     def result(self) -> dict[str, Any]:
         lines = [line for line in self.stdout.splitlines() if line.startswith("{")]
         assert lines, f"no JSON result; stdout:\n{self.stdout}\nstderr:\n{self.stderr}"
         return json.loads(lines[-1])
+
+
+def _drain(pipe, into: list[str]) -> None:
+    for line in pipe:
+        into.append(line)
+    pipe.close()
 
 
 def _parser():

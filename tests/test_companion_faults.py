@@ -34,7 +34,7 @@ def test_stale_telemetry_stops_the_rover_then_resumes(tmp_path):
     with Proxy() as proxy, \
             PlantProcess("--speedup", "2", "--d-cen", "0.3", port=proxy.plant_port) as plant, \
             Companion(proxy.companion_port, "--arm", "--json", "--mission", str(mission)) as comp:
-        proxy.wait_for(lambda: _tracking(proxy), 20.0)
+        comp.wait_until(lambda: _tracking(proxy), 20.0, "tracking")
         os.kill(plant.proc.pid, signal.SIGSTOP)
         try:
             time.sleep(1.5)
@@ -73,7 +73,7 @@ def test_sigterm_stops_the_rover_holds_and_exits_0(tmp_path):
             PlantProcess("--speedup", "2", "--d-cen", "0.3", port=proxy.plant_port), \
             Companion(proxy.companion_port, "--arm", "--json", "--mission",
                       "missions/paper_ellipse_012.toml") as comp:
-        proxy.wait_for(lambda: _tracking(proxy), 20.0)
+        comp.wait_until(lambda: _tracking(proxy), 20.0, "tracking")
         t_term = time.monotonic()
         comp.proc.send_signal(signal.SIGTERM)
         assert comp.wait(10.0) == 0, comp.stderr

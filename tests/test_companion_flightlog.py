@@ -155,8 +155,9 @@ def test_sigkill_mid_mission_loses_at_most_100_ms_of_either_log(tmp_path):
             Companion(proxy.companion_port, "--arm", "--no-zenoh", "--mission", str(mission),
                       "--log-dir",
                       str(logs), "-q") as comp:
-        proxy.wait_for(lambda: sum(1 for s in proxy.companion_sent(
-            "SET_POSITION_TARGET_LOCAL_NED") if not is_zero(s.msg)) >= 160, 30.0)
+        comp.wait_until(lambda: sum(1 for s in proxy.companion_sent(
+            "SET_POSITION_TARGET_LOCAL_NED") if not is_zero(s.msg)) >= 160, 30.0,
+            "160 tracking setpoints")
         os.kill(comp.proc.pid, signal.SIGKILL)
         t_kill = time.monotonic()
         comp.proc.wait(5.0)

@@ -265,8 +265,8 @@ def test_fuzz_both_processes_over_udp_during_a_mission(tmp_path):
                       str(mission),
                       "--max-speed", "3", "--max-yaw-rate", "2", "--log-dir",
                       str(tmp_path)) as comp:
-        proxy.wait_for(lambda: len(proxy.companion_sent("SET_POSITION_TARGET_LOCAL_NED")) > 5,
-                       20.0)
+        comp.wait_until(lambda: len(proxy.companion_sent("SET_POSITION_TARGET_LOCAL_NED")) > 5,
+                        20.0, "setpoints")
         while comp.proc.poll() is None:
             for seen in proxy.plant_sent("LOCAL_POSITION_NED")[-3:]:
                 to_companion.fuzz.good(seen.msg.get_msgbuf())

@@ -137,7 +137,7 @@ def test_the_companion_ignores_unsigned_and_wrong_key_telemetry(tmp_path):
     """A signed companion tracks a signed plant while unsigned and wrong-key frames pretending
     to be the vehicle (poses, attitudes, a HOLD heartbeat) pour into its port: none is used."""
     key = make_key(tmp_path / "k")
-    mission = ellipse_mission(tmp_path / "m.toml", 8.0)
+    mission = ellipse_mission(tmp_path / "m.toml", 16.0)
     injected = 0
     with InjectingProxy() as proxy, \
             PlantProcess("--speedup", "2", "--d-cen", "0.3", "--signing-key", str(key),
@@ -145,11 +145,16 @@ def test_the_companion_ignores_unsigned_and_wrong_key_telemetry(tmp_path):
             Companion(proxy.companion_port, "--arm", "--no-zenoh", "--json", "--mission",
                       str(mission),
                       "--signing-key", str(key), "--log-dir", str(tmp_path)) as comp:
-        proxy.wait_for(lambda: len(proxy.companion_sent("SET_POSITION_TARGET_LOCAL_NED")) > 20,
-                       20.0)
+        comp.wait_until(lambda: len(proxy.companion_sent("SET_POSITION_TARGET_LOCAL_NED")) > 20,
+                        20.0, "setpoints")
         strangers = [encoder(None, sysid=1, compid=1), encoder(b"\x02" * 32, sysid=1, compid=1)]
+        # Inject over 6 s of vehicle time (of the mission's 16), at most 2000 frames: a window
+        # set by the vehicle's clock, so a loaded machine injects fewer frames, not later ones.
+        t_end = proxy.plant_sent("LOCAL_POSITION_NED")[-1].msg.time_boot_ms + 6000
         while comp.proc.poll() is None and injected < 2000:
             last = proxy.plant_sent("LOCAL_POSITION_NED")[-1].msg.time_boot_ms
+            if last >= t_end:
+                break
             for mav in strangers:
                 ms = last + 13          # off the plant's 25 ms grid: recognisable if answered
                 for msg in (mav.heartbeat_encode(10, 3, 1, HOLD_MODE, 4),
@@ -158,6 +163,13 @@ def test_the_companion_ignores_unsigned_and_wrong_key_telemetry(tmp_path):
                     proxy.to_companion(frame(mav, msg))
                     injected += 1
             time.sleep(0.01)
+        # The strangers shared the plant's socket, so they reached the companion's port before
+        # any pose sent after them: a setpoint answering such a pose means all were read.
+        t_last = time.monotonic()
+        proxy.wait_for(lambda: proxy.plant_sent("LOCAL_POSITION_NED", after=t_last), 5.0)
+        after_ms = proxy.plant_sent("LOCAL_POSITION_NED", after=t_last)[0].msg.time_boot_ms
+        comp.wait_until(lambda: any(s.msg.time_boot_ms >= after_ms for s in proxy.companion_sent(
+            "SET_POSITION_TARGET_LOCAL_NED")), 10.0, "a setpoint after the last stranger")
         assert comp.wait(60.0) == 0, comp.stderr
         r = comp.result()
     assert injected >= 300

@@ -28,8 +28,9 @@ def test_pilot_takeover_stops_the_companion_within_one_cycle(tmp_path, how):
                       str(mission),
                       "--log-dir", str(tmp_path)) as comp:
         if how.startswith("paced"):
-            proxy.wait_for(lambda: sum(1 for s in proxy.companion_sent(
-                "SET_POSITION_TARGET_LOCAL_NED") if not is_zero(s.msg)) >= 100, 20.0)
+            comp.wait_until(lambda: sum(1 for s in proxy.companion_sent(
+                "SET_POSITION_TARGET_LOCAL_NED") if not is_zero(s.msg)) >= 100, 20.0,
+                "100 tracking setpoints")
             plant.proc.send_signal(signal.SIGUSR1)
         code = comp.wait(30.0)
         r = comp.result()

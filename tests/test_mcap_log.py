@@ -125,8 +125,9 @@ def test_sigkill_of_a_run_logging_mcap_loses_at_most_100_ms(tmp_path):
             PlantProcess("--speedup", "1", "--d-cen", "0.3", port=proxy.plant_port), \
             Companion(proxy.companion_port, "--arm", "--no-zenoh", "--mission", str(mission),
                       "--log-dir", str(logs), "--log-format", "mcap", "-q") as comp:
-        proxy.wait_for(lambda: sum(1 for s in proxy.companion_sent(
-            "SET_POSITION_TARGET_LOCAL_NED") if not is_zero(s.msg)) >= 160, 30.0)
+        comp.wait_until(lambda: sum(1 for s in proxy.companion_sent(
+            "SET_POSITION_TARGET_LOCAL_NED") if not is_zero(s.msg)) >= 160, 30.0,
+            "160 tracking setpoints")
         os.kill(comp.proc.pid, signal.SIGKILL)
         t_kill = time.monotonic()
         comp.proc.wait(5.0)

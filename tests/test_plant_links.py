@@ -9,13 +9,11 @@ import time
 
 import pytest
 
-from sitl_plant.testing import Pilot, PlantProcess, free_udp_port, speed_of
+from sitl_plant.testing import Pilot, PlantProcess, free_port, free_udp_port, speed_of
 
 
 def free_tcp_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
+    return free_port(socket.SOCK_STREAM)
 
 
 def wait_listening(port: int, timeout: float = 5.0) -> None:

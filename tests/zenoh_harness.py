@@ -24,15 +24,14 @@ from typing import Any
 import zenoh
 
 from companion.bus import decode
+from sitl_plant.testing import free_port
 
 ROOT = Path(__file__).resolve().parents[1]
 ISOLATED = ["--no-zenoh-scouting"]
 
 
 def free_tcp_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
+    return free_port(socket.SOCK_STREAM)
 
 
 def endpoint(port: int) -> str:
