@@ -3,12 +3,18 @@ vehicle, a controller output that is not finite. Real processes, real UDP on loo
 
 from __future__ import annotations
 
+import json
 import math
 import os
 import signal
+import subprocess
+import sys
 import time
 
+import pytest
+
 from companion_harness import (
+    ROOT,
     Companion,
     FakeVehicle,
     Proxy,
@@ -33,7 +39,8 @@ def test_stale_telemetry_stops_the_rover_then_resumes(tmp_path):
     mission = ellipse_mission(tmp_path / "m.toml", 8.0)
     with Proxy() as proxy, \
             PlantProcess("--speedup", "2", "--d-cen", "0.3", port=proxy.plant_port) as plant, \
-            Companion(proxy.companion_port, "--arm", "--json", "--mission", str(mission)) as comp:
+            Companion(proxy.companion_port, "--arm", "--json", "--mission", str(mission),
+                      "--log-dir", str(tmp_path / "logs")) as comp:
         comp.wait_until(lambda: _tracking(proxy), 20.0, "tracking")
         os.kill(plant.proc.pid, signal.SIGSTOP)
         try:
@@ -66,6 +73,15 @@ def test_stale_telemetry_stops_the_rover_then_resumes(tmp_path):
               if not is_zero(s.msg)]
     assert len(moving) > 20 and moving[0].wall >= guided[0].wall
     assert "filter and integrators reset" in comp.stderr
+    # The .tlog alone (no reference in it) gives the live metrics: `companion plot` replays the
+    # mission clock, which stood still through the failsafe.
+    p = subprocess.run([sys.executable, "-m", "companion", "plot", r["tlog"], "--mission",
+                        str(mission), "--out", str(tmp_path / "plot"), "--json"],
+                       capture_output=True, text=True, cwd=ROOT, timeout=120)
+    assert p.returncode == 0, p.stderr
+    m = json.loads(p.stdout)
+    assert m["f_cost"] == pytest.approx(r["f_cost"], rel=1e-3)
+    assert m["steady_rms"] == pytest.approx(r["steady_rms"], rel=2e-2)
 
 
 def test_sigterm_stops_the_rover_holds_and_exits_0(tmp_path):

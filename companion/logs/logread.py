@@ -4,7 +4,8 @@ Both come out as one :class:`Flight`: vehicle time, measured pose and speed, and
 the log holds (reference, filtered pose, commands). The .tlog is read by pymavlink
 (``mavutil.mavlink_connection``); a .tlog carries no reference, so one is rebuilt from the
 mission (``mission=``) anchored, as the companion anchors it, at the first sample answered by a
-moving setpoint (mission time 0) -- right for a run without pauses or failsafes.
+moving setpoint (mission time 0), its mission clock replayed from the setpoints (it stands still
+through failsafes and pauses).
 
 Tracking metrics are the paper's, as :mod:`companion.live.stats` computes them live: f_cost =
 sqrt(trapezoidal integral of |p_ref - p|^2 over mission time), steady RMS over the second half
@@ -27,9 +28,13 @@ from typing import Any
 import numpy as np
 
 from ..errors import UserError
+from ..live.config import RunnerConfig
 from ..live.flightlog import CSV_FIELDS
 
 _NUMERIC = CSV_FIELDS[:16]          # vehicle_time ... yaw_rate_cmd
+# vehicle s between tracked samples that start a new segment of the mission clock: the
+# companion's default (a run with another --max-gap is replayed with this one)
+MAX_GAP = RunnerConfig.max_gap
 
 
 @dataclass
@@ -232,21 +237,47 @@ def read_tlog(path: str | Path, mission: Any = None) -> Flight:
 
 
 def _attach_reference(flight: Flight, mission: Any, cmds: dict, ms: np.ndarray) -> None:
-    """Mission time 0 = the first sample answered by a moving setpoint (the companion's anchor)."""
-    start = next((k for k, m in enumerate(ms)
-                  if int(m) in cmds and any(v != 0.0 for v in cmds[int(m)] if math.isfinite(v))),
-                 None)
-    if start is None:
+    """The reference the companion tracked, from its setpoints: its mission clock replayed.
+
+    The tracked samples are those answered by a moving setpoint; the first anchors the
+    trajectory (mission time 0). As in :class:`companion.live.runner.MissionClock`, mission time
+    runs with vehicle time within a segment and stands still between segments: a new one begins
+    after a failsafe, a pause or a re-engagement (a stop setpoint answered a sample in between)
+    or a gap of more than ``max_gap`` vehicle s between tracked samples. Samples the companion
+    did not track are left out of the metrics, as the live ones leave them out.
+    """
+    def moving(m: int) -> bool:
+        return any(v != 0.0 for v in cmds[m] if math.isfinite(v))
+
+    tracked: list[int] = []
+    mt: list[float] = []
+    stopped_since = False       # a stop setpoint answered a sample since the last tracked one
+    for k, m in enumerate(ms):
+        m = int(m)
+        if m not in cmds:
+            continue            # not answered: refused by the companion, or never read
+        if not moving(m):
+            stopped_since = bool(tracked)
+            continue
+        if not tracked:
+            mt.append(0.0)
+        elif stopped_since or flight.t[k] - flight.t[tracked[-1]] > MAX_GAP:
+            mt.append(mt[-1])   # a new segment: the clock resumes where it stood
+        else:
+            mt.append(mt[-1] + float(flight.t[k] - flight.t[tracked[-1]]))
+        tracked.append(k)
+        stopped_since = False
+    if not tracked:
         return
-    keep = slice(start, None)
-    t0 = flight.t[start]
-    mt = flight.t[keep] - t0
-    inside = mt <= mission.duration + 1e-9
+    start = tracked[0]
+    mission_t = np.array(mt)
+    keep = np.array(tracked)[mission_t <= mission.duration + 1e-9]
+    mission_t = mission_t[mission_t <= mission.duration + 1e-9]
     trajectory = mission.anchored(float(flight.x[start]), float(flight.y[start]),
                                   float(flight.yaw[start]))
-    refs = [trajectory.sample(float(m)) for m in mt[inside]]
+    refs = [trajectory.sample(float(m)) for m in mission_t]
     for name in ("t", "x", "y", "yaw", "speed", "yaw_rate", "speed_along"):
-        setattr(flight, name, getattr(flight, name)[keep][inside])
-    flight.mission_t = mt[inside]
+        setattr(flight, name, getattr(flight, name)[keep])
+    flight.mission_t = mission_t
     flight.x_ref = np.array([r.x for r in refs])
     flight.y_ref = np.array([r.y for r in refs])
