@@ -47,15 +47,16 @@ def test_stale_telemetry_stops_the_rover_then_resumes(tmp_path):
             time.sleep(1.5)
             last = proxy.plant_sent("LOCAL_POSITION_NED")[-1]
             last_tel = last.wall
-            # what went out after the last sample, except the answer to that sample itself
-            after = [s for s in proxy.companion_sent("SET_POSITION_TARGET_LOCAL_NED",
-                                                     after=last_tel)
-                     if s.msg.time_boot_ms != last.msg.time_boot_ms]
-            assert after, "no setpoint after telemetry stopped"
-            first = after[0]
-            assert is_zero(first.msg), "the first setpoint after the silence must be zero"
+            # What went out after the last sample: answers to samples sent before it (a loaded
+            # companion answers late), then the failsafe's zero setpoint, then only zeros.
+            after = proxy.companion_sent("SET_POSITION_TARGET_LOCAL_NED", after=last_tel)
+            zeros = [k for k, s in enumerate(after) if is_zero(s.msg)]
+            assert zeros, "no zero setpoint after telemetry stopped"
+            first = after[zeros[0]]
+            assert all(s.msg.time_boot_ms <= last.msg.time_boot_ms
+                       for s in after[:zeros[0]]), "a moving setpoint answered no sample"
             assert first.wall - last_tel <= 0.6, first.wall - last_tel
-            assert all(is_zero(s.msg) for s in after)
+            assert all(is_zero(s.msg) for s in after[zeros[0]:]), "moved again in the silence"
             holds = [s for s in proxy.companion_sent("COMMAND_LONG", after=last_tel)
                      if is_mode_command(s.msg, HOLD)]
             assert holds and holds[0].wall >= first.wall
