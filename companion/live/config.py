@@ -75,6 +75,13 @@ class RunnerConfig:
     track_mode: str | None = None
 
 
+def segment_gap(max_gap: float, period: float | None) -> float:
+    """Vehicle s between two tracked samples that ends a segment of the mission clock (and
+    resets the tracker): ``max_gap``, but at least 5 telemetry periods. The live loop's rule, and
+    the one ``companion plot`` replays a .tlog's mission clock with."""
+    return max(max_gap, 5.0 * (period or 0.0))
+
+
 @dataclass(frozen=True)
 class OriginConfig:
     """Where a mission placed by latitude / longitude goes (:mod:`companion.live.origin`)."""

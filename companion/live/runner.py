@@ -59,7 +59,7 @@ from ..core.trajectory import Trajectory
 from ..errors import ExitCode, UserError
 from . import events as ev
 from . import health
-from .config import RunnerConfig
+from .config import RunnerConfig, segment_gap
 from .events import ControlChannel, ControlRequest, LoopRecord, Sink, StatusEvent
 from .link import Link
 from .stats import TrackingStats
@@ -219,8 +219,7 @@ class Runner:
         self.trajectory: Trajectory | None = None   # anchored at the first tracking sample
         self.outcome: Outcome | None = None
         self.heard = Heard()
-        # A gap this long between tracked samples resets the tracker (at least 5 periods).
-        self.clock = MissionClock(max_gap=max(config.max_gap, 5.0 * (config.period or 0.0)))
+        self.clock = MissionClock(max_gap=segment_gap(config.max_gap, config.period))
         self.engagement = Engagement(after=State.TRACKING if config.autostart else State.READY)
         self.mode_request = ModeRequest()
         self.stopping = Stopping()

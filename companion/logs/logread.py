@@ -28,13 +28,10 @@ from typing import Any
 import numpy as np
 
 from ..errors import UserError
-from ..live.config import RunnerConfig
+from ..live.config import RunnerConfig, segment_gap
 from ..live.flightlog import CSV_FIELDS
 
 _NUMERIC = CSV_FIELDS[:16]          # vehicle_time ... yaw_rate_cmd
-# vehicle s between tracked samples that start a new segment of the mission clock: the
-# companion's default (a run with another --max-gap is replayed with this one)
-MAX_GAP = RunnerConfig.max_gap
 
 
 @dataclass
@@ -232,36 +229,39 @@ def read_tlog(path: str | Path, mission: Any = None) -> Flight:
         if np.any(np.isfinite(course)):
             flight.course_cmd = course
     if mission is not None:
-        _attach_reference(flight, mission, cmds, ms)
+        _attach_reference(flight, mission, cmds, ms, answered)
     return flight
 
 
-def _attach_reference(flight: Flight, mission: Any, cmds: dict, ms: np.ndarray) -> None:
+def _attach_reference(flight: Flight, mission: Any, cmds: dict, ms: np.ndarray,
+                      answered: list[int]) -> None:
     """The reference the companion tracked, from its setpoints: its mission clock replayed.
 
     The tracked samples are those answered by a moving setpoint; the first anchors the
     trajectory (mission time 0). As in :class:`companion.live.runner.MissionClock`, mission time
     runs with vehicle time within a segment and stands still between segments: a new one begins
     after a failsafe, a pause or a re-engagement (a stop setpoint answered a sample in between)
-    or a gap of more than ``max_gap`` vehicle s between tracked samples. Samples the companion
-    did not track are left out of the metrics, as the live ones leave them out.
+    or a gap of more than :func:`companion.live.config.segment_gap` between tracked samples.
+    Samples the companion did not track are left out of the metrics, as the live ones are.
+    ``answered``: the indices of the samples a setpoint answered (``ms`` in ``cmds``).
     """
     def moving(m: int) -> bool:
         return any(v != 0.0 for v in cmds[m] if math.isfinite(v))
 
+    # the live rule, with the companion's default max_gap (a run with another is replayed with
+    # this one) and the log's own telemetry period
+    period = float(np.median(np.diff(flight.t[answered]))) if len(answered) > 1 else None
+    max_gap = segment_gap(RunnerConfig.max_gap, period)
     tracked: list[int] = []
     mt: list[float] = []
     stopped_since = False       # a stop setpoint answered a sample since the last tracked one
-    for k, m in enumerate(ms):
-        m = int(m)
-        if m not in cmds:
-            continue            # not answered: refused by the companion, or never read
-        if not moving(m):
+    for k in answered:          # (the others: refused by the companion, or never read)
+        if not moving(int(ms[k])):
             stopped_since = bool(tracked)
             continue
         if not tracked:
             mt.append(0.0)
-        elif stopped_since or flight.t[k] - flight.t[tracked[-1]] > MAX_GAP:
+        elif stopped_since or flight.t[k] - flight.t[tracked[-1]] > max_gap:
             mt.append(mt[-1])   # a new segment: the clock resumes where it stood
         else:
             mt.append(mt[-1] + float(flight.t[k] - flight.t[tracked[-1]]))
@@ -270,9 +270,8 @@ def _attach_reference(flight: Flight, mission: Any, cmds: dict, ms: np.ndarray) 
     if not tracked:
         return
     start = tracked[0]
-    mission_t = np.array(mt)
-    keep = np.array(tracked)[mission_t <= mission.duration + 1e-9]
-    mission_t = mission_t[mission_t <= mission.duration + 1e-9]
+    inside = np.array(mt) <= mission.duration + 1e-9
+    keep, mission_t = np.array(tracked)[inside], np.array(mt)[inside]
     trajectory = mission.anchored(float(flight.x[start]), float(flight.y[start]),
                                   float(flight.yaw[start]))
     refs = [trajectory.sample(float(m)) for m in mission_t]
