@@ -248,8 +248,7 @@ def _attach_reference(flight: Flight, mission: Any, cmds: dict, ms: np.ndarray,
     def moving(m: int) -> bool:
         return any(v != 0.0 for v in cmds[m] if math.isfinite(v))
 
-    # the live rule, with the companion's default max_gap (a run with another is replayed with
-    # this one) and the log's own telemetry period
+    # the live rule: RunnerConfig's max_gap (no command sets another) and the log's own period
     period = float(np.median(np.diff(flight.t[answered]))) if len(answered) > 1 else None
     max_gap = segment_gap(RunnerConfig.max_gap, period)
     tracked: list[int] = []
