@@ -29,15 +29,17 @@ def fly(plant_args, companion_args, timeout=60.0):
         return comp.result()
 
 
-def batch_twin(result) -> float:
-    """companion.sim.batch.simulate of the same scenario: same gains, limits, rate, plant, start."""
+def batch_twin(result, delay: float = 0.0) -> float:
+    """companion.sim.batch.simulate of the same scenario: same gains, limits, rate, plant, start;
+    ``delay`` s of link transit on both channels (zero over loopback)."""
     g = result["gains"]
     tracker = PZCTracker(FilterGains(g["k_df"], g["lambda_f"]),
                          PZCGains(**{k: g[k] for k in ("k_dc", "lambda_c", "k_dc_yaw",
                                                        "lambda_c_yaw", "velocity_ff",
                                                        "heading_rate_ff", "speed_law")}),
                          Limits(**result["limits"]))
-    sim = simulate(tracker, RoverParams.paper(d_cen=0.3), Ellipse.paper(0.12),
+    plant = RoverParams.paper(d_cen=0.3).with_(speed_delay=delay, yaw_delay=delay)
+    sim = simulate(tracker, plant, Ellipse.paper(0.12),
                    config=SimConfig(duration=60.0, control_rate=40.0, start=(0.0, 0.0, 0.0)))
     return float(sim.f_cost)
 
