@@ -23,8 +23,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..core import ops
-from ..sim.plant import LAT_ACCEL_MIN_SPEED, lag_step
+from ..sim.lag_series import lag_series
+from ..sim.plant import LAT_ACCEL_MIN_SPEED
 
 
 @dataclass(frozen=True)
@@ -45,12 +45,12 @@ class Grid:
         return cls(steps, held, sample_step)
 
 
-def _delayed(commands: np.ndarray, delay, n: int, dt: float):
-    """Per grid step, the delayed setpoint of each of ``n`` models (a function of the step)."""
+def _delayed(commands: np.ndarray, delay, n: int, dt: float) -> tuple[np.ndarray, np.ndarray]:
+    """The setpoints padded with zeros in front and each of ``n`` models' offset into them:
+    model i's delayed setpoint at grid step k is ``padded[k + offset[i]]``."""
     lag = np.broadcast_to(np.rint(np.asarray(delay, dtype=float) / dt).astype(int), (n,))
     padded = np.concatenate([np.zeros(int(lag.max(initial=0))), commands])
-    offset = int(lag.max(initial=0)) - lag
-    return lambda k: padded[k + offset]
+    return padded, int(lag.max(initial=0)) - lag
 
 
 def turn_rate(t: np.ndarray, yaw_rate_cmd: np.ndarray, n: int, dt: float, omega0: float,
@@ -67,21 +67,19 @@ def turn_rate(t: np.ndarray, yaw_rate_cmd: np.ndarray, n: int, dt: float, omega0
     two time scales, may be negative) the channel's output passes
     :func:`companion.sim.plant.overshoot_step`, as respond's."""
     g = Grid.of(t, dt)
-    m = ops.for_size(n)
-    command = _delayed(np.asarray(yaw_rate_cmd, dtype=float)[g.held], delay, n, dt)
+    padded, offset = _delayed(np.asarray(yaw_rate_cmd, dtype=float)[g.held], delay, n, dt)
     coupled = bool(np.any(np.asarray(coupling) > 0))
     curved = bool(np.any(np.asarray(turn_radius) > 0))
     lateral = bool(np.any(np.isfinite(lat_accel)))
-    by_speed = coupled or curved or lateral
-    if by_speed:
+    top = np.broadcast_to(np.asarray(max_rate, dtype=float), (n,))[None, :]
+    if coupled or curved or lateral:
         if speed_grid is None or len(speed_grid) < g.steps:
             raise ValueError("a coupled turn-rate channel needs the speed on every grid step")
-        # The clamp per grid step, before the loop: it does not depend on the turn rate, so
-        # the loop pays nothing more for it.
+        # The clamp per grid step, before the loop: it does not depend on the turn rate.
         speed = np.abs(speed_grid[:g.steps])
         if speed.ndim == 1:
             speed = speed[:, None]
-        top = max_rate + np.zeros((g.steps, n))
+        top = top + np.zeros((g.steps, n))
         if coupled:
             top = top * (1.0 - coupling * np.minimum(speed / max_speed, 1.0))
         if curved:
@@ -90,16 +88,8 @@ def turn_rate(t: np.ndarray, yaw_rate_cmd: np.ndarray, n: int, dt: float, omega0
                                            np.inf))
         if lateral:
             top = np.minimum(top, lat_accel / np.maximum(speed, LAT_ACCEL_MIN_SPEED))
-    over = bool(np.any(np.asarray(overshoot) != 0))
-    w = np.full(n, float(omega0))
-    x = w                                # the channel's output (the turn rate without overshoot)
-    z = w
-    out = np.empty((g.steps, n))
-    for k in range(g.steps):
-        out[k] = w
-        limit = top[k] if by_speed else max_rate
-        u = m.clip(command(k), -limit, limit)
-        w, x, z = lag_step(m, x, z, u, bandwidth, accel, decel, dt, overshoot, overshoot_s, over)
+    out = lag_series(padded, offset, top, g.steps, float(omega0), bandwidth, accel, decel, dt,
+                     overshoot, overshoot_s)
     return out[g.sample_step], out
 
 
@@ -111,20 +101,12 @@ def speed(t: np.ndarray, speed_cmd: np.ndarray, omega_grid: np.ndarray, n: int, 
     clamp lost while turning) reads; with ``overshoot`` the channel's output passes
     :func:`companion.sim.plant.overshoot_step` (the coupling reads the speed itself)."""
     g = Grid.of(t, dt)
-    m = ops.for_size(n)
-    command = _delayed(np.asarray(speed_cmd, dtype=float)[g.held], delay, n, dt)
-    coupled = bool(np.any(np.asarray(coupling) > 0))
-    over = bool(np.any(np.asarray(overshoot) > 0))
-    omega = omega_grid if omega_grid.ndim == 2 else omega_grid[:, None]
-    x = np.full(n, float(v0))          # the channel's output (the speed without overshoot)
-    z = np.full(n, float(v0))
-    v = x
-    out = np.empty((g.steps, n))
-    for k in range(g.steps):
-        out[k] = v
-        top = max_speed
-        if coupled:
-            top = top * (1.0 - coupling * m.minimum(abs(omega[k]) / max_yaw_rate, 1.0))
-        u = m.clip(command(k), -top, top)
-        v, x, z = lag_step(m, x, z, u, bandwidth, accel, decel, dt, overshoot, overshoot_s, over)
+    padded, offset = _delayed(np.asarray(speed_cmd, dtype=float)[g.held], delay, n, dt)
+    top = np.broadcast_to(np.asarray(max_speed, dtype=float), (n,))[None, :]
+    if bool(np.any(np.asarray(coupling) > 0)):
+        # The clamp per grid step, before the loop: it reads the given turn rate only.
+        omega = omega_grid if omega_grid.ndim == 2 else omega_grid[:, None]
+        top = top * (1.0 - coupling * np.minimum(np.abs(omega[:g.steps]) / max_yaw_rate, 1.0))
+    out = lag_series(padded, offset, top, g.steps, float(v0), bandwidth, accel, decel, dt,
+                     overshoot, overshoot_s)
     return out[g.sample_step]
