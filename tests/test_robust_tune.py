@@ -8,6 +8,7 @@ import math
 import subprocess
 import sys
 from dataclasses import replace
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -20,6 +21,8 @@ from companion.sim import vehicle_file
 from companion.sim.plant import RoverParams
 from companion.sim.robust import RobustConfig, Spread, ensemble, evaluate, tune
 from companion.sim.tuning import Candidates
+
+ROOT = Path(__file__).resolve().parent.parent
 
 ROVER = RoverParams(w_c=1 / 0.3, w_c_yaw=1 / 0.05, max_speed=4.0, max_yaw_rate=2.0944,
                     max_accel=1.0, max_yaw_accel=2.0944, speed_delay=0.05, yaw_delay=0.03,
@@ -114,14 +117,37 @@ def test_companion_tune_vehicle_writes_gains_that_record_their_vehicle(tmp_path)
     assert g.pzc.lead_tau == 0.0                    # the robust search never uses the lead
 
 
+def test_tune_vehicle_on_the_frequencies_f_r_names(tmp_path):
+    """--f-r with --vehicle: the paper's ellipse at those frequencies (it was once ignored,
+    the four default references tuned instead), simulated for --duration."""
+    vpath = tmp_path / "rover.toml"
+    vehicle_file.save(vehicle_file.VehicleFile(ROVER, name="rover"), vpath)
+    p = subprocess.run([sys.executable, "-m", "companion", "tune", "--vehicle", str(vpath),
+                        "--f-r", "0.03,0.05", "--duration", "20", "--population", "8",
+                        "--rounds", "1", "--neighbours", "0", "--json", "--no-progress"],
+                       capture_output=True, text=True, timeout=300)
+    assert p.returncode == 0, p.stderr
+    d = json.loads(p.stdout)
+    assert d["references"] == ["ellipse 0.03 Hz", "ellipse 0.05 Hz"]
+    assert len(d["steady_rms"]) == 2 and d["ensemble"] == 1
+
+
 @pytest.mark.parametrize("argv, message", [
     (["--vehicle", "nope.toml"], "no such vehicle file"),
+    (["--vehicle", "companion/sim/vehicles/ardupilot_skid.toml", "--w-c", "3"],
+     "--w-c describes the rover, which --vehicle companion/sim/vehicles/ardupilot_skid.toml"),
+    (["--vehicle", "companion/sim/vehicles/ardupilot_skid.toml", "--max-speed", "2"],
+     "leave --max-speed out"),
+    (["--vehicle", "companion/sim/vehicles/ardupilot_skid.toml", "--f-r", "0.04",
+      "--mission", "missions/circle.toml"], "--f-r and --mission both name the references"),
+    (["--vehicle", "companion/sim/vehicles/ardupilot_skid.toml", "--f-r", "0.04,fast"],
+     "--f-r must be comma-separated frequencies in Hz, not '0.04,fast'"),
     (["--mission", "missions/circle.toml", "--rate", "40"], "--mission needs --vehicle"),
     ([], "--rate is required"),
 ])
 def test_tune_errors_are_one_line(argv, message):
     p = subprocess.run([sys.executable, "-m", "companion", "tune", *argv, "--no-progress"],
-                       capture_output=True, text=True, timeout=60)
+                       capture_output=True, text=True, timeout=60, cwd=ROOT)
     assert p.returncode == 2 and message in p.stderr and "Traceback" not in p.stderr
 
 

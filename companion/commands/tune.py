@@ -43,19 +43,23 @@ def register(subparsers) -> None:
                         "default the paper's ellipse at 0.02, 0.04, 0.08, 0.12 Hz)")
     p.add_argument("--neighbours", type=int, default=6, metavar="N",
                    help="with --vehicle: perturbed neighbours besides the vehicle (default 6)")
-    p.add_argument("--w-c", type=float, default=20.0, dest="w_c", metavar="RAD_S",
+    # (None: not given. With --vehicle the plant and its limits are the vehicle file's, so the
+    # flags that describe them are refused there rather than silently ignored.)
+    p.add_argument("--w-c", type=float, dest="w_c", metavar="RAD_S",
                    help="actuator bandwidth of the rover (default 20; a stock rover is about 1.2)")
-    p.add_argument("--d-cen", type=float, default=0.0, dest="d_cen", metavar="M",
+    p.add_argument("--d-cen", type=float, dest="d_cen", metavar="M",
                    help="distance from the tracked point to the wheel axle (default 0)")
-    p.add_argument("--f-r", default="0.04,0.08,0.12", metavar="HZ,HZ,...",
-                   help="reference frequencies of the paper's ellipse to tune over together")
-    p.add_argument("--duration", type=float, default=60.0, metavar="S",
-                   help="simulated seconds per run (default 60)")
+    p.add_argument("--f-r", metavar="HZ,HZ,...",
+                   help="reference frequencies of the paper's ellipse to tune over together "
+                        "(default 0.04,0.08,0.12; with --vehicle, in place of --mission)")
+    p.add_argument("--duration", type=float, metavar="S",
+                   help="simulated seconds per run (default 60; with --vehicle and --mission, "
+                        "the longest mission's, at most 120)")
     p.add_argument("--max-speed", type=float, metavar="M_S",
                    help="command speed limit (default: the companion's, as run resolves it)")
     p.add_argument("--max-yaw-rate", type=float, metavar="RAD_S",
                    help="command yaw-rate limit (default: the companion's, as run resolves it)")
-    p.add_argument("--max-accel", type=float, default=math.inf, metavar="M_S2",
+    p.add_argument("--max-accel", type=float, metavar="M_S2",
                    help="the rover's acceleration limit (default none)")
     p.add_argument("--population", type=int, metavar="N",
                    help="gain sets simulated per round (default 128; with --vehicle the "
@@ -79,7 +83,17 @@ def _frequencies(text: str) -> tuple[float, ...]:
     return values
 
 
+LINEAR_DEFAULTS = {"w_c": 20.0, "d_cen": 0.0, "f_r": "0.04,0.08,0.12", "duration": 60.0,
+                   "max_accel": math.inf}
+# What describes the plant or its limits: the vehicle file's own with --vehicle.
+PLANT_FLAGS = {"w_c": "--w-c", "d_cen": "--d-cen", "max_accel": "--max-accel",
+               "max_speed": "--max-speed", "max_yaw_rate": "--max-yaw-rate"}
+
+
 def check(args) -> tuple[float, ...]:
+    for name, value in LINEAR_DEFAULTS.items():
+        if getattr(args, name) is None:
+            setattr(args, name, value)
     for flag, value in (("--rate", args.rate), ("--w-c", args.w_c), ("--duration", args.duration),
                         ("--max-speed", args.max_speed), ("--max-yaw-rate", args.max_yaw_rate)):
         require_positive(flag, value)
@@ -217,6 +231,10 @@ def run_robust(args) -> int:
     args.rounds = RobustConfig.rounds if args.rounds is None else args.rounds
     rate = 40.0 if args.rate is None else args.rate
     require_positive("--rate", rate)
+    for name, flag in PLANT_FLAGS.items():
+        if getattr(args, name) is not None:
+            raise UserError(f"{flag} describes the rover, which --vehicle {args.vehicle} "
+                            f"already does (its model and limits): leave {flag} out")
     if args.population < 8:
         raise UserError(f"--population must be at least 8, not {args.population}")
     if args.rounds < 1:
@@ -225,8 +243,16 @@ def run_robust(args) -> int:
         raise UserError(f"--neighbours must be 0..64, not {args.neighbours}")
     if args.out and not Path(args.out).resolve().parent.is_dir():
         raise UserError(f"--out {args.out}: directory {Path(args.out).resolve().parent} does not exist")
+    from ..core.trajectory import Ellipse
     from ..sim.vehicle_gains import config_for, record
     refs, duration = mission_references(args.mission)
+    if args.f_r is not None:
+        if args.mission:
+            raise UserError("--f-r and --mission both name the references: give one")
+        refs = [(f"ellipse {f:g} Hz", Ellipse.paper(f)) for f in _frequencies(args.f_r)]
+    if args.duration is not None:
+        require_positive("--duration", args.duration)
+        duration = args.duration
     cfg = config_for(args.vehicle, rate, refs, duration, population=args.population,
                      rounds=args.rounds, neighbours=args.neighbours, seed=args.seed)
     with progress_bar(f"robust tune {rate:g} Hz", not args.no_progress) as progress:
