@@ -40,7 +40,8 @@ def register(subparsers) -> None:
                    help="tune robustly for this identified vehicle (companion identify)")
     p.add_argument("--mission", action="append", default=[], metavar="FILE",
                    help="with --vehicle: tune on this mission's trajectory (repeatable; "
-                        "default the paper's ellipse at 0.02, 0.04, 0.08, 0.12 Hz)")
+                        "default the paper's ellipse at those of 0.02, 0.04, 0.08, 0.12 Hz the "
+                        "vehicle can follow)")
     p.add_argument("--neighbours", type=int, default=6, metavar="N",
                    help="with --vehicle: perturbed neighbours besides the vehicle (default 6)")
     # (None: not given. With --vehicle the plant and its limits are the vehicle file's, so the
