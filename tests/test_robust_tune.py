@@ -110,8 +110,7 @@ def test_companion_tune_vehicle_writes_gains_that_record_their_vehicle(tmp_path)
                        capture_output=True, text=True, timeout=300)
     assert p.returncode == 0, p.stderr
     d = json.loads(p.stdout)
-    # (the 0.12 Hz ellipse asks 1.8 m/s^2 of this 1 m/s^2 rover: left out)
-    assert d["vehicle"] == str(vpath) and d["ensemble"] == 2 and len(d["steady_rms"]) == 3
+    assert d["vehicle"] == str(vpath) and d["ensemble"] == 2 and len(d["steady_rms"]) == 4
     g = gains_mod.load(out)
     assert g.vehicle_file == "rover.toml" and len(g.vehicle_sha256) == 64
     text = out.read_text()
@@ -272,10 +271,11 @@ def test_the_tuner_leaves_out_references_the_vehicle_cannot_turn_through():
     assert labels(crawl) == ["ellipse 0.02 Hz"]                 # the slowest is always kept
 
 
-def test_the_tuner_leaves_out_references_the_vehicle_cannot_accelerate_along():
-    # The 0.12 Hz ellipse asks 1.80 m/s^2 along its path, ArduPilot's rovers have about 1.0:
-    # in the objective it pulled a car's 0.08 Hz gains to 0.27-0.34 m in simulation (2026-12-03)
+def test_a_cars_tune_leaves_out_references_it_cannot_accelerate_along(tmp_path):
+    # The 0.12 Hz ellipse asks 1.80 m/s^2 along its path, ArduPilot's car has about 1.0: in
+    # the objective it pulled the car's 0.08 Hz gains to 0.27-0.34 m in simulation (2026-12-03)
     from companion.sim.robust import PAPER_F_R, RobustConfig, ellipse_path_accel
+    from companion.sim.vehicle_gains import config_for
     assert [round(ellipse_path_accel(f), 3) for f in PAPER_F_R] == [0.05, 0.2, 0.799, 1.798]
     # the closed form against the ellipse's own speed, differenced
     ellipse = Ellipse.paper(0.08)
@@ -283,11 +283,19 @@ def test_the_tuner_leaves_out_references_the_vehicle_cannot_accelerate_along():
     xy = np.array([(float(r.x), float(r.y)) for r in map(ellipse.sample, t)])
     speed = np.hypot(*np.gradient(xy, t, axis=0).T)
     assert np.max(np.abs(np.gradient(speed, t)[50:-50])) == pytest.approx(0.799, abs=0.002)
-    labels = lambda vehicle: [label for label, _ in RobustConfig(vehicle=vehicle).reference_list()]  # noqa: E731
-    assert labels(RoverParams(max_yaw_rate=2.09, max_accel=1.02, max_decel=1.03)) == [
-        "ellipse 0.02 Hz", "ellipse 0.04 Hz", "ellipse 0.08 Hz"]
-    # ATC_ACCEL_MAX 0.5 with ATC_DECEL_MAX 2: the slower of the two limits counts
-    assert labels(RoverParams(max_yaw_rate=2.09, max_accel=0.52, max_decel=2.1)) == [
-        "ellipse 0.02 Hz", "ellipse 0.04 Hz"]
-    assert labels(RoverParams(max_yaw_rate=2.09, max_accel=2.1, max_decel=0.52)) == [
-        "ellipse 0.02 Hz", "ellipse 0.04 Hz"]
+    labels = lambda cfg: [label for label, _ in cfg.reference_list()]  # noqa: E731
+    four = [f"ellipse {f:g} Hz" for f in PAPER_F_R]
+    skid = RoverParams(max_yaw_rate=2.09, max_accel=1.02, max_decel=1.03)
+    assert labels(RobustConfig(vehicle=skid)) == four      # not checked unless asked (a car)
+    assert labels(RobustConfig(vehicle=skid, accel_room=1.0)) == four[:3]
+    # ATC_ACCEL_MAX 0.5 with ATC_DECEL_MAX 2: the slower of the two limits counts, either way
+    for slow in (RoverParams(max_yaw_rate=2.09, max_accel=0.52, max_decel=2.1),
+                 RoverParams(max_yaw_rate=2.09, max_accel=2.1, max_decel=0.52)):
+        assert labels(RobustConfig(vehicle=slow, accel_room=1.0)) == four[:2]
+    # a vehicle file of a car asks it; a skid-steer one does not
+    car = tmp_path / "car.toml"
+    vehicle_file.save(vehicle_file.VehicleFile(ROVER.with_(min_turn_radius=0.9), name="car"), car)
+    rover = tmp_path / "rover.toml"
+    vehicle_file.save(vehicle_file.VehicleFile(ROVER, name="rover"), rover)
+    assert labels(config_for(car, 40.0)) == four[:3]
+    assert labels(config_for(rover, 40.0)) == four

@@ -41,7 +41,7 @@ def register(subparsers) -> None:
     p.add_argument("--mission", action="append", default=[], metavar="FILE",
                    help="with --vehicle: tune on this mission's trajectory (repeatable; "
                         "default the paper's ellipse at those of 0.02, 0.04, 0.08, 0.12 Hz the "
-                        "vehicle can follow)")
+                        "vehicle can turn through, and for a car accelerate along)")
     p.add_argument("--neighbours", type=int, default=6, metavar="N",
                    help="with --vehicle: perturbed neighbours besides the vehicle (default 6)")
     # (None: not given. With --vehicle the plant and its limits are the vehicle file's, so the

@@ -54,7 +54,7 @@ from .tuning import Candidates, perturb, random_candidates
 PAPER_F_R = (0.02, 0.04, 0.08, 0.12)
 LIMIT_CYCLE_SHARE = 0.05     # yaw-rate setpoint at its limit in more of the second half: rejected
 TURN_ROOM = 0.8              # a reference's peak turn rate at most this share of the vehicle's
-ACCEL_ROOM = 1.0             # its peak acceleration along the path at most the vehicle's limit
+CAR_ACCEL_ROOM = 1.0         # a car's: its peak acceleration along the path at most the limit
 
 # The robust search's own dimensions (log-uniform ranges; tuning.RANGES / FLAGS are unchanged):
 # accel_ff_turn in seconds; the braking accelerations as factors of the vehicle's scale
@@ -114,15 +114,18 @@ class RobustConfig:
     min_progress: float = 0.0          # the law's progress floor for every candidate (PX4, a car)
     speed_law: str = "projected"       # every candidate's (a car: "paper", it turns only moving)
     course_tau: float = 0.0            # s, every candidate's course correction (core.course)
+    # None: the references are not checked against the vehicle's acceleration; a number: those
+    # whose peak acceleration along the path exceeds that share of it are left out (a car's)
+    accel_room: float | None = None
     # processes that simulate each round's candidates (this one and workers - 1 spawned): the
     # same gains at any count (:func:`evaluate`), in less wall time where cores are free
     workers: int = 1
 
     def reference_list(self) -> tuple[tuple[str, Trajectory], ...]:
-        """The references given, else the paper's ellipses this vehicle can follow with room to
-        correct: their peak turn rate within TURN_ROOM of its limit, and their peak
-        acceleration along the path within its speed limits (ACCEL_ROOM). The slowest is
-        always kept.
+        """The references given, else the paper's ellipses this vehicle can turn through with
+        room to correct (their peak turn rate within TURN_ROOM of its limit) and, with
+        ``accel_room``, accelerate along (their peak acceleration along the path within that
+        share of the slower of its speed limits). The slowest is always kept.
 
         A turn rate at the limit holds every candidate that follows it there, which the
         limit-cycle rule rejects, so only gains too slow to follow anything survive (SITL
@@ -130,15 +133,19 @@ class RobustConfig:
         ellipse, 1.51 rad/s, 1.15 m at 0.08 Hz; with the 0.08 Hz one, 1.005 rad/s, 1.80 m; tuned
         on 0.02 and 0.04 Hz alone the same vehicle file simulates 0.0038 / 0.083 m; Kanayama
         0.13 m). An acceleration beyond the limit leaves the vehicle a metre or more behind
-        whatever the gains (the 0.12 Hz ellipse asks 1.80 m/s^2; stock ArduPilot rovers have
-        about 1.0): its log RMS in the objective then buys small relative gains there with the
-        followable references' tracking. On SITL's car (2026-12-03) four robust tunes on all
-        four ellipses simulated 0.174 / 0.266 / 0.341 m at 0.08 Hz, four without 0.12 Hz
-        0.162-0.186 m, 0.022-0.026 m at 0.04 Hz either way; stock rover-skid 0.049 / 0.052 m."""
+        whatever the gains (the 0.12 Hz ellipse asks 1.80 m/s^2, ArduPilot's rovers have about
+        1.0); for SITL's car its log RMS in the objective bought small relative gains there with
+        the 0.08 Hz tracking (four robust tunes on all four ellipses: 0.174 / 0.266 / 0.341 m
+        simulated at 0.08 Hz; four without 0.12 Hz: 0.162-0.186 m; 0.022-0.026 m at 0.04 Hz
+        either way, 2026-12-03), so a car's tune leaves it out (vehicle_gains.config_for). A
+        skid-steer rover's does not need to (stock rover-skid 0.049 / 0.052 m at 0.08 Hz with
+        and without), and PX4's deceleration is too loosely identified to judge by (0.65 to
+        3 m/s^2 over sessions of one SIH rover)."""
         if self.references:
             return self.references
         top = TURN_ROOM * float(np.min(self.vehicle.max_yaw_rate))
-        accel = ACCEL_ROOM * float(np.min(np.minimum(self.vehicle.max_accel, self.vehicle.decel)))
+        accel = (math.inf if self.accel_room is None else self.accel_room
+                 * float(np.min(np.minimum(self.vehicle.max_accel, self.vehicle.decel))))
         kept = [f for f in PAPER_F_R if f == min(PAPER_F_R)
                 or (ellipse_turn_rate(f) <= top and ellipse_path_accel(f) <= accel)]
         return tuple((f"ellipse {f:g} Hz", Ellipse.paper(f)) for f in kept)

@@ -23,7 +23,7 @@ from . import gains as gains_mod
 from . import vehicle_file
 from .gains import TunedGains
 from .plant import RoverParams
-from .robust import RobustConfig, RobustResult, tune
+from .robust import CAR_ACCEL_ROOM, RobustConfig, RobustResult, tune
 
 
 class NothingRobust(UserError):
@@ -82,6 +82,8 @@ def config_for(vehicle_path: str | Path, rate: float,
         # keeps it driving forward, the progress floor keeps u_p from vanishing.
         search.setdefault("min_progress", CAR_MIN_PROGRESS)
         search.setdefault("speed_law", "paper")
+        # and not on references it cannot accelerate along (RobustConfig.reference_list)
+        search.setdefault("accel_room", CAR_ACCEL_ROOM)
     return RobustConfig(vehicle=vehicle, rate_hz=rate, tick=0.02 if rate < 50 else None,
                         references=tuple(references), duration=duration,
                         limits=vehicle_limits(vehicle), **search)
