@@ -3,7 +3,9 @@
 ``respond`` steps both channels for every parameter set; a search over the turn-rate channel's
 parameters needs only that channel, and one over the speed channel's needs the turn rate only
 as it is (the fitted turn-rate model's), not per candidate. Stepping one channel halves the cost
-of a search round, whose cost is the Python step loop, not the population.
+of a search round. The clamps each step meets are computed for the whole series first (they read
+only the other channel's given output), then :func:`companion.sim.lag_series.lag_series` runs the
+step loop itself (compiled where numba is installed).
 
 The model is respond's, step for step: the same grid (``dt`` from ``t[0]``, the setpoint in
 force at each grid point, each sample read at the grid point at or just before it), a pure delay
