@@ -173,7 +173,14 @@ def test_the_companion_ignores_unsigned_and_wrong_key_telemetry(tmp_path):
         assert comp.wait(60.0) == 0, comp.stderr
         r = comp.result()
     assert injected >= 300
-    assert r["reason"] == "mission_done" and r["failsafes"] == 0
+    assert r["reason"] == "mission_done"
+    # No failsafe the strangers caused: a loaded machine may stall the plant past the stale
+    # timeout (a failsafe for silence, and back: seen once beside a SITL suite), nothing else,
+    # and no genuine sample was refused.
+    stops = [line for line in comp.stderr.splitlines() if "stopping the rover" in line]
+    assert r["failsafes"] == len(stops), comp.stderr
+    assert all("telemetry stale" in line for line in stops), stops
+    assert sum(r["telemetry_rejected"].values()) == 0, r["telemetry_rejected"]
     assert r["signing_rejected"] >= injected
     sps = proxy.companion_sent("SET_POSITION_TARGET_LOCAL_NED")
     assert all(s.msg.time_boot_ms % 25 == 0 for s in sps), "a setpoint answered injected data"
