@@ -331,15 +331,29 @@ class GroundStation:
         """The vehicle's first HEARTBEAT in ``mode`` (since ``after``, default now)."""
         return self.wait_for("HEARTBEAT", lambda m: m.custom_mode == mode, timeout, after)
 
-    def command(self, command: int, *params: float, timeout: float = 5.0) -> int:
-        """COMMAND_LONG to the vehicle; the result of the COMMAND_ACK addressed to us."""
+    def command(self, command: int, *params: float, timeout: float = 5.0,
+                attempts: int = 3) -> int:
+        """COMMAND_LONG to the vehicle; the result of the COMMAND_ACK addressed to us. Sent
+        again (confirmation 1, 2, ...) after ``timeout`` s without an answer, as a ground
+        station does (MAVLink's command protocol): a SITL's first command on a link it had
+        just accepted once went unanswered for 5 s (make sitl-test, nothing beside it)."""
         p = list(params) + [0.0] * (7 - len(params))
         sent = time.monotonic()
-        with self._lock:
-            self.mav.command_long_send(*self.vehicle, command, 0, *p)
-        ack = self.wait_for("COMMAND_ACK", lambda m: m.command == command and (
-            (m.target_system, m.target_component) in (self.me, (0, 0))), timeout, sent)
-        return ack.result
+
+        def ours(m: Any) -> bool:
+            return m.command == command and (
+                (m.target_system, m.target_component) in (self.me, (0, 0)))
+
+        for confirmation in range(attempts):
+            with self._lock:
+                self.mav.command_long_send(*self.vehicle, command, confirmation, *p)
+            try:
+                return self.wait_for("COMMAND_ACK", ours, timeout, sent).result
+            except AssertionError:
+                if confirmation == attempts - 1:
+                    raise AssertionError(f"no COMMAND_ACK for command {command} in {attempts} "
+                                         f"attempts of {timeout:g} s") from None
+        raise AssertionError("unreachable")
 
     def set_rate(self, msg_id: int, hz: float) -> int:
         """MAV_CMD_SET_MESSAGE_INTERVAL on this link: the ACK's result."""
