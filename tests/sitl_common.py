@@ -347,13 +347,10 @@ class GroundStation:
         for confirmation in range(attempts):
             with self._lock:
                 self.mav.command_long_send(*self.vehicle, command, confirmation, *p)
-            try:
+            with contextlib.suppress(AssertionError):      # no answer yet: send it again
                 return self.wait_for("COMMAND_ACK", ours, timeout, sent).result
-            except AssertionError:
-                if confirmation == attempts - 1:
-                    raise AssertionError(f"no COMMAND_ACK for command {command} in {attempts} "
-                                         f"attempts of {timeout:g} s") from None
-        raise AssertionError("unreachable")
+        raise AssertionError(f"no COMMAND_ACK for command {command} in {attempts} attempts "
+                             f"of {timeout:g} s")
 
     def set_rate(self, msg_id: int, hz: float) -> int:
         """MAV_CMD_SET_MESSAGE_INTERVAL on this link: the ACK's result."""

@@ -101,16 +101,15 @@ def _loop(padded: Any, offset: Any, top: Any, x0: float, b: Any, up: Any, down: 
             rate = down[i] if e0 * x[i] < 0 else up[i]
             knee = rate / b[i]
             t1 = max(abs(e0) / rate - 1.0 / b[i], 0.0)
+            e1 = min(max(e0, -knee), knee)        # the error when the ramp ends
             tr = min(dt, t1)                      # time spent ramping at the rate limit
             te = dt - tr                          # then decaying
             if t1 <= 0:                           # the usual case: no ramp, no exp
-                x1 = u - min(max(e0, -knee), knee) * decay[i]
+                x1 = u - e1 * decay[i]
             elif te > 0:
-                e1 = min(max(e0, -knee), knee)
                 x1 = u - e1 * math.exp(-b[i] * te)
-            else:
-                ramp = (-rate if e0 < 0 else rate) if t1 > 0 else 0.0
-                x1 = x[i] + ramp * tr
+            else:                                 # ramping all step long
+                x1 = x[i] + (-rate if e0 < 0 else rate) * tr
             if over:
                 z[i] = z[i] + (1.0 - keep[i]) * (0.5 * (x[i] + x1) - z[i])
                 y[i] = (1.0 + g[i]) * x1 - g[i] * z[i]
