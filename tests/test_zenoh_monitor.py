@@ -34,3 +34,41 @@ def test_monitor_once_json_and_record_see_a_demo(tmp_path):
     assert len(states) == v["state_msgs"]
     assert all(r["payload"]["schema"] == "pzc-rover/state/1" and r["rx"] >= r["payload"]["sent_at"]
                for r in states)
+
+
+class _Sample:
+    """What the monitor reads of a Zenoh sample: its key expression and payload bytes."""
+
+    def __init__(self, key: str, payload: dict):
+        from companion.bus import encode
+        self.key_expr, self._data = key, encode(payload)
+        self.payload = self
+
+    def to_bytes(self) -> bytes:
+        return self._data
+
+
+def test_the_last_snapshot_and_the_record_count_the_same_messages(tmp_path):
+    """Zenoh's threads can deliver a sample after ``--once``'s snapshot and before the session
+    closes (a fresh-clone CI run recorded 40 states against a snapshot of 39): the last snapshot
+    ends counting and recording together."""
+    from companion.commands.monitor import Fleet
+
+    def state(seq: int) -> _Sample:
+        return _Sample("rover/r1/state", {"schema": "pzc-rover/state/1", "vehicle_id": "r1",
+                                          "seq": seq, "every": 1, "mode": "GUIDED", "armed": True})
+
+    path = tmp_path / "rec.jsonl"
+    with open(path, "w", encoding="utf-8") as record:
+        fleet = Fleet(record)
+        for seq in range(3):
+            fleet.on_sample(state(seq))
+        assert fleet.snapshot()["vehicles"][0]["state_msgs"] == 3
+        fleet.on_sample(state(3))                     # a snapshot while running does not freeze
+        snap = fleet.snapshot(last=True)
+        fleet.on_sample(state(4))                     # arrives between the snapshot and close
+    (v,) = snap["vehicles"]
+    assert v["state_msgs"] == 4 and v["lost"] == 0
+    seqs = [json.loads(line)["payload"]["seq"] for line in path.read_text().splitlines()]
+    assert seqs == [0, 1, 2, 3]
+    assert fleet.snapshot()["vehicles"][0]["state_msgs"] == 4

@@ -84,6 +84,7 @@ class Fleet:
         self.vehicles: dict[str, Seen] = {}
         self.record = record
         self.bad = 0
+        self.frozen = False     # after the last snapshot: the record holds what it counted
 
     def on_sample(self, sample) -> None:
         from ..bus import decode
@@ -92,6 +93,8 @@ class Fleet:
         parts = key.split("/")
         data = sample.payload.to_bytes()
         with self.lock:
+            if self.frozen:
+                return
             if len(parts) != 3:
                 self.bad += 1
                 return
@@ -133,10 +136,14 @@ class Fleet:
         if v.state in ("", "connected"):
             v.state = "tracking"
 
-    def snapshot(self) -> dict[str, Any]:
+    def snapshot(self, last: bool = False) -> dict[str, Any]:
+        """The vehicles as seen now; ``last`` stops counting and recording here, so that the
+        final snapshot and ``--record`` describe the same messages (Zenoh's threads may deliver
+        more before the session closes)."""
         now = time.monotonic()
         with self.lock:
             vehicles = [self.vehicles[k].view(now) for k in sorted(self.vehicles)]
+            self.frozen = self.frozen or last
         return {"schema": SNAPSHOT_SCHEMA, "time": time.time(), "vehicles": vehicles}
 
 
@@ -182,10 +189,12 @@ def run(args) -> int:
                 if stop.wait(min(args.refresh, left)) or args.once:
                     continue
                 _show(fleet.snapshot(), args.json, tty)
-            snap = fleet.snapshot()
+            snap = fleet.snapshot(last=True)
     finally:
-        if record is not None:
-            record.close()
+        with fleet.lock:        # no callback writes to the file once it is closed
+            fleet.frozen = True
+            if record is not None:
+                record.close()
     if args.once:
         _show(snap, args.json, False)
     return 0
