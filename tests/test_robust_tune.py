@@ -267,7 +267,7 @@ def test_gains_files_keep_every_law_parameter(tmp_path):
     pzc = PZCGains(0.7, 0.6, k_dc_yaw=2.0, lambda_c_yaw=2.5, velocity_ff=True,
                    heading_rate_ff=True, accel_ff=0.34, lead_tau=0.2, lead_max_gain=3.0,
                    speed_law="paper", accel_ff_turn=0.005, brake_accel=0.21, brake_yaw_accel=0.98,
-                   min_progress=0.3, course_tau=2.0, integrate_beyond=True)
+                   min_progress=0.3, course_tau=2.0)
     defaults = PZCGains(0.7, 0.6)
     changed = [f.name for f in fields(PZCGains) if getattr(pzc, f.name) != getattr(defaults, f.name)]
     assert len(changed) == len(fields(PZCGains)) - 2          # all but k_dc, lambda_c

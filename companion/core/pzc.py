@@ -31,11 +31,6 @@ Extensions beyond the paper, each off by default (the paper's law exactly) and c
   linear zone:
       P(e) = K_P e                                            for |e| <= alpha / K_P^2
            = sign(e) sqrt(2 alpha (|e| - alpha / (2 K_P^2)))  beyond;
-* ``integrate_beyond`` (0 / 1, with ``brake_accel``): beyond the knee the position integrators
-  take the error scaled back to the knee, ``int p~ += p~ min(1, e_k / |p~|) dt`` with
-  e_k = alpha / K_P^2, instead of holding: a disturbance that keeps the error past the knee is
-  still integrated away, at most at the knee's pace (a held integrator left a PX4 SIH rover
-  0.15-0.28 m ahead of the reference on the fast half of each lap);
 * ``min_progress`` = gamma: with t = p_ref' / |p_ref'|, u_p += max(0, gamma |p_ref'| - u_p . t) t,
   the position integrators held while it acts (nothing changes where |p_ref'| = 0);
 * ``lead_tau``, ``lead_max_gain``: the actuator lead of :mod:`companion.core.lead`;
@@ -89,7 +84,6 @@ class PZCGains:
     brake_yaw_accel: Num = 0.0
     min_progress: Num = 0.0
     course_tau: Num = 0.0
-    integrate_beyond: Num = False
 
     def __post_init__(self) -> None:
         if self.speed_law not in SPEED_LAWS:
@@ -197,10 +191,8 @@ class PZCLaw:
             demand, beyond = braking_p(m, kp, g.brake_accel, err)
             if beyond is not False:
                 kp = m.where(beyond, demand / m.maximum(err, 1e-12), kp)
-                # held, or (integrate_beyond) the error scaled back to the knee
-                keep = g.integrate_beyond * g.brake_accel / (g.kp * g.kp) / m.maximum(err, 1e-12)
-                int_x = m.where(beyond, self.int_x + ex * keep * dt, int_x)
-                int_y = m.where(beyond, self.int_y + ey * keep * dt, int_y)
+                int_x = m.where(beyond, self.int_x, int_x)
+                int_y = m.where(beyond, self.int_y, int_y)
         ux = kp * ex + g.ki * int_x + g.velocity_ff * ref.vx
         uy = kp * ey + g.ki * int_y + g.velocity_ff * ref.vy
         heading_rate = None

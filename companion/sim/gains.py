@@ -69,10 +69,9 @@ class TunedGains:
                   f"lambda_f = {float(self.filter.lambda_f)!r}", "", "[pzc]"]
         for f in fields(PZCGains):
             value = getattr(self.pzc, f.name)
-            if value is None or (f.name in ("min_progress", "course_tau", "integrate_beyond")
-                                 and not value):
+            if value is None or (f.name in ("min_progress", "course_tau") and not value):
                 continue              # off: not written (older files stay as they were)
-            if f.name in ("velocity_ff", "heading_rate_ff", "integrate_beyond"):
+            if f.name in ("velocity_ff", "heading_rate_ff"):
                 lines.append(f"{f.name} = {'true' if value else 'false'}")
             elif isinstance(value, str):
                 lines.append(f'{f.name} = "{value}"')
@@ -133,7 +132,7 @@ def parse(data: dict, where: str) -> TunedGains:
             kwargs[key] = _number(pzc, key, f"{where}: pzc", positive=False)
             if kwargs[key] < 0:
                 raise UserError(f"{where}: pzc.{key} must be >= 0, not {kwargs[key]!r}")
-    for key in ("velocity_ff", "heading_rate_ff", "integrate_beyond"):
+    for key in ("velocity_ff", "heading_rate_ff"):
         if key in pzc:
             if not isinstance(pzc[key], bool):
                 raise UserError(f"{where}: pzc.{key} must be true or false, not {pzc[key]!r}")

@@ -118,7 +118,6 @@ class RobustConfig:
     min_progress: float = 0.0          # the law's progress floor for every candidate (PX4, a car)
     speed_law: str = "projected"       # every candidate's (a car: "paper", it turns only moving)
     course_tau: float = 0.0            # s, every candidate's course correction (core.course)
-    integrate_beyond: bool = False     # every candidate's integrators past the knee (core.pzc)
     # None: the references are not checked against the vehicle's acceleration; a number: those
     # whose peak acceleration along the path exceeds that share of it are left out (a car's)
     accel_room: float | None = None
@@ -286,7 +285,7 @@ def _extension_values(cands: Candidates, scales: tuple[float, float]) -> dict[st
 def _tracker(cands: Candidates, repeat: int, limits: Limits,
              scales: tuple[float, float] = DEFAULT_BRAKE_SCALE,
              min_progress: float = 0.0, speed_law: str = "projected",
-             course_tau: float = 0.0, integrate_beyond: bool = False) -> PZCTracker:
+             course_tau: float = 0.0) -> PZCTracker:
     p, f = cands.params, cands.flags
     rep = lambda a: np.repeat(a, repeat)  # noqa: E731
     separate = f["separate_yaw"] > 0.5
@@ -307,8 +306,7 @@ def _tracker(cands: Candidates, repeat: int, limits: Limits,
                  brake_accel=rep(ext["brake_accel"]) if np.any(ext["brake_accel"] > 0) else 0.0,
                  brake_yaw_accel=(rep(ext["brake_yaw_accel"])
                                   if np.any(ext["brake_yaw_accel"] > 0) else 0.0),
-                 min_progress=min_progress, speed_law=speed_law, course_tau=course_tau,
-                 integrate_beyond=integrate_beyond),
+                 min_progress=min_progress, speed_law=speed_law, course_tau=course_tau),
         limits, n=len(cands) * repeat)
 
 
@@ -341,8 +339,7 @@ def _simulate_part(cands: Candidates, cfg: RobustConfig, vehicles: Sequence[Rove
                     noise_slice=(total * n_v * n_r, first * n_v * n_r))
     with np.errstate(all="ignore"):
         result = simulate(_tracker(cands, n_v * n_r, cfg.limits, brake_scales(cfg.vehicle),
-                                   cfg.min_progress, cfg.speed_law, cfg.course_tau,
-                                   cfg.integrate_beyond), params,
+                                   cfg.min_progress, cfg.speed_law, cfg.course_tau), params,
                           _reference(refs, n_c, n_v), n, sim, progress)
     shape = (n_c, n_v, n_r)
     return (np.asarray(result.steady_rms).reshape(shape),
@@ -526,7 +523,7 @@ def tune(cfg: RobustConfig, progress: Callable[[float], None] | None = None) -> 
                   None if progress is None else (lambda f: progress((cfg.rounds + f) / total)))
     fg, pg = candidate_gains(winner, 0, brake_scales(cfg.vehicle))
     pg = replace(pg, min_progress=cfg.min_progress, speed_law=cfg.speed_law,
-                 course_tau=cfg.course_tau, integrate_beyond=cfg.integrate_beyond)
+                 course_tau=cfg.course_tau)
     labels = [label for label, _ in cfg.reference_list()]
     if not math.isfinite(float(ev.objective[0])):
         raise RuntimeError("no gain set held on every neighbour: widen the search "

@@ -83,11 +83,6 @@ def config_for(vehicle_path: str | Path, rate: float,
         # ... and its speed may settle well above the command (PX4_OVER_DRIVE): gains that
         # hold only where speed meets the command oscillate across the path there
         search.setdefault("spread", Spread(over_drive=PX4_OVER_DRIVE))
-        # and a braking curve's knee must not stop the position integrators: the SIH rover's
-        # speed, set by its drag per axis, runs ahead of the reference past the knee on the
-        # fast half of each lap and a held integrator left it there (core.pzc,
-        # integrate_beyond: one calibration's gains 0.250 m held, 0.068 m integrating)
-        search.setdefault("integrate_beyond", True)
     else:
         search.setdefault("course_tau", COURSE_TAU)
     if vehicle.steered_by_radius:     # (never a velocity-vector vehicle)
