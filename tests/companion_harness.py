@@ -28,6 +28,14 @@ from sitl_plant.testing import free_udp_port  # noqa: E402
 ROOT = Path(__file__).resolve().parents[1]
 
 
+def companion_cli(*args: str, timeout: float, cwd: Path = ROOT, env: dict[str, str] | None = None,
+                  prefix: tuple[str, ...] = ()) -> subprocess.CompletedProcess:
+    """``python -m companion ARGS`` run to its end, output captured. ``timeout`` is each test
+    file's guard against a hung run (it fails the test), not a speed target."""
+    return subprocess.run([*prefix, sys.executable, "-m", "companion", *args], capture_output=True,
+                          text=True, timeout=timeout, cwd=cwd, env=env)
+
+
 def ellipse_mission(path: Path, duration: float, f_r: float = 0.12) -> Path:
     path.write_text(f'name = "ellipse {duration:g} s"\nframe = "start"\nduration = {duration}\n'
                     f'[trajectory]\nkind = "ellipse"\nf_r = {f_r}\n')

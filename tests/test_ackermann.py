@@ -9,8 +9,7 @@ from __future__ import annotations
 
 import json
 import math
-import subprocess
-import sys
+from functools import partial
 
 import numpy as np
 import pytest
@@ -25,7 +24,7 @@ from companion.mission.paths import Circle
 from companion.profiles import ackermann, ardupilot, skid
 from companion.sim.plant import LAT_ACCEL_MIN_SPEED, RoverModel, RoverParams, RoverState
 from companion.sim.vehicle_file import VehicleFile, load, save
-from companion_harness import ROOT
+from companion_harness import companion_cli
 from sitl_plant.testing import Pilot, PlantProcess
 
 G = 9.80665
@@ -39,9 +38,7 @@ STOCK = {"ATC_ACCEL_MAX": 1.0, "ATC_DECEL_MAX": 0.0, "ATC_STR_ACC_MAX": 120.0,
          "CRUISE_THROTTLE": 30.0, "SERVO1_FUNCTION": 26.0, "SERVO3_FUNCTION": 70.0}
 
 
-def companion(*args: str, timeout: float = 120.0) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "companion", *args], capture_output=True,
-                          text=True, timeout=timeout, cwd=ROOT)
+companion = partial(companion_cli, timeout=120.0)
 
 
 # --------------------------------------------------------------------------- the model

@@ -5,8 +5,7 @@ from __future__ import annotations
 
 import json
 import shlex
-import subprocess
-import sys
+from functools import partial
 from pathlib import Path
 
 import pytest
@@ -15,7 +14,7 @@ from companion.sim import gains as gains_mod
 from companion.sim import vehicle_file
 from companion.sim.plant import RoverParams
 from companion.sim.vehicle_gains import digest
-from companion_harness import ROOT
+from companion_harness import ROOT, companion_cli
 from sitl_plant.testing import Pilot, PlantProcess
 
 TRUE = RoverParams(w_c=1 / 0.12, w_c_yaw=1 / 0.05, max_speed=2.5, max_yaw_rate=1.8,
@@ -23,9 +22,7 @@ TRUE = RoverParams(w_c=1 / 0.12, w_c_yaw=1 / 0.05, max_speed=2.5, max_yaw_rate=1
                    turn_speed_coupling=0.2)
 
 
-def companion(*args: str, timeout: float = 300.0) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "companion", *args], capture_output=True,
-                          text=True, timeout=timeout, cwd=ROOT)
+companion = partial(companion_cli, timeout=300.0)
 
 
 @pytest.mark.solo   # loads both cores (fit, tune) for about 2 min alone: under four workers on

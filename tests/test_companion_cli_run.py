@@ -7,14 +7,12 @@ import signal
 import subprocess
 import sys
 import time
+from functools import partial
 
-from companion_harness import ROOT
+from companion_harness import ROOT, companion_cli
 from sitl_plant.testing import free_udp_port
 
-
-def companion(*args: str, timeout: float = 30.0) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "companion", *args], capture_output=True,
-                          text=True, timeout=timeout, cwd=ROOT)
+companion = partial(companion_cli, timeout=30.0)
 
 
 def one_line_error(p: subprocess.CompletedProcess, prog: str, needle: str) -> None:

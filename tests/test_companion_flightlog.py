@@ -6,24 +6,21 @@ from __future__ import annotations
 import json
 import os
 import signal
-import subprocess
-import sys
 import time
+from functools import partial
 from pathlib import Path
 
 import pytest
 
 from companion.live.flightlog import CSV_FIELDS
-from companion_harness import ROOT, Companion, Proxy, ellipse_mission, is_zero
+from companion_harness import ROOT, Companion, Proxy, companion_cli, ellipse_mission, is_zero
 from safety_harness import read_tlog
 from sitl_plant.testing import PlantProcess
 
 ENV = {**os.environ, "PYTHONPATH": str(ROOT)}
 
 
-def companion(*args: str, cwd: Path = ROOT, timeout: float = 90.0) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "companion", *args], capture_output=True,
-                          text=True, cwd=cwd, timeout=timeout, env=ENV)
+companion = partial(companion_cli, timeout=90.0, env=ENV)
 
 
 # One worker takes the whole module (make test: --dist loadgroup): one demo flight, not one per

@@ -10,13 +10,14 @@ import os
 import subprocess
 import sys
 import tomllib
+from functools import partial
 from pathlib import Path
 
 import pytest
 
 from companion import cli
 from companion.commands.config_file import keyed_actions
-from companion_harness import ROOT, ellipse_mission
+from companion_harness import ROOT, companion_cli, ellipse_mission
 from sitl_plant.testing import PlantProcess
 
 MISSION = str(ROOT / "missions" / "circle.toml")
@@ -150,9 +151,7 @@ def test_required_flag_may_come_from_the_file_and_not_from_nowhere(capsys, tmp_p
     assert printed(capsys, "run", "--config", str(conf))["mission"] == MISSION
 
 
-def companion(*args: str, cwd: Path = ROOT) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "companion", *args], capture_output=True,
-                          text=True, timeout=30.0, cwd=cwd)
+companion = partial(companion_cli, timeout=30.0)
 
 
 @pytest.mark.parametrize("text, needle", [

@@ -7,20 +7,18 @@ the tuned gains at 40 Hz, and a slow rover at 40 Hz with w_c 1.2 rad/s).
 from __future__ import annotations
 
 import json
-import subprocess
-import sys
+from functools import partial
 from pathlib import Path
 
 import pytest
 
 from companion.sim import gains as gains_mod
+from companion_harness import companion_cli
 
 ROOT = Path(__file__).resolve().parent.parent
 
 
-def companion(*args: str, timeout: float = 240) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "companion", *args], capture_output=True,
-                          text=True, timeout=timeout, cwd=ROOT)
+companion = partial(companion_cli, timeout=240)
 
 
 def table(*args: str) -> dict:

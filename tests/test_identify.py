@@ -13,6 +13,7 @@ import struct
 import subprocess
 import sys
 import time
+from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -28,7 +29,7 @@ from companion.profiles.priors import defaults
 from companion.sim.plant import RoverModel, RoverParams, RoverState
 from companion.sim.response import respond
 from companion.sim.vehicle_file import VehicleFile, load, save
-from companion_harness import ROOT, ellipse_mission, mavlink2
+from companion_harness import ROOT, companion_cli, ellipse_mission, mavlink2
 from safety_harness import read_tlog
 from sitl_common import CANDIDATE
 from sitl_plant.testing import Pilot, PlantProcess, free_udp_port
@@ -44,11 +45,9 @@ TRUE = RoverParams(w_c=4.0, w_c_yaw=15.0, max_speed=3.5, max_yaw_rate=2.0, max_a
                    yaw_delay=0.04, turn_speed_coupling=0.3, speed_turn_coupling=0.15)
 
 
-def companion(*args: str, timeout: float = 400.0) -> subprocess.CompletedProcess:
-    # (a guard against a hung run, not a speed target: a two-log fit took over 120 s of wall
-    # under make test's load beside a SITL suite; speed is the benchmarks' business)
-    return subprocess.run([sys.executable, "-m", "companion", *args], capture_output=True,
-                          text=True, timeout=timeout, cwd=ROOT)
+# (a guard against a hung run, not a speed target: a two-log fit took over 120 s of wall
+# under make test's load beside a SITL suite; speed is the benchmarks' business)
+companion = partial(companion_cli, timeout=400.0)
 
 
 def one_line_error(p: subprocess.CompletedProcess, needle: str) -> None:

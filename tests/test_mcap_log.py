@@ -8,13 +8,14 @@ from __future__ import annotations
 import json
 import os
 import signal
-import subprocess
-import sys
 import time
 from collections import Counter
+from functools import partial
 from pathlib import Path
 
 import pytest
+
+from companion_harness import companion_cli
 
 pytest.importorskip("mcap")
 pytest.importorskip("foxglove")
@@ -27,9 +28,7 @@ from sitl_plant.testing import PlantProcess  # noqa: E402
 ENV = {**os.environ, "PYTHONPATH": str(ROOT)}
 
 
-def companion(*args: str, cwd: Path = ROOT, timeout: float = 120.0) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "companion", *args], capture_output=True,
-                          text=True, cwd=cwd, timeout=timeout, env=ENV)
+companion = partial(companion_cli, timeout=120.0, env=ENV)
 
 
 @pytest.fixture(scope="module")

@@ -7,20 +7,17 @@ from __future__ import annotations
 import base64
 import json
 import re
-import subprocess
-import sys
+from functools import partial
 from pathlib import Path
 
 import pytest
 
-from companion_harness import ROOT
+from companion_harness import ROOT, companion_cli
 
 VEHICLE = ROOT / "companion" / "sim" / "vehicles" / "ardupilot_skid.toml"
 
 
-def companion(*args: str, timeout: float = 180.0) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "companion", *args], capture_output=True,
-                          text=True, cwd=ROOT, timeout=timeout)
+companion = partial(companion_cli, timeout=180.0)
 
 
 @pytest.fixture(scope="module")

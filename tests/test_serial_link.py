@@ -18,7 +18,7 @@ from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 
 from companion.errors import UserError
 from companion.mav.connection import DEFAULT_BAUD, serial_target
-from companion_harness import ROOT, Companion
+from companion_harness import ROOT, Companion, companion_cli
 from field_harness import held_reference, largest_error
 from serial_harness import PtyCable
 from sitl_common import CANDIDATE, ground_speed
@@ -45,8 +45,7 @@ def plant_on(url: str, *args: str):
 
 
 def companion(*args: str, prefix: tuple[str, ...] = ()) -> subprocess.CompletedProcess:
-    return subprocess.run([*prefix, sys.executable, "-m", "companion", "run", *args],
-                          capture_output=True, text=True, timeout=20.0, cwd=ROOT)
+    return companion_cli("run", *args, timeout=20.0, prefix=prefix)
 
 
 def one_line(p: subprocess.CompletedProcess, prog: str, *needles: str) -> str:

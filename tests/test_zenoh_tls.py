@@ -13,9 +13,8 @@ import datetime as dt
 import json
 import os
 import shutil
-import subprocess
-import sys
 import time
+from functools import partial
 from pathlib import Path
 
 import pytest
@@ -25,8 +24,8 @@ from companion.bus import BusOptions, control_request, encode, prepare, state_pa
 from companion.cli import main
 from companion.live.events import LoopRecord
 from companion.security import pki
+from companion_harness import companion_cli
 from zenoh_harness import (
-    ROOT,
     Collector,
     Proc,
     WireRecorder,
@@ -48,9 +47,7 @@ REC = LoopRecord(12.345, 3.21, 1.0, 2.0, 0.3, 1.01, 2.01, 0.31, 1.1, 2.1, 0.14, 
                  1.2, 0.3, 1.25, 0.4, "GUIDED", True)
 
 
-def _companion(*args: str, timeout: float = 30.0) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "companion", *args], capture_output=True,
-                          text=True, timeout=timeout, cwd=ROOT)
+_companion = partial(companion_cli, timeout=30.0)
 
 
 def _no_reply(s: zenoh.Session, vehicle: str, verb: str = "pause") -> bool:
