@@ -23,7 +23,7 @@ from . import gains as gains_mod
 from . import vehicle_file
 from .gains import TunedGains
 from .plant import RoverParams
-from .robust import CAR_ACCEL_ROOM, RobustConfig, RobustResult, Spread, tune
+from .robust import CAR_ACCEL_ROOM, RobustConfig, RobustResult, tune
 
 
 class NothingRobust(UserError):
@@ -31,14 +31,6 @@ class NothingRobust(UserError):
 
 
 PX4_MIN_PROGRESS = 0.3  # share of the reference speed u_p keeps along it on a PX4 vehicle
-# PX4's rover speed control is a throttle feed-forward (speed / RO_MAX_THR_SPEED) plus a PI whose
-# gains the SIH Ackermann rover leaves at 0.001 (RoverControl::speedControl, airframe 10045): its
-# speed settles where throttle force meets friction and drag, which SIH applies per axis
-# (sih.cpp: 400 N x throttle against 0.3 g rolling friction and KDV 50 x v^2 along N and E), so
-# 0.95-1.35 x the command by speed and heading. Gains tuned where speed meets its command flew
-# 0.44-0.85 m at 0.04 Hz on SIH (2026-12-03; the model with speed 1.4 x the command: 0.83 for the
-# 0.85 m set) where others flew 0.21-0.32. The neighbours over-drive by up to this share.
-PX4_OVER_DRIVE = 0.4
 CAR_MIN_PROGRESS = 0.3  # ... and on a car driven by turn-rate setpoints
 # s: the law steers the course over ground (core.course) on a vehicle sent turn-rate setpoints.
 # ArduPilot SITL's heading drifts from its course after calibrate's manoeuvres (0.006 rad in the
@@ -80,9 +72,6 @@ def config_for(vehicle_path: str | Path, rate: float,
         # rover from turning round when it gets ahead (core.pzc, min_progress). PX4 steers its
         # own course from u_p, which the course correction leaves be: none here.
         search.setdefault("min_progress", PX4_MIN_PROGRESS)
-        # ... and its speed may settle well above the command (PX4_OVER_DRIVE): gains that
-        # hold only where speed meets the command oscillate across the path there
-        search.setdefault("spread", Spread(over_drive=PX4_OVER_DRIVE))
     else:
         search.setdefault("course_tau", COURSE_TAU)
     if vehicle.steered_by_radius:     # (never a velocity-vector vehicle)
@@ -110,9 +99,8 @@ def record(result: RobustResult, cfg: RobustConfig, vehicle_path: str | Path,
              f"{cfg.rate_hz:g} Hz" + (f" on {cfg.tick * 1000:g} ms ticks" if cfg.tick else ""),
              f"ensemble: the vehicle and {len(result.vehicles) - 1} neighbours (lags x1+-"
              f"{cfg.spread.lag:g}, rate limits x1+-{cfg.spread.limit:g}, delays +"
-             f"{cfg.spread.delay_samples:g} samples, coupling +-{cfg.spread.coupling:g}"
-             + (f", speed up to x{1 + cfg.spread.over_drive:g} the command"
-                if cfg.spread.over_drive > 0 else "") + f"), seed {cfg.seed}",
+             f"{cfg.spread.delay_samples:g} samples, coupling +-{cfg.spread.coupling:g}), seed "
+             f"{cfg.seed}",
              "steady RMS (m) on the vehicle / worst neighbour: " + ", ".join(
                  f"{a:.3f}/{b:.3f}" for a, b in zip(result.nominal_steady_rms,
                                                     result.worst_steady_rms, strict=True))]
