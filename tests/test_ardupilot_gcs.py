@@ -12,15 +12,14 @@ from __future__ import annotations
 import csv
 import json
 import math
-import subprocess
-import sys
 import time
 
 import pytest
 
-from ardupilot_harness import ROOT, CompanionProcess
+from ardupilot_harness import CompanionProcess
 from companion.mav import mission_transfer as mt
 from companion.mission import geo
+from companion_harness import companion_cli
 from gcs_harness import COMPANION, GroundStation
 
 SPEEDUP = 5
@@ -59,9 +58,8 @@ def test_uploaded_pulled_identical_flown_within_1m_and_paused_from_the_gcs(ardup
         # The guard is the command's own give-up, not a speed bound: each request is sent
         # again after 1.5 s, five times (mav.mission_transfer), and SITL's SERIAL1 under a
         # doubled load (make test beside make sitl-test, 2026-12-03) passed a 60 s guard once
-        r = subprocess.run([sys.executable, "-m", "companion", "mission", "pull", "--connect",
-                            sitl.url(1), "--out", str(out)], capture_output=True, text=True,
-                           timeout=180, cwd=ROOT)
+        r = companion_cli("mission", "pull", "--connect", sitl.url(1), "--out", str(out),
+                          timeout=180)
         pull_wall = time.monotonic() - t0
         assert r.returncode == 0, r.stderr
         pulled = mt.plan_items(json.loads(out.read_text()), home_item=True)

@@ -7,8 +7,6 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import subprocess
-import sys
 import tomllib
 from functools import partial
 from pathlib import Path
@@ -215,9 +213,7 @@ def test_run_flies_from_a_config_file(tmp_path):
             f'connect = "udpin:127.0.0.1:{plant.port}"\nmission = "ellipse.toml"\n'
             'arm = true\njson = true\nquiet = true\nlog_dir = "flightlogs"\nw_c = 20\n'
             'd_cen = 0.3\n')
-        proc = subprocess.run([sys.executable, "-m", "companion", "run", "--config",
-                               "rover/rover.toml"], capture_output=True, text=True,
-                              timeout=60.0, cwd=tmp_path)
+        proc = companion("run", "--config", "rover/rover.toml", timeout=60.0, cwd=tmp_path)
     assert proc.returncode == 0, proc.stderr
     r = json.loads(proc.stdout.strip().splitlines()[-1])
     assert r["reason"] == "mission_done" and r["duration_s"] == pytest.approx(12.0)
