@@ -123,7 +123,11 @@ def _bad_telemetry(k: int, ms: int):
 def test_bad_telemetry_never_produces_a_setpoint(tmp_path):
     mission = ellipse_mission(tmp_path / "m.toml", 4.0)
     port = free_udp_port()
-    with Companion(port, "--arm", "--json", "--mission", str(mission)) as comp, \
+    # The fake vehicle is a thread of this test's process, which shares two cores with the
+    # suite: a stall of it longer than the default 0.5 s would be a true stale failsafe. The
+    # refused samples leave gaps of at most two ticks (50 ms); 2 s tells the two apart.
+    with Companion(port, "--arm", "--json", "--mission", str(mission),
+                   "--stale-timeout", "2") as comp, \
             FakeVehicle(port, script=_bad_telemetry) as fake:
         assert comp.wait(30.0) == 0, comp.stderr
         r = comp.result()
@@ -138,7 +142,30 @@ def test_bad_telemetry_never_produces_a_setpoint(tmp_path):
     assert rej["not_finite"] == 3 and rej["no_attitude"] == 1   # NaN yaw: its position too
     assert rej["other_source"] == 2                              # its ATTITUDE and position
     assert rej["time_backwards"] == 1 and rej["duplicate"] == 1
-    assert r["reason"] == "mission_done" and r["failsafes"] == 0
+    assert r["reason"] == "mission_done" and r["failsafes"] == 0, comp.stderr
+
+
+def test_the_companions_own_stall_is_not_taken_for_stale_telemetry(tmp_path):
+    """SIGSTOP the companion (not the vehicle) for 1 s mid-mission, as an overloaded board
+    deschedules it: the vehicle streamed all along and the samples wait in the socket, so on
+    waking the companion reads them and goes on (no failsafe), and says it was not running."""
+    mission = ellipse_mission(tmp_path / "m.toml", 6.0)
+    port = free_udp_port()
+    with Companion(port, "--arm", "--json", "--mission", str(mission)) as comp, \
+            FakeVehicle(port) as fake:
+        comp.wait_until(lambda: len(fake.setpoints) > 40, 20.0, "tracking")
+        os.kill(comp.proc.pid, signal.SIGSTOP)
+        try:
+            time.sleep(1.0)
+            streamed = len(fake.sent_ms)
+        finally:
+            os.kill(comp.proc.pid, signal.SIGCONT)
+        assert comp.wait(30.0) == 0, comp.stderr
+        r = comp.result()
+    assert streamed > 0
+    assert r["reason"] == "mission_done" and r["failsafes"] == 0, (r["reason"], comp.stderr)
+    assert "the companion was not running for" in comp.stderr
+    assert r["stalls"] >= 1
 
 
 def test_a_rebooted_vehicle_is_stopped_not_resumed(tmp_path):

@@ -12,7 +12,10 @@ N, RATE, DURATION = 10, 20.0, 10.0
 MAX_GAP_MS = 200.0
 
 
+# solo: 22 processes on two cores judged against the wall clock (200 ms); beside the other
+# workers' flights the machine itself stalls that long (CI: 182-247 ms, every vehicle alike).
 @pytest.mark.slow
+@pytest.mark.solo
 def test_ten_vehicles_through_one_router_seen_by_one_monitor(tmp_path):
     fleet = run_fleet(N, tmp_path, rate=RATE, duration=DURATION, timeout=150.0)
     ids = {f"rover{i}" for i in range(1, N + 1)}

@@ -78,6 +78,9 @@ CLOCK_LISTEN = 0.5
 CLOCK_WAIT = 3.0
 TIMER_EVERY = 0.02     # wall s: timers run at least this often even while messages pour in
 MAX_WAIT = 0.05        # wall s: the longest sleep (so stop requests are seen promptly)
+# wall s between two turns of the loop that only the companion's own stall explains (an
+# overloaded board descheduled it): four of its longest sleeps
+STALL = 4 * MAX_WAIT
 # vehicle s of telemetry the first engagement waits for the estimator's first report (asked for
 # at 5 Hz), so a vehicle that has no position yet is not engaged on the strength of no news
 FIRST_REPORT_GRACE = 1.0
@@ -116,6 +119,10 @@ class Heard:
     vehicle_t: float = 0.0                # the last valid sample's vehicle time
     pose: tuple[float, float, float] | None = None   # the last valid sample's x, y, yaw
     waited: bool = True                   # idle since the last position sample was handled
+    loop_wall: float = 0.0                # the loop's last turn
+    # After the companion's own stall, the silence is not judged until the socket has been
+    # read empty (what the vehicle sent meanwhile is waiting in it) or this wall time passes.
+    catch_up_until: float = 0.0
 
 
 @dataclass(slots=True)
@@ -180,6 +187,7 @@ class Timers:
     next_timer: float = 0.0               # _timers runs at least this often
     next_heartbeat: float = 0.0           # the companion's own heartbeat, 1 Hz
     next_refusal_log: float = 0.0         # at most one "refused telemetry" line a second
+    next_stall_log: float = 0.0           # at most one "was not running" line in 10 s
 
 
 @dataclass(slots=True)
@@ -187,6 +195,7 @@ class Counters:
     failsafes: int = 0
     sink_errors: int = 0
     tracker_resets: int = 0
+    stalls: int = 0                       # the companion's own stalls (see STALL)
     refusals_logged: dict[str, int] = field(default_factory=dict)   # as last logged
 
 
@@ -254,6 +263,10 @@ class Runner:
     def tracker_resets(self) -> int:
         return self.counters.tracker_resets
 
+    @property
+    def stalls(self) -> int:
+        return self.counters.stalls
+
     # --- public -----------------------------------------------------------------------------
     def request_stop(self, reason: str) -> None:
         """Ask the loop to stop the rover and end (safe to call from a signal handler)."""
@@ -264,6 +277,7 @@ class Runner:
         link, clock = self.link, time.perf_counter
         now = clock()
         self.timers.started = self.heard.sample_wall = self.heard.heartbeat_wall = now
+        self.heard.loop_wall = now
         self.timers.next_timer = now
         self.timers.next_heartbeat = now
         v = link.vehicle
@@ -313,9 +327,13 @@ class Runner:
                     if not request.ok and self.ground.gcs is not None:
                         self.ground.gcs.refused(f"{request.verb}: {request.message}")
             t_read = clock()
+            if t_read - self.heard.loop_wall > STALL:
+                self._stalled(t_read - self.heard.loop_wall, t_read)
+            self.heard.loop_wall = t_read
             msg = recv()
             if msg is None:
                 self.heard.waited = True
+                self.heard.catch_up_until = 0.0    # read empty: nothing sent to us is unread
                 self._timers(t_read)
                 link.wait(min(MAX_WAIT, max(0.0, self.timers.next_timer - clock())))
                 continue
@@ -565,7 +583,9 @@ class Runner:
                 self.link.send_stop()
                 self._request_mode(self.hold_mode, now)
         elif state in ACTIVE:
-            if now - self.heard.sample_wall > cfg.stale_timeout:
+            if now < self.heard.catch_up_until:
+                pass    # the companion itself was not running: what came meanwhile is unread
+            elif now - self.heard.sample_wall > cfg.stale_timeout:
                 self._failsafe(now)
             elif not self._heartbeat_fresh(now):
                 self.heard.heartbeat_lost_said = True
@@ -573,6 +593,18 @@ class Runner:
                                     f"{now - self.heard.heartbeat_wall:.2f} s")
             elif state is State.ENGAGING:
                 self._engage(now)
+
+    def _stalled(self, gap: float, now: float) -> None:
+        """The loop did not turn for ``gap`` wall s: the process was not scheduled (or a
+        handler blocked). The vehicle's silence is judged once its backlog has been read, not
+        before: at the socket's head may be an ATTITUDE with the pose samples behind it."""
+        self.counters.stalls += 1
+        self.heard.catch_up_until = now + self.config.stale_timeout
+        if now >= self.timers.next_stall_log:
+            self.timers.next_stall_log = now + 10.0
+            self.log(f"the companion was not running for {gap:.2f} s (the board is overloaded?): "
+                     f"reading what the vehicle sent meanwhile before judging its silence "
+                     f"({self.counters.stalls} such stalls so far)")
 
     def _failsafe(self, now: float, reason: str | None = None, cause: str = "telemetry",
                   hold: bool = True) -> None:

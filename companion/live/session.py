@@ -197,7 +197,8 @@ def fly(s: RunSettings, sinks: Sequence[Sink] = (), control: ControlChannel | No
                **({"ekf_origin": origin.as_dict()} if origin is not None else {}),
                "missed_gaps": st.gaps, "backlog": st.backlog,
                "sink_errors": runner.sink_errors, "signing_rejected": link.signing_rejected,
-               "tracker_resets": runner.tracker_resets, "udp_recv_buffer": link.recv_buffer,
+               "tracker_resets": runner.tracker_resets, "stalls": runner.stalls,
+               "udp_recv_buffer": link.recv_buffer,
                "tcp_reconnects": link.reconnects,
                **({"handovers": [r.as_dict() for r in handover.results]}
                   if handover is not None else {})})
