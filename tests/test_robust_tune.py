@@ -299,3 +299,21 @@ def test_a_cars_tune_leaves_out_references_it_cannot_accelerate_along(tmp_path):
     vehicle_file.save(vehicle_file.VehicleFile(ROVER, name="rover"), rover)
     assert labels(config_for(car, 40.0)) == four[:3]
     assert labels(config_for(rover, 40.0)) == four
+
+
+def test_a_px4_vehicles_neighbours_turn_up_to_two_samples_late(tmp_path):
+    # PX4 SIH's course loop reverses later than its fitted model (gain sets tuned against one
+    # sample swung across the path in five of nine sessions, 2026-12-03): its ensemble's slow
+    # corner is two 25 ms samples late at 40 Hz; ArduPilot's (turn-rate setpoints) one.
+    from companion.sim.vehicle_gains import config_for
+    px4, skid = tmp_path / "px4.toml", tmp_path / "skid.toml"
+    vehicle_file.save(vehicle_file.VehicleFile(
+        ROVER.with_(course_gain=3.9, min_turn_radius=0.56), name="px4"), px4)
+    vehicle_file.save(vehicle_file.VehicleFile(ROVER, name="skid"), skid)
+    for path, samples in ((px4, 2), (skid, 1)):
+        cfg = config_for(path, 40.0)
+        vehicle = vehicle_file.load(path).params
+        assert vehicle.velocity_vector == (path == px4)
+        slow = ensemble(vehicle, 6, cfg.spread, 1 / 40.0, seed=1)[1]
+        assert float(slow.yaw_delay) == pytest.approx(float(vehicle.yaw_delay) + samples / 40.0)
+        assert float(slow.speed_delay) == pytest.approx(float(vehicle.speed_delay) + samples / 40.0)
