@@ -41,6 +41,28 @@ def test_ensemble_starts_with_the_vehicle_and_holds_its_slow_corner():
     assert [m.max_yaw_accel for m in again] == [m.max_yaw_accel for m in members]
 
 
+def test_over_drive_neighbours_settle_above_their_command_and_the_rest_are_unchanged():
+    """A speed loop without integral action (PX4's SIH rover: RO_SPEED_P/I 0.001) settles where
+    its feed-forward puts it: ``Spread.over_drive`` adds neighbours whose speed stays up to
+    (1 + share) x the command, and leaves every other draw of the ensemble as it was."""
+    from companion.sim.plant import RoverModel, RoverState
+
+    plain = ensemble(ROVER, 5, Spread(), 0.025, seed=3)
+    over = ensemble(ROVER, 5, Spread(over_drive=0.4), 0.025, seed=3)
+    assert [m.with_(speed_overshoot=0.0, speed_overshoot_s=1.0) for m in over] == plain
+    assert over[1].speed_overshoot == pytest.approx(0.4) and math.isinf(over[1].speed_overshoot_s)
+    assert over[2] == plain[2]                      # the fast corner keeps the vehicle's loop
+    shares = [m.speed_overshoot for m in over[3:]]
+    assert all(0.0 <= g <= 0.4 for g in shares) and len(set(shares)) == 3
+    # the slow corner's speed settles at 1.4 x the command and stays there (never taken back)
+    model, state = RoverModel(over[1].with_(turn_speed_coupling=0.0)), RoverState()
+    speeds = []
+    for _ in range(2000):                           # 40 s
+        state = model.step(state, 1.0, 0.0, 0.02)
+        speeds.append(state.v)
+    assert speeds[500] == pytest.approx(1.4, rel=1e-3) and speeds[-1] == pytest.approx(1.4, rel=1e-3)
+
+
 def _candidates(*pairs: tuple[FilterGains, PZCGains]) -> Candidates:
     """Candidates from explicit gain sets (the tuner's array layout)."""
     names = ("k_df", "lambda_f", "k_dc", "lambda_c", "k_dc_yaw", "lambda_c_yaw", "accel_ff",

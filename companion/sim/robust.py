@@ -89,6 +89,10 @@ class Spread:
     limit: float = 0.15       # rate limits x (1 +- limit)
     delay_samples: float = 1  # delays + up to this many telemetry samples (never below 0)
     coupling: float = 0.15    # coupling +- this (clipped to [0, 1])
+    # A speed loop without integral action settles where its feed-forward puts it, not at the
+    # command: neighbours whose speed is up to (1 + over_drive) x the command and stays there
+    # (speed_overshoot at that share, never taken back). 0: none (a speed loop that closes).
+    over_drive: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -175,6 +179,7 @@ def ensemble(vehicle: RoverParams, count: int, spread: Spread, sample_period: fl
     # every other draw stays what it was before it was modelled; and apart from the speed
     # side's, because a mixer that favours steering gives up speed and keeps turn rate.
     rng_turn = np.random.default_rng([seed, 1])
+    rng_drive = np.random.default_rng([seed, 2])    # (the same way for the over-drive)
     out = [vehicle]
     for i in range(count):
         if i == 0:
@@ -203,6 +208,11 @@ def ensemble(vehicle: RoverParams, count: int, spread: Spread, sample_period: fl
             yaw_delay=max(0.0, vehicle.yaw_delay + delay),
             turn_speed_coupling=float(np.clip(vehicle.turn_speed_coupling + dc, 0.0, 1.0)),
             speed_turn_coupling=float(np.clip(vehicle.speed_turn_coupling + dcw, 0.0, 1.0))))
+        if spread.over_drive > 0 and i != 1:
+            # the slow corner over-drives fully, the random ones by a share of it
+            share = 1.0 if i == 0 else float(rng_drive.uniform(0.0, 1.0))
+            out[-1] = out[-1].with_(speed_overshoot=spread.over_drive * share,
+                                    speed_overshoot_s=math.inf)
     return out
 
 
