@@ -36,7 +36,7 @@ PX4_MIN_PROGRESS = 0.3  # share of the reference speed u_p keeps along it on a P
 # - its course loop reverses later than the fit says (turn delay fitted 0.04 or 0.09 s by
 #   session; the flights swung as if 0.04-0.07 s more): gain sets tuned against neighbours one
 #   telemetry sample late swung across the path (heading 27-58 deg RMS off it, a 2.7-3.3 s
-#   period) in five of nine sessions, 0.45-1.24 m; tuned against two samples, none of five;
+#   period) in five of nine sessions, 0.45-1.24 m; tuned against two samples, none of seven;
 # - its speed settles up to 1.35 x the command: PX4's rover speed control is a throttle
 #   feed-forward (speed / RO_MAX_THR_SPEED) plus a PI that airframe 10045 leaves at 0.001, and
 #   SIH's drag acts per axis (sih.cpp), so the rover sits where throttle meets drag. A gain set
