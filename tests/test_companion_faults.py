@@ -146,17 +146,19 @@ def test_bad_telemetry_never_produces_a_setpoint(tmp_path):
 
 
 def test_the_companions_own_stall_is_not_taken_for_stale_telemetry(tmp_path):
-    """SIGSTOP the companion (not the vehicle) for 1 s mid-mission, as an overloaded board
-    deschedules it: the vehicle streamed all along and the samples wait in the socket, so on
-    waking the companion reads them and goes on (no failsafe), and says it was not running."""
+    """SIGSTOP the companion (not the vehicle) for twice its stale timeout mid-mission, as an
+    overloaded board deschedules it: the vehicle streamed all along and the samples wait in the
+    socket, so on waking the companion reads them and goes on (no failsafe), and says it was
+    not running. (A 1 s timeout, not 0.5: the fake vehicle is a thread of this loaded process.)"""
     mission = ellipse_mission(tmp_path / "m.toml", 6.0)
     port = free_udp_port()
-    with Companion(port, "--arm", "--json", "--mission", str(mission)) as comp, \
+    with Companion(port, "--arm", "--json", "--mission", str(mission),
+                   "--stale-timeout", "1") as comp, \
             FakeVehicle(port) as fake:
         comp.wait_until(lambda: len(fake.setpoints) > 40, 20.0, "tracking")
         os.kill(comp.proc.pid, signal.SIGSTOP)
         try:
-            time.sleep(1.0)
+            time.sleep(2.0)
             streamed = len(fake.sent_ms)
         finally:
             os.kill(comp.proc.pid, signal.SIGCONT)
