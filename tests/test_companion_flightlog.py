@@ -186,3 +186,35 @@ def test_sigkill_mid_mission_loses_at_most_100_ms_of_either_log(tmp_path):
           f"{csv_missing * 1e3:.1f} ms, from the tlog {tlog_missing * 1e3:.1f} ms; "
           f"corrupt CSV lines {corrupt}, tlog BAD_DATA {bad}")
     assert csv_missing <= 0.100 and tlog_missing <= 0.100
+
+
+def test_a_failsafe_that_stopped_the_rover_is_a_zero_setpoint_in_the_csv(tmp_path):
+    """The CSV says what the vehicle was last asked: a failsafe that sent the zero setpoint
+    records it (at the last sample heard, after that sample's own setpoint); one that left the
+    vehicle to the autopilot's failsafe sent nothing and records nothing."""
+    from companion.live.events import LoopRecord, StatusEvent
+    from companion.live.flightlog import open_csv
+    from companion.logs.logread import read
+
+    def cycle(t: float) -> LoopRecord:
+        return LoopRecord(t, t - 1.0, t, 0.0, 0.1, t, 0.0, 0.1, t, 0.0, 0.0, 0.0, 1.0, 0.5,
+                          1.5, 0.4, "GUIDED", True)
+
+    path = tmp_path / "run.csv"
+    log = open_csv(str(path))
+    for t in (1.0, 1.025, 1.05):
+        log.record(cycle(t))
+    log.status(StatusEvent("failsafe", "telemetry stale: no valid sample for 0.51 s", 1.05,
+                           {"cause": "telemetry", "stop": True}))
+    log.status(StatusEvent("resumed", "telemetry back", 1.6))
+    for t in (1.6, 1.625):
+        log.record(cycle(t))
+    log.status(StatusEvent("failsafe", "autopilot failsafe: Failsafe (GCS)", 1.625,
+                           {"cause": "autopilot", "stop": False}))
+    log.close()
+    flight = read(str(path))
+    assert list(flight.t) == [1.0, 1.025, 1.05, 1.6, 1.625]
+    assert list(flight.cmd_t) == [1.0, 1.025, 1.05, 1.05, 1.6, 1.625]
+    assert list(flight.speed_cmd) == [1.5, 1.5, 1.5, 0.0, 1.5, 1.5]
+    assert list(flight.yaw_rate_cmd) == [0.4, 0.4, 0.4, 0.0, 0.4, 0.4]
+    assert [e for _, e in flight.events][0].startswith("failsafe: telemetry stale")

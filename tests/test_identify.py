@@ -8,6 +8,7 @@ from __future__ import annotations
 import functools
 import json
 import math
+import os
 import signal
 import struct
 import subprocess
@@ -302,6 +303,65 @@ def test_identify_a_companion_run_log_end_to_end(vehicle_file, tmp_path):
     assert j["log"] == f"{flown['tlog']} + {flown['csv']}" and j["samples"] > r["samples"]
     assert f"fitted to {flown['tlog']} + {flown['csv']}" in (tmp_path / "j.toml").read_text()
     check_recovered(j["params"])
+
+
+def _pause_when_tracked(plant: PlantProcess, logs: Path, mission_s: float, pause: float,
+                        deadline: float) -> bool:
+    """Stop the plant process (SIGSTOP) for ``pause`` wall s once the companion's CSV shows
+    ``mission_s`` of mission tracked: a vehicle that falls silent mid-flight, as a descheduled
+    autopilot or a dead link does. True when it was paused."""
+    while time.monotonic() < deadline:
+        for path in logs.glob("*.csv"):
+            rows = path.read_text(errors="replace").splitlines()[1:]
+            if any(r.split(",")[1:2] not in ([""], []) and float(r.split(",")[1]) >= mission_s
+                   for r in rows[-5:] if not r.split(",")[-1]):
+                os.kill(plant.proc.pid, signal.SIGSTOP)
+                try:
+                    time.sleep(pause)
+                finally:
+                    os.kill(plant.proc.pid, signal.SIGCONT)
+                return True
+        time.sleep(0.02)
+    return False
+
+
+def test_a_run_log_with_a_failsafe_in_it_records_the_stop_and_still_identifies(vehicle_file,
+                                                                                tmp_path):
+    # (CI: a loaded machine descheduled the plant for over the 0.5 s stale timeout mid-flight;
+    # the CSV then held the tracker's last setpoint through the stop and the re-engagement,
+    # and the model "missed" it by 0.3 rad/s RMS)
+    mission = ellipse_mission(tmp_path / "ellipse.toml", 40.0, f_r=0.12)
+    logs = tmp_path / "logs"
+    with PlantProcess("--lockstep", "--vehicle", str(vehicle_file)) as plant:
+        run = subprocess.Popen(
+            [sys.executable, "-m", "companion", "run", "--connect",
+             f"udpin:127.0.0.1:{plant.port}", "--arm", "--json", "-q", "--no-zenoh",
+             "--mission", str(mission), "--log-dir", str(logs), "--max-yaw-rate", "3"],
+            cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        try:
+            paused = _pause_when_tracked(plant, logs, 15.0, 1.0, time.monotonic() + 120.0)
+            out, err = run.communicate(timeout=240.0)
+        finally:
+            if run.poll() is None:
+                run.kill()
+                run.wait()
+    assert paused and run.returncode == 0, err
+    flown = json.loads(out.strip().splitlines()[-1])
+    assert flown["reason"] == "mission_done" and flown["failsafes"] >= 1, flown
+    # The failsafe's row carries the zero setpoint it sent, at the last sample heard.
+    stops = [r for r in Path(flown["csv"]).read_text().splitlines()
+             if "failsafe: telemetry stale" in r.split(",")[-1]]
+    assert stops, "no failsafe row in the CSV"
+    cells = dict(zip(CSV_FIELDS, stops[0].split(","), strict=True))
+    assert cells["speed_cmd"] == cells["yaw_rate_cmd"] == "0" and cells["vehicle_time"]
+    p = companion("identify", flown["tlog"], "--out", str(tmp_path / "v.toml"), "--check",
+                  flown["csv"], "--json")
+    assert p.returncode == 0, p.stderr
+    r = json.loads(p.stdout)
+    check_recovered(r["params"])
+    # as the run without a failsafe (test above); holding the tracker's setpoint through the
+    # stop made these 0.18 m/s and 0.29-0.31 rad/s
+    assert r["check"]["speed_m_s"] < 0.05 and r["check"]["yaw_rate_rad_s"] < 0.15, r["check"]
 
 
 @pytest.mark.slow   # long: started first under workers (conftest.py)

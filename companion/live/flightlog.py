@@ -8,7 +8,10 @@
   of pymavlink's ``MAVLink`` object, so both directions are in one file in the order they
   happened. Reading is pymavlink's too (``mavutil.mavlink_connection("x.tlog")``).
 * ``.csv``: one row per tracking cycle (:class:`companion.live.events.LoopRecord`) plus one row per
-  life-cycle event (``event`` column set, the numeric columns empty).
+  life-cycle event (``event`` column set, the numeric columns empty), except that a failsafe
+  that stopped the rover carries the zero setpoint it sent (``ux``, ``uy``, ``speed_cmd``,
+  ``yaw_rate_cmd`` = 0): the log says what the vehicle was last asked, so an identification
+  from it does not hold the tracker's last setpoint through the stop.
 
 Crash safety: both files are buffered (a write per frame would cost a system call in the loop)
 and flushed to the operating system
@@ -44,6 +47,8 @@ DEFAULT_DIR = "logs"
 
 _stamp = struct.Struct(">Q").pack
 CSV_FIELDS = [f.name for f in dataclasses.fields(LoopRecord)] + ["event"]
+# the command cells of an event row that sent the zero setpoint (see the module docstring)
+_STOP_FIELDS = ("ux", "uy", "speed_cmd", "yaw_rate_cmd")
 # Format of a loop row: times to the microsecond, positions to 0.1 mm, angles to 1 urad.
 _ROW = ("%.6f,%.6f,%.4f,%.4f,%.6f,%.4f,%.4f,%.6f,%.4f,%.4f,%.4f,%.6f,"
         "%.5f,%.5f,%.5f,%.6f,%s,%d,%s,\n")
@@ -138,6 +143,9 @@ class CsvLog:
         vt = "" if event.vehicle_time is None else f"{event.vehicle_time:.6f}"
         cells = [vt] + [""] * (len(CSV_FIELDS) - 3) + [_clean(self.failsafe),
                                                         _clean(f"{event.kind}: {event.reason}")]
+        if event.detail.get("stop"):
+            for name in _STOP_FIELDS:
+                cells[CSV_FIELDS.index(name)] = "0"
         self.out.write((",".join(cells) + "\n").encode())
         self.out.flush()
 

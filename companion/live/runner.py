@@ -626,7 +626,7 @@ class Runner:
         stopping.failsafe_since = now
         self.counters.failsafes += 1
         self._emit(ev.FAILSAFE, reason, {"rejected": dict(self.telemetry.rejected),
-                                         "cause": cause})
+                                         "cause": cause, "stop": hold})
 
     def _recover(self) -> None:
         """Telemetry is back (and the estimate healthy, the autopilot's failsafe cleared):

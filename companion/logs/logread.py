@@ -32,6 +32,8 @@ from ..live.config import RunnerConfig, segment_gap
 from ..live.flightlog import CSV_FIELDS
 
 _NUMERIC = CSV_FIELDS[:16]          # vehicle_time ... yaw_rate_cmd
+# the command cells (ux, uy, speed_cmd, yaw_rate_cmd): set in an event row that sent a stop
+_CMD = tuple(CSV_FIELDS.index(name) for name in ("ux", "uy", "speed_cmd", "yaw_rate_cmd"))
 
 
 @dataclass
@@ -104,6 +106,7 @@ def read_csv(path: str | Path) -> Flight:
     rows: list[list[float]] = []
     modes: list[str] = []
     events: list[tuple[float | None, str]] = []
+    stops: list[list[float]] = []       # setpoints sent without a sample (a failsafe's stop)
     corrupt: list[int] = []
     try:
         with open(path, newline="", encoding="utf-8", errors="replace") as f:
@@ -120,10 +123,13 @@ def read_csv(path: str | Path) -> Flight:
                 if row[-1]:
                     try:
                         vt = float(row[0]) if row[0] else None
+                        stop = [float(row[i]) for i in _CMD] if row[_CMD[0]] else None
                     except ValueError:
                         corrupt.append(line_no)
                         continue
                     events.append((vt, row[-1]))
+                    if vt is not None and stop is not None:
+                        stops.append([vt, *stop])
                     continue
                 try:
                     values = [float(v) for v in row[:len(_NUMERIC)]]
@@ -140,11 +146,26 @@ def read_csv(path: str | Path) -> Flight:
     col = {name: a[:, i] for i, name in enumerate(_NUMERIC)}
     t = col["vehicle_time"]
     speed, yaw_rate, along = _differentiate(t, col["x"], col["y"], col["yaw"])
+    cmd_t, speed_cmd, yaw_rate_cmd = _commands(t, col["speed_cmd"], col["yaw_rate_cmd"], stops)
     return Flight(str(path), "csv", t, col["x"], col["y"], col["yaw"], speed, yaw_rate,
                   mission_t=col["mission_time"], x_ref=col["x_ref"], y_ref=col["y_ref"],
-                  x_hat=col["x_hat"], y_hat=col["y_hat"], yaw_hat=col["yaw_hat"], cmd_t=t,
-                  speed_cmd=col["speed_cmd"], yaw_rate_cmd=col["yaw_rate_cmd"], events=events,
+                  x_hat=col["x_hat"], y_hat=col["y_hat"], yaw_hat=col["yaw_hat"], cmd_t=cmd_t,
+                  speed_cmd=speed_cmd, yaw_rate_cmd=yaw_rate_cmd, events=events,
                   corrupt=corrupt, records=len(rows) + len(events), speed_along=along)
+
+
+def _commands(t, speed_cmd, yaw_rate_cmd, stops: list[list[float]]
+              ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The setpoints in the order sent: each cycle's, and each event row's (a failsafe's stop,
+    answering the last sample heard, so after that sample's own setpoint)."""
+    if not stops:
+        return t, speed_cmd, yaw_rate_cmd
+    s = np.array(stops, dtype=float)
+    # (the stable sort keeps a cycle's row before the event row of the same vehicle time)
+    order = np.argsort(np.concatenate([t, s[:, 0]]), kind="stable")
+    return (np.concatenate([t, s[:, 0]])[order],
+            np.concatenate([speed_cmd, s[:, 3]])[order],
+            np.concatenate([yaw_rate_cmd, s[:, 4]])[order])
 
 
 def _differentiate(t, x, y, yaw) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
