@@ -296,6 +296,7 @@ def test_the_tuner_leaves_out_references_the_vehicle_cannot_turn_through():
 def test_a_cars_tune_leaves_out_references_it_cannot_accelerate_along(tmp_path):
     # The 0.12 Hz ellipse asks 1.80 m/s^2 along its path, ArduPilot's car has about 1.0: in
     # the objective it pulled the car's 0.08 Hz gains to 0.27-0.34 m in simulation (2026-12-03)
+    from companion.commands.flight import tune_search
     from companion.sim.robust import PAPER_F_R, RobustConfig, ellipse_path_accel
     from companion.sim.vehicle_gains import config_for
     assert [round(ellipse_path_accel(f), 3) for f in PAPER_F_R] == [0.05, 0.2, 0.799, 1.798]
@@ -319,23 +320,60 @@ def test_a_cars_tune_leaves_out_references_it_cannot_accelerate_along(tmp_path):
     vehicle_file.save(vehicle_file.VehicleFile(ROVER.with_(min_turn_radius=0.9), name="car"), car)
     rover = tmp_path / "rover.toml"
     vehicle_file.save(vehicle_file.VehicleFile(ROVER, name="rover"), rover)
-    assert labels(config_for(car, 40.0)) == four[:3]
-    assert labels(config_for(rover, 40.0)) == four
+    assert labels(config_for(car, 40.0, **tune_search(car))) == four[:3]
+    assert labels(config_for(rover, 40.0, **tune_search(rover))) == four
 
 
 def test_a_px4_vehicles_neighbours_turn_up_to_two_samples_late(tmp_path):
     # PX4 SIH's course loop reverses later than its fitted model (gain sets tuned against one
     # sample swung across the path in five of nine sessions, 2026-12-03): its ensemble's slow
     # corner is two 25 ms samples late at 40 Hz; ArduPilot's (turn-rate setpoints) one.
+    from companion.commands.flight import tune_search
     from companion.sim.vehicle_gains import config_for
     px4, skid = tmp_path / "px4.toml", tmp_path / "skid.toml"
     vehicle_file.save(vehicle_file.VehicleFile(
         ROVER.with_(course_gain=3.9, min_turn_radius=0.56), name="px4"), px4)
     vehicle_file.save(vehicle_file.VehicleFile(ROVER, name="skid"), skid)
     for path, samples in ((px4, 2), (skid, 1)):
-        cfg = config_for(path, 40.0)
+        cfg = config_for(path, 40.0, **tune_search(path))
         vehicle = vehicle_file.load(path).params
         assert vehicle.velocity_vector == (path == px4)
         slow = ensemble(vehicle, 6, cfg.spread, 1 / 40.0, seed=1)[1]
         assert float(slow.yaw_delay) == pytest.approx(float(vehicle.yaw_delay) + samples / 40.0)
         assert float(slow.speed_delay) == pytest.approx(float(vehicle.speed_delay) + samples / 40.0)
+
+
+def test_the_tuners_settings_come_from_the_profiles_that_fly_the_vehicle(tmp_path):
+    """Each difference has one home: PX4's settings in its profile (velocity vectors), the
+    course correction in ArduPilot's (turn-rate setpoints), a car's in the Ackermann profile,
+    which counts only on turn-rate setpoints (on velocity vectors PX4's course loop steers)."""
+    from companion.profiles import ackermann, ardupilot, px4, tune_settings
+    skid = ROVER
+    car = ROVER.with_(min_turn_radius=0.9)
+    px4_car = ROVER.with_(course_gain=3.9, min_turn_radius=0.56)
+    assert tune_settings(skid) == {"course_tau": 2.0} == dict(ardupilot.PROFILE.tune)
+    assert tune_settings(car) == {"course_tau": 2.0, "min_progress": 0.3, "speed_law": "paper",
+                                  "accel_room": 1.0}
+    assert tune_settings(car) == {**ardupilot.PROFILE.tune, **dict(ackermann.PROFILE.tune_on_turn_rate)}
+    assert tune_settings(px4_car) == dict(px4.PROFILE.tune)
+    assert tune_settings(px4_car)["spread"] == {"delay_samples": 2, "over_drive": 0.4}
+
+
+def test_companion_tune_records_a_px4_vehicles_own_neighbours(tmp_path):
+    # through the command: the gains file's record names the ensemble it was tuned against
+    px4, skid = tmp_path / "px4.toml", tmp_path / "skid.toml"
+    vehicle_file.save(vehicle_file.VehicleFile(
+        ROVER.with_(course_gain=3.9, min_turn_radius=0.56), name="px4"), px4)
+    vehicle_file.save(vehicle_file.VehicleFile(ROVER, name="skid"), skid)
+    for path, delays, over in ((px4, "+2 samples", "speed up to x1.4 the command"),
+                               (skid, "+1 samples", None)):
+        out = tmp_path / f"{path.stem}.gains.toml"
+        p = subprocess.run([sys.executable, "-m", "companion", "tune", "--vehicle", str(path),
+                            "--population", "8", "--rounds", "1", "--neighbours", "2",
+                            "--f-r", "0.04", "--duration", "20", "--out", str(out),
+                            "--no-progress"],
+                           capture_output=True, text=True, timeout=300, cwd=ROOT)
+        assert p.returncode == 0, p.stderr
+        header = out.read_text()
+        assert f"delays {delays}" in header, header
+        assert (over in header) if over else ("speed up to" not in header), header

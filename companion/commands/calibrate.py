@@ -133,7 +133,8 @@ def _quick_gains(vehicle: Path, rate: float, command: str, log) -> Path:
     vehicle file (removed before calibrate ends: ``run --vehicle`` must never find them)."""
     from ..sim import vehicle_gains
     from ..sim.robust import tune
-    cfg = vehicle_gains.config_for(vehicle, rate, (), **REFINE_SEARCH)
+    from .flight import tune_search
+    cfg = vehicle_gains.config_for(vehicle, rate, (), **tune_search(vehicle, **REFINE_SEARCH))
     try:
         result = tune(cfg)
     except RuntimeError:

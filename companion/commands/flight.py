@@ -59,13 +59,22 @@ def signing_key(path: str | None) -> bytes | None:
     return load_key(path)
 
 
+def tune_search(path, **search) -> dict[str, Any]:
+    """The robust tuner's settings for the vehicle file ``path``: its autopilot's and steering
+    kind's (companion.profiles.tune_settings), then ``search`` (population, rounds, ...) over
+    them. Every tune of a vehicle file goes through here: tune, calibrate, run and the rest."""
+    from ..profiles import tune_settings
+    from ..sim import vehicle_file
+    return {**tune_settings(vehicle_file.load(path).params), **search}
+
+
 def gains_for_vehicle(path, rate: float, command: str, show_bar: bool, log: Log, **search):
     """The gains tuned for a vehicle file (found beside it, else tuned now and stored there,
     with a progress bar): for run, demo, simulate and calibrate."""
     from ..progress import progress_bar
     from ..sim.vehicle_gains import gains_for
     with progress_bar(f"tuning for {Path(path).name}", show_bar) as progress:
-        return gains_for(path, rate, command, progress, log, **search)
+        return gains_for(path, rate, command, progress, log, **tune_search(path, **search))
 
 
 def known_vehicle(path: str | None, mission: Any, gains: Any, command: str, show_bar: bool,

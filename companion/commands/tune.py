@@ -254,8 +254,10 @@ def run_robust(args) -> int:
     if args.duration is not None:
         require_positive("--duration", args.duration)
         duration = args.duration
-    cfg = config_for(args.vehicle, rate, refs, duration, population=args.population,
-                     rounds=args.rounds, neighbours=args.neighbours, seed=args.seed)
+    from .flight import tune_search
+    cfg = config_for(args.vehicle, rate, refs, duration, **tune_search(
+        args.vehicle, population=args.population, rounds=args.rounds,
+        neighbours=args.neighbours, seed=args.seed))
     with progress_bar(f"robust tune {rate:g} Hz", not args.no_progress) as progress:
         try:
             result = robust_tune(cfg, progress)

@@ -5,6 +5,8 @@ May import: ``core``, ``sim`` (rover parameters, for priors), ``errors``; no I/O
 
 from __future__ import annotations
 
+from typing import Any
+
 from . import ackermann, ardupilot, px4, skid, steering
 from .autopilot import AirframeFrame, AutopilotProfile, ServoFrame
 from .steering import SteeringProfile
@@ -91,3 +93,15 @@ __all__ = ["AUTOPILOTS", "STEERING", "DEFAULT_AUTOPILOT", "AutopilotProfile", "S
            "autopilot_named", "from_heartbeat", "from_setpoints", "prior_params", "model_steering",
            "steering_of_model", "steering_by_airframe", "steering_by_servos", "steering_params",
            "steering_from_params"]
+
+
+def tune_settings(params) -> dict[str, Any]:
+    """The robust tuner's settings for a vehicle model (``params``: a RoverParams), from the
+    profiles that fly it: the autopilot's whose setpoints it takes (``tune``), then, on speed /
+    turn-rate setpoints, its steering kind's (``tune_on_turn_rate``; the steering kind's win
+    where both say). Names are RobustConfig's (companion.sim.vehicle_gains.config_for)."""
+    profile = from_setpoints(bool(params.velocity_vector))
+    settings = dict(profile.tune)
+    if not profile.setpoint.velocity_vector:
+        settings.update(steering_of_model(params).tune_on_turn_rate)
+    return settings

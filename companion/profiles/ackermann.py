@@ -25,4 +25,11 @@ PROFILE = SteeringProfile(
     # mixer shares nothing between speed and steering, so no coupling.
     priors=(("min_turn_radius", 1.0), ("turn_speed_coupling", 0.0),
             ("speed_turn_coupling", 0.0)),
-    priors_why="Ackermann steering")
+    priors_why="Ackermann steering",
+    # A car on speed / turn-rate setpoints turns only while it drives: the projected speed law
+    # slows it to nothing when its heading is far off, and the turning-radius clamp (Limits)
+    # then leaves it no turn at all (SITL rover, 2026-12-02: 1.6 rad off for 10 s, 15 m from
+    # the 0.08 Hz ellipse). The paper's |u_p| keeps it driving forward, a progress floor keeps
+    # u_p from vanishing; and it is not tuned on references it cannot accelerate along (its
+    # peak acceleration along the path at most the limit: RobustConfig.reference_list).
+    tune_on_turn_rate=(("min_progress", 0.3), ("speed_law", "paper"), ("accel_room", 1.0)))

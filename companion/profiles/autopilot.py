@@ -28,6 +28,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
+from typing import Any
 
 from .priors import Priors
 
@@ -292,6 +293,10 @@ class AutopilotProfile:
     # one whose recorded parameters (its ``[source]`` values of ``ident.params``) and steering
     # kind the vehicle has (companion.live.presets); () : none.
     presets: Mapping[str, str] = field(default_factory=dict)
+    # The robust tuner's settings (companion.sim.robust.RobustConfig fields; ``spread`` as a
+    # mapping of Spread's) for a vehicle flown by these setpoints: what the identified model
+    # leaves out of how this autopilot drives (companion.profiles.tune_settings).
+    tune: Mapping[str, Any] = field(default_factory=dict)
 
     def modes_for(self, mav_type: int) -> ModeTable:
         """The mode table for a vehicle of this MAV_TYPE (empty for a type it does not cover)."""

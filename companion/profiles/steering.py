@@ -14,6 +14,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass
+from typing import Any
 
 OK, WARN = "ok", "warn"        # companion.preflight.checks' statuses
 
@@ -33,6 +34,10 @@ class SteeringProfile:
     # identification's priors for this kind over the autopilot's (RoverParams field -> value)
     priors: tuple[tuple[str, float], ...] = ()
     priors_why: str = ""               # where they come from, for the vehicle file
+    # The robust tuner's settings for this kind where the companion sends it speed and turn
+    # rate (ArduPilot's); on velocity vectors the autopilot's own course loop steers it and
+    # its profile's ``tune`` says all (companion.profiles.tune_settings).
+    tune_on_turn_rate: tuple[tuple[str, Any], ...] = ()
 
     def prior_changes(self) -> Mapping[str, float]:
         return dict(self.priors)

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import hashlib
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import replace
 from pathlib import Path
 from typing import Any
@@ -23,32 +23,11 @@ from . import gains as gains_mod
 from . import vehicle_file
 from .gains import TunedGains
 from .plant import RoverParams
-from .robust import CAR_ACCEL_ROOM, RobustConfig, RobustResult, Spread, tune
+from .robust import RobustConfig, RobustResult, Spread, tune
 
 
 class NothingRobust(UserError):
     """The robust tuner found no gain set that held on every neighbour (exit 2)."""
-
-
-PX4_MIN_PROGRESS = 0.3  # share of the reference speed u_p keeps along it on a PX4 vehicle
-# PX4's neighbours (others: Spread()), for two things PX4 SIH's rover does that its fitted model
-# does not (2026-12-03, docs/benchmarks.md):
-# - its course loop reverses later than the fit says (turn delay fitted 0.04 or 0.09 s by
-#   session; the flights swung as if 0.04-0.07 s more): gain sets tuned against neighbours one
-#   telemetry sample late swung across the path (heading 27-58 deg RMS off it, a 2.7-3.3 s
-#   period) in five of nine sessions, 0.45-1.24 m; tuned against two samples, none of seven;
-# - its speed settles up to 1.35 x the command: PX4's rover speed control is a throttle
-#   feed-forward (speed / RO_MAX_THR_SPEED) plus a PI that airframe 10045 leaves at 0.001, and
-#   SIH's drag acts per axis (sih.cpp), so the rover sits where throttle meets drag. A gain set
-#   with a soft braking curve ran 0.49 m ahead (0.557 m); the model with the speed at 1.35 x
-#   said 0.531 m for it, and 0.11 / 0.10 m for two sets that flew 0.120 / 0.107 m.
-PX4_SPREAD = Spread(delay_samples=2, over_drive=0.4)
-CAR_MIN_PROGRESS = 0.3  # ... and on a car driven by turn-rate setpoints
-# s: the law steers the course over ground (core.course) on a vehicle sent turn-rate setpoints.
-# ArduPilot SITL's heading drifts from its course after calibrate's manoeuvres (0.006 rad in the
-# refining flight, 0.04 rad five flights later, both frames, 2026-12-02), which ran the stock
-# skid rover 6 cm inside the 0.08 Hz ellipse; a real rover's compass does the same.
-COURSE_TAU = 2.0
 
 
 def digest(vehicle_path: str | Path) -> str:
@@ -77,26 +56,15 @@ def config_for(vehicle_path: str | Path, rate: float,
                references: Sequence[tuple[str, Trajectory]] = (), duration: float = 60.0,
                **search: Any) -> RobustConfig:
     """The robust tuner's configuration for a vehicle file at a loop rate (ArduPilot's 50 Hz
-    scheduler ticks below 50 Hz), on the references given or the paper's ellipses."""
+    scheduler ticks below 50 Hz), on the references given or the paper's ellipses.
+
+    ``search``: RobustConfig's fields, a ``spread`` as a Spread or a mapping of its fields. What
+    the vehicle's autopilot and steering kind add (companion.profiles.tune_settings) comes in
+    here too, from the command that knows the profiles (companion.commands.flight.tune_search):
+    this layer does not."""
     vehicle = vehicle_file.load(vehicle_path).params
-    if vehicle.velocity_vector:
-        # PX4 (velocity vector, its own course loop): the progress floor keeps an Ackermann
-        # rover from turning round when it gets ahead (core.pzc, min_progress). PX4 steers its
-        # own course from u_p, which the course correction leaves be: none here.
-        search.setdefault("min_progress", PX4_MIN_PROGRESS)
-        search.setdefault("spread", PX4_SPREAD)
-    else:
-        search.setdefault("course_tau", COURSE_TAU)
-    if vehicle.steered_by_radius:     # (never a velocity-vector vehicle)
-        # A car on speed / turn-rate setpoints (ArduPilot's Ackermann rover) turns only while it
-        # drives: the projected speed law slows it to nothing when its heading is far off and
-        # the turning-radius clamp (Limits) then leaves it no turn at all (SITL rover,
-        # 2026-12-02: 1.6 rad off for 10 s, 15 m from the 0.08 Hz ellipse). The paper's |u_p|
-        # keeps it driving forward, the progress floor keeps u_p from vanishing.
-        search.setdefault("min_progress", CAR_MIN_PROGRESS)
-        search.setdefault("speed_law", "paper")
-        # and not on references it cannot accelerate along (RobustConfig.reference_list)
-        search.setdefault("accel_room", CAR_ACCEL_ROOM)
+    if isinstance(search.get("spread"), Mapping):
+        search["spread"] = Spread(**search["spread"])
     return RobustConfig(vehicle=vehicle, rate_hz=rate, tick=0.02 if rate < 50 else None,
                         references=tuple(references), duration=duration,
                         limits=vehicle_limits(vehicle), **search)
