@@ -1,5 +1,5 @@
 """The live loop's state is declared in one place: ``Runner.__init__`` makes every attribute, in
-a few named pieces (companion/live/runner.py: Heard, MissionClock, Engagement, ModeRequest,
+a few named pieces (companion/live/loop_state.py: Heard, MissionClock, Engagement, ModeRequest,
 Stopping, Timers, Counters), and every piece of state is read somewhere (no write-only flag).
 Read with ``ast``: a method that invents an attribute, or a field nobody reads, fails here."""
 
@@ -9,12 +9,12 @@ import ast
 import dataclasses
 from pathlib import Path
 
-from companion.live import runner
+from companion.live import loop_state, runner
 
 SOURCE = Path(runner.__file__).read_text()
 TREE = ast.parse(SOURCE)
-PIECES = (runner.Heard, runner.MissionClock, runner.Engagement, runner.ModeRequest,
-          runner.Stopping, runner.Timers, runner.Counters)
+PIECES = (loop_state.Heard, loop_state.MissionClock, loop_state.Engagement, loop_state.ModeRequest,
+          loop_state.Stopping, loop_state.Timers, loop_state.Counters)
 
 
 def _runner_class() -> ast.ClassDef:
@@ -71,7 +71,7 @@ def test_a_fresh_runner_has_all_its_state(monkeypatch):
     mission = SimpleNamespace(duration=10.0, name="m")
     r = Runner(link, object(), mission, RunnerConfig(autostart=False), Limits(1.0, 1.0))
     assert (r.track_mode, r.hold_mode) == ("OFFBOARD", "LOITER")
-    assert r.engagement.after is runner.State.READY and r.stopping.wants_hold is False
+    assert r.engagement.after is loop_state.State.READY and r.stopping.wants_hold is False
     assert (r.mission_time, r.failsafes, r.sink_errors, r.tracker_resets) == (0.0, 0, 0, 0)
     for piece in PIECES:
         assert sum(isinstance(v, piece) for v in vars(r).values()) == 1, piece.__name__
