@@ -6,13 +6,16 @@ Everything binds loopback ports chosen by the OS (port 0) and is stopped in ``__
 
 from __future__ import annotations
 
+import atexit
 import json
 import math
 import os
 import select
+import shutil
 import socket
 import subprocess
 import sys
+import tempfile
 import threading
 import time
 from dataclasses import dataclass, field
@@ -26,6 +29,17 @@ from pymavlink.dialects.v20 import ardupilotmega as mavlink2  # noqa: E402
 from sitl_plant.testing import free_udp_port  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
+_LOGS: Path | None = None
+
+
+def scratch_log_dir() -> Path:
+    """A folder for the flight logs of runs whose test did not name one (never the checkout's
+    ``logs/``), one per test process, removed when it exits (after every test has read them)."""
+    global _LOGS
+    if _LOGS is None:
+        _LOGS = Path(tempfile.mkdtemp(prefix="pzc-test-logs-"))
+        atexit.register(shutil.rmtree, _LOGS, True)
+    return _LOGS
 
 
 def companion_cli(*args: str, timeout: float, cwd: Path = ROOT, env: dict[str, str] | None = None,
@@ -54,6 +68,8 @@ class Companion:
                  url: str | None = None):
         self.argv = [sys.executable, "-m", "companion", command,
                      "--connect", url or f"udpin:127.0.0.1:{port}", *args]
+        if "--log-dir" not in args and "--no-log" not in args:
+            self.argv += ["--log-dir", str(scratch_log_dir())]
         self.proc: subprocess.Popen | None = None
         self.stdout = self.stderr = ""
         self._out: list[str] = []
