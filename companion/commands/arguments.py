@@ -334,3 +334,18 @@ def add_zenoh_arguments(p: argparse.ArgumentParser, vehicle: bool = True,
         g.add_argument("--control-secret", metavar="FILE",
                        help="enable the rover/<vehicle_id>/control queryable; requests must "
                             "carry this file's secret (the file must be chmod 600)")
+
+
+def parse_origin(text: str | None) -> tuple[float, float] | None:
+    """``"LAT,LON"`` -> (lat, lon); a one-line UserError otherwise."""
+    if text is None:
+        return None
+    from ..mission import geo
+    try:
+        lat, lon = (float(part) for part in text.split(","))
+    except ValueError:
+        raise UserError(f"--origin must be LAT,LON in degrees, not {text!r}") from None
+    problem = geo.check_latlon(lat, lon)
+    if problem:
+        raise UserError(f"--origin {problem}")
+    return lat, lon

@@ -41,12 +41,17 @@ def logger(prefix: str, quiet: bool) -> Log:
     return log
 
 
+def print_warnings(mission, prog: str = "companion mission") -> None:
+    for line in mission.warnings:
+        print(f"{prog}: warning: {line}", file=sys.stderr)
+
+
 def load_mission(path: str, origin_text: str | None, command: str = "companion run"):
     """The mission file read and checked before connecting (a bad one fails early); one
     placed by latitude / longitude is placed again around the vehicle's EKF origin once it is
     known (companion.live.origin)."""
     from .. import mission as missions
-    from .mission import parse_origin, print_warnings
+    from .arguments import parse_origin
     mission = missions.load(path, origin=parse_origin(origin_text))
     print_warnings(mission, command)
     return mission

@@ -51,34 +51,16 @@ def _common(parser: argparse.ArgumentParser) -> None:
                         help="speed for imported .plan / .waypoints (default: the file's)")
 
 
-def parse_origin(text: str | None) -> tuple[float, float] | None:
-    """``"LAT,LON"`` -> (lat, lon); a one-line UserError otherwise."""
-    if text is None:
-        return None
-    from ..mission import geo
-    try:
-        lat, lon = (float(part) for part in text.split(","))
-    except ValueError:
-        raise UserError(f"--origin must be LAT,LON in degrees, not {text!r}") from None
-    problem = geo.check_latlon(lat, lon)
-    if problem:
-        raise UserError(f"--origin {problem}")
-    return lat, lon
-
-
 def _check_speed(speed: float | None) -> None:
     import math
     if speed is not None and not (math.isfinite(speed) and 0 < speed <= 100):
         raise UserError(f"--speed must be a speed in (0, 100] m/s, not {speed!r}")
 
 
-def print_warnings(mission, prog: str = "companion mission") -> None:
-    for line in mission.warnings:
-        print(f"{prog}: warning: {line}", file=sys.stderr)
-
-
 def run_check(args) -> int:
     from .. import mission as missions
+    from .arguments import parse_origin
+    from .flight import print_warnings
     origin = parse_origin(args.origin)
     _check_speed(args.speed)
     vehicle = None
@@ -113,6 +95,8 @@ def run_show(args) -> int:
     import math
 
     from .. import mission as missions
+    from .arguments import parse_origin
+    from .flight import print_warnings
     origin = parse_origin(args.origin)
     _check_speed(args.speed)
     if args.every is not None and not (math.isfinite(args.every) and args.every > 0):

@@ -111,7 +111,7 @@ def start_limit(metres: float) -> float:
 
 def origin_config(args: argparse.Namespace) -> OriginConfig:
     """add_origin_arguments (its --max-start-distance goes to the runner)."""
-    from .mission import parse_origin
+    from .arguments import parse_origin
     return OriginConfig(expected=parse_origin(args.origin), timeout=args.origin_timeout)
 
 

@@ -81,8 +81,8 @@ def run(args) -> int:
     from ..sim import vehicle_file
     from ..sim.batch import SimConfig, simulate
     from ..sim.plant import RoverParams
-    from .flight import known_vehicle, logger
-    from .mission import parse_origin, print_warnings
+    from .arguments import parse_origin
+    from .flight import known_vehicle, logger, print_warnings
 
     require_positive("--rate", args.rate)
     require_positive("--w-c", args.w_c)
