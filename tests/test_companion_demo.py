@@ -5,13 +5,12 @@ from __future__ import annotations
 import json
 import math
 import subprocess
-import sys
 import time
 from pathlib import Path
 
 import pytest
 
-from companion_harness import ROOT
+from companion_harness import companion_cli
 
 FIELDS = ("f_cost", "steady_rms", "setpoints_sent", "telemetry_received", "loop_rate_hz",
           "latency_p50_ms", "latency_p99_ms", "duration_s", "plot")
@@ -19,8 +18,7 @@ FIELDS = ("f_cost", "steady_rms", "setpoints_sent", "telemetry_received", "loop_
 
 def demo(*args: str, timeout: float = 120.0) -> tuple[subprocess.CompletedProcess, float]:
     t0 = time.monotonic()
-    p = subprocess.run([sys.executable, "-m", "companion", "demo", "--json", *args],
-                       capture_output=True, text=True, timeout=timeout, cwd=ROOT)
+    p = companion_cli("demo", "--json", *args, timeout=timeout)
     return p, time.monotonic() - t0
 
 
@@ -80,17 +78,15 @@ def test_demo_flies_a_baseline_controller_as_simulate_predicts(tmp_path, control
     mission.write_text('name = "e"\nframe = "start"\nduration = 20.0\nrate_hz = 40.0\n'
                        '[trajectory]\nkind = "ellipse"\nf_r = 0.12\nax = 6.0\nbx = -1.0\n'
                        'ay = 2.0\nby = 3.0\n[vehicle]\nd_cen = 0.3\nw_c = 20.0\n')
-    s = subprocess.run([sys.executable, "-m", "companion", "simulate", "--mission", str(mission),
-                        "--controller", controller, "--json"],
-                       capture_output=True, text=True, timeout=60, cwd=ROOT)
+    s = companion_cli("simulate", "--mission", str(mission),
+                      "--controller", controller, "--json", timeout=60)
     predicted = json.loads(s.stdout)
     assert predicted["controller"] == controller and predicted["gains"] == r["gains_source"]
     assert r["steady_rms"] == pytest.approx(predicted["steady_rms"], rel=0.1)
 
 
 def test_demo_text_output_names_the_controller(tmp_path):
-    p = subprocess.run([sys.executable, "-m", "companion", "demo", "--controller", "kanayama",
-                        "--duration", "5", "--no-plot", "--no-log", "-q"],
-                       capture_output=True, text=True, timeout=120, cwd=ROOT)
+    p = companion_cli("demo", "--controller", "kanayama",
+                      "--duration", "5", "--no-plot", "--no-log", "-q", timeout=120)
     assert p.returncode == 0, p.stderr
     assert "controller  kanayama\n" in p.stdout

@@ -7,7 +7,6 @@ from __future__ import annotations
 import json
 import math
 import subprocess
-import sys
 
 import numpy as np
 import pytest
@@ -18,7 +17,7 @@ from companion.core.limits import Limits
 from companion.core.signals import Command, Estimate, Measurement
 from companion.core.tracker import Tracker
 from companion.core.trajectory import Ellipse
-from companion_harness import ROOT
+from companion_harness import companion_cli
 
 LIMITS = Limits(max_speed=4.0, max_yaw_rate=3.0)
 
@@ -143,20 +142,18 @@ def test_simulate_and_the_live_loop_build_the_same_tracker(name):
 
 @pytest.mark.parametrize("command", ["run", "demo", "simulate"])
 def test_controller_flag_offers_the_registry_and_refuses_others(command):
-    help_text = subprocess.run([sys.executable, "-m", "companion", command, "--help"],
-                               capture_output=True, text=True, cwd=ROOT, timeout=60).stdout
+    help_text = companion_cli(command, "--help", timeout=60).stdout
     assert "--controller {pzc,pid,kanayama}" in help_text
     extra = ["--mission", "missions/paper_ellipse_004.toml"] if command == "run" else []
-    p = subprocess.run([sys.executable, "-m", "companion", command, *extra, "--controller",
-                        "lqr"], capture_output=True, text=True, cwd=ROOT, timeout=60)
+    p = companion_cli(command, *extra, "--controller",
+                      "lqr", timeout=60)
     assert p.returncode == 2 and "invalid choice: 'lqr'" in p.stderr
     assert "Traceback" not in p.stderr
 
 
 def test_pzc_gains_for_a_baseline_are_one_clear_line():
-    p = subprocess.run([sys.executable, "-m", "companion", "simulate", "--controller", "pid",
-                        "--gains", "companion/sim/tuned/rate40_wc20.toml"],
-                       capture_output=True, text=True, cwd=ROOT, timeout=60)
+    p = companion_cli("simulate", "--controller", "pid",
+                      "--gains", "companion/sim/tuned/rate40_wc20.toml", timeout=60)
     assert p.returncode == 2 and "Traceback" not in p.stderr
     assert p.stderr.strip().splitlines() == [
         "companion simulate: error: --gains sets the filter + PZC gains; --controller pid "
@@ -165,10 +162,10 @@ def test_pzc_gains_for_a_baseline_are_one_clear_line():
 
 def test_pzc_gain_flags_for_a_baseline_on_run_are_refused_before_connecting():
     # nobody listens on the port: the refusal must come before any wait for a vehicle
-    p = subprocess.run([sys.executable, "-m", "companion", "run", "--connect",
-                        "udpin:127.0.0.1:9", "--mission", "missions/paper_ellipse_004.toml",
-                        "--controller", "kanayama", "--k-dc", "2", "--lambda-c", "3",
-                        "--no-log"], capture_output=True, text=True, cwd=ROOT, timeout=60)
+    p = companion_cli("run", "--connect",
+                      "udpin:127.0.0.1:9", "--mission", "missions/paper_ellipse_004.toml",
+                      "--controller", "kanayama", "--k-dc", "2", "--lambda-c", "3",
+                      "--no-log", timeout=60)
     assert p.returncode == 2 and "Traceback" not in p.stderr
     assert p.stderr.strip().splitlines()[-1].endswith(
         "--k-dc and --lambda-c set the filter + PZC gains; --controller kanayama flies its own "
@@ -181,8 +178,7 @@ SKID = "companion/sim/vehicles/ardupilot_skid.toml"
 
 
 def _simulate(*args: str) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "companion", "simulate", *args],
-                          capture_output=True, text=True, cwd=ROOT, timeout=60)
+    return companion_cli("simulate", *args, timeout=60)
 
 
 def test_own_gains_are_set_field_by_field_over_the_defaults_and_reach_the_tracker():
@@ -250,10 +246,9 @@ def test_simulate_flies_controller_gains_deterministically_and_shows_them():
 def test_demo_flies_controller_gains_live(tmp_path):
     """The live loop (demo: the companion against the bundled plant over MAVLink) flies them
     too, and its result says so."""
-    p = subprocess.run([sys.executable, "-m", "companion", "demo", "--json", "--controller",
-                        "pid", "--controller-gains", "kp=2,kd=0", "--duration", "5",
-                        "--no-plot", "--no-log", "-q"],
-                       capture_output=True, text=True, cwd=ROOT, timeout=120)
+    p = companion_cli("demo", "--json", "--controller",
+                      "pid", "--controller-gains", "kp=2,kd=0", "--duration", "5",
+                      "--no-plot", "--no-log", "-q", timeout=120)
     assert p.returncode == 0, p.stderr
     r = json.loads(p.stdout)
     assert r["controller"] == "pid" and r["reason"] == "mission_done"
@@ -283,9 +278,8 @@ def test_bad_controller_gains_are_one_line_naming_the_flag_and_the_field(control
 def test_controller_gains_with_pzc_are_refused_before_anything_flies(command):
     extra = (["--connect", "udpin:127.0.0.1:9", "--mission", "missions/paper_ellipse_004.toml",
               "--no-log"] if command == "run" else [])
-    p = subprocess.run([sys.executable, "-m", "companion", command, *extra,
-                        "--controller-gains", "kx=1"],
-                       capture_output=True, text=True, cwd=ROOT, timeout=60)
+    p = companion_cli(command, *extra,
+                      "--controller-gains", "kx=1", timeout=60)
     assert p.returncode == 2 and "Traceback" not in p.stderr
     assert p.stderr.strip().splitlines()[-1] == (
         f"companion {command}: error: --controller-gains sets the own gains of a baseline "
@@ -297,9 +291,7 @@ def test_controller_gains_with_pzc_are_refused_before_anything_flies(command):
 def test_controller_gains_help_names_every_field(command):
     """The help text is built without importing the controllers (instant --help), so it names
     their fields itself: held here to the dataclasses."""
-    help_text = " ".join(subprocess.run(
-        [sys.executable, "-m", "companion", command, "--help"], capture_output=True, text=True,
-        cwd=ROOT, timeout=60).stdout.split())
+    help_text = " ".join(companion_cli(command, "--help", timeout=60).stdout.split())
     assert "--controller-gains NAME=VALUE[,...]" in help_text
     for name in ("pid", "kanayama"):
         fields = ", ".join(controllers.get(name).gain_defaults())

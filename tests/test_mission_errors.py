@@ -14,6 +14,8 @@ from pathlib import Path
 
 import pytest
 
+from companion_harness import companion_cli
+
 CIRCLE = '[trajectory]\nkind = "circle"\nradius = 5.0\nspeed = 1.0\n'
 HOME = [-35.363261, 149.16523, 584]
 
@@ -171,8 +173,8 @@ def test_check_reports_every_file_and_fails_if_any_is_bad(tmp_path):
     good.write_text("duration = 20\n" + CIRCLE)
     bad = tmp_path / "bad.toml"
     bad.write_text(CIRCLE.replace("radius = 5.0", "radius = -1.0"))
-    proc = subprocess.run([sys.executable, "-m", "companion", "mission", "check", str(good),
-                           str(bad)], capture_output=True, text=True, timeout=60)
+    proc = companion_cli("mission", "check", str(good),
+                         str(bad), timeout=60)
     assert proc.returncode == 2
     assert proc.stdout.count("\n") == 1 and f"{good}: ok: circle" in proc.stdout
     assert "trajectory.radius" in proc.stderr and str(bad) in proc.stderr

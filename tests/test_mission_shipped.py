@@ -5,8 +5,6 @@ from __future__ import annotations
 
 import json
 import math
-import subprocess
-import sys
 from pathlib import Path
 
 import pytest
@@ -18,6 +16,7 @@ from companion.core.pzc import PZCGains, PZCTracker
 from companion.sim.batch import SimConfig, simulate
 from companion.sim.gains import find_tuned
 from companion.sim.plant import RoverParams
+from companion_harness import companion_cli
 
 ROOT = Path(__file__).resolve().parent.parent
 SHIPPED = sorted(str(p.relative_to(ROOT)) for p in (ROOT / "missions").iterdir()
@@ -43,8 +42,7 @@ def test_the_promised_missions_are_shipped():
 
 
 def test_every_shipped_mission_passes_check():
-    proc = subprocess.run([sys.executable, "-m", "companion", "mission", "check", *SHIPPED],
-                          capture_output=True, text=True, timeout=120, cwd=ROOT)
+    proc = companion_cli("mission", "check", *SHIPPED, timeout=120)
     assert proc.returncode == 0, proc.stderr
     assert proc.stderr == ""
     lines = proc.stdout.strip().splitlines()
@@ -87,9 +85,8 @@ def test_shipped_mission_is_tracked_within_0_3_m_at_40_hz(name):
 
 def test_simulate_prints_json_metrics(tmp_path):
     plot = tmp_path / "run.png"
-    proc = subprocess.run([sys.executable, "-m", "companion", "simulate", "--mission",
-                           "missions/paper_ellipse_004.toml", "--json", "--plot", str(plot)],
-                          capture_output=True, text=True, timeout=120, cwd=ROOT)
+    proc = companion_cli("simulate", "--mission",
+                         "missions/paper_ellipse_004.toml", "--json", "--plot", str(plot), timeout=120)
     assert proc.returncode == 0, proc.stderr
     out = json.loads(proc.stdout)
     assert {"mission", "rate_hz", "f_cost", "steady_rms", "duration_s"} <= set(out)
@@ -99,10 +96,9 @@ def test_simulate_prints_json_metrics(tmp_path):
 
 
 def test_simulate_controllers_and_flags():
-    proc = subprocess.run([sys.executable, "-m", "companion", "simulate", "--mission",
-                           "missions/example_rover.plan", "--controller", "kanayama", "--rate",
-                           "20", "--w-c", "10", "--d-cen", "0.3"],
-                          capture_output=True, text=True, timeout=120, cwd=ROOT)
+    proc = companion_cli("simulate", "--mission",
+                         "missions/example_rover.plan", "--controller", "kanayama", "--rate",
+                         "20", "--w-c", "10", "--d-cen", "0.3", timeout=120)
     assert proc.returncode == 0, proc.stderr
     assert "kanayama at 20 Hz" in proc.stdout and "w_c 10 rad/s, d_cen 0.3 m" in proc.stdout
     assert "steady_rms" in proc.stdout
@@ -115,17 +111,15 @@ def test_simulate_controllers_and_flags():
     (["--gains", "nowhere.toml"], "nowhere.toml"),
 ])
 def test_simulate_bad_flags_are_one_line_errors(args, text):
-    proc = subprocess.run([sys.executable, "-m", "companion", "simulate", *args],
-                          capture_output=True, text=True, timeout=60, cwd=ROOT)
+    proc = companion_cli("simulate", *args, timeout=60)
     assert proc.returncode == 2
     assert proc.stderr.count("\n") == 1 and text in proc.stderr and "Traceback" not in proc.stderr
 
 
 def test_mission_show_plots_the_path(tmp_path):
     out = tmp_path / "path.png"
-    proc = subprocess.run([sys.executable, "-m", "companion", "mission", "show",
-                           "missions/warehouse_aisles.toml", "--plot", str(out)],
-                          capture_output=True, text=True, timeout=60, cwd=ROOT)
+    proc = companion_cli("mission", "show",
+                         "missions/warehouse_aisles.toml", "--plot", str(out), timeout=60)
     assert proc.returncode == 0, proc.stderr
     assert "polyline" in proc.stdout and "max_speed" in proc.stdout
     assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and out.stat().st_size > 10000

@@ -9,8 +9,6 @@ course atan2(u_p) through PX4's proportional course loop into the turn-rate chan
 from __future__ import annotations
 
 import math
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -29,6 +27,7 @@ from companion.profiles import px4
 from companion.sim import vehicle_file
 from companion.sim.batch import SimConfig, simulate
 from companion.sim.plant import RoverModel, RoverParams, RoverState
+from companion_harness import companion_cli
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -217,16 +216,14 @@ def test_mission_check_with_a_vehicle_exits_3_on_a_reference_out_of_reach(tmp_pa
     tight.write_text('name = "tight"\nframe = "start"\nduration = 10\n[trajectory]\n'
                      'kind = "circle"\ncenter = [0.0, 0.3]\nradius = 0.3\nspeed = 1.0\n')
     ok = ROOT / "missions" / "paper_ellipse_004.toml"
-    p = subprocess.run([sys.executable, "-m", "companion", "mission", "check", str(ok),
-                        str(tight), "--vehicle", str(vehicle)], capture_output=True, text=True,
-                       cwd=ROOT, timeout=60)
+    p = companion_cli("mission", "check", str(ok),
+                      str(tight), "--vehicle", str(vehicle), timeout=60)
     assert p.returncode == 3, p.stderr
     lines = p.stdout.splitlines()
     assert lines[0].startswith(f"{ok}: ok:") and "within" in lines[0]
     assert any("tighter than the minimum turning radius" in line and "radius 0.30 m" in line
                for line in lines[1:]), p.stdout
-    p = subprocess.run([sys.executable, "-m", "companion", "mission", "check", str(ok),
-                        "--vehicle", str(tmp_path / "none.toml")], capture_output=True,
-                       text=True, cwd=ROOT, timeout=60)
+    p = companion_cli("mission", "check", str(ok),
+                      "--vehicle", str(tmp_path / "none.toml"), timeout=60)
     assert p.returncode == 2 and "no such vehicle file" in p.stderr
     assert "Traceback" not in p.stderr

@@ -5,8 +5,6 @@ from __future__ import annotations
 
 import json
 import math
-import subprocess
-import sys
 from dataclasses import replace
 from pathlib import Path
 
@@ -22,6 +20,7 @@ from companion.sim import vehicle_file
 from companion.sim.plant import RoverParams
 from companion.sim.robust import RobustConfig, Spread, ensemble, evaluate, tune
 from companion.sim.tuning import Candidates
+from companion_harness import companion_cli
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -126,10 +125,9 @@ def test_companion_tune_vehicle_writes_gains_that_record_their_vehicle(tmp_path)
     vpath = tmp_path / "rover.toml"
     vehicle_file.save(vehicle_file.VehicleFile(ROVER, name="rover"), vpath)
     out = tmp_path / "gains.toml"
-    p = subprocess.run([sys.executable, "-m", "companion", "tune", "--vehicle", str(vpath),
-                        "--population", "8", "--rounds", "1", "--neighbours", "1",
-                        "--out", str(out), "--json", "--no-progress"],
-                       capture_output=True, text=True, timeout=300)
+    p = companion_cli("tune", "--vehicle", str(vpath),
+                      "--population", "8", "--rounds", "1", "--neighbours", "1",
+                      "--out", str(out), "--json", "--no-progress", timeout=300)
     assert p.returncode == 0, p.stderr
     d = json.loads(p.stdout)
     assert d["vehicle"] == str(vpath) and d["ensemble"] == 2 and len(d["steady_rms"]) == 4
@@ -145,10 +143,9 @@ def test_tune_vehicle_on_the_frequencies_f_r_names(tmp_path):
     the four default references tuned instead), simulated for --duration."""
     vpath = tmp_path / "rover.toml"
     vehicle_file.save(vehicle_file.VehicleFile(ROVER, name="rover"), vpath)
-    p = subprocess.run([sys.executable, "-m", "companion", "tune", "--vehicle", str(vpath),
-                        "--f-r", "0.03,0.05", "--duration", "20", "--population", "8",
-                        "--rounds", "1", "--neighbours", "0", "--json", "--no-progress"],
-                       capture_output=True, text=True, timeout=300)
+    p = companion_cli("tune", "--vehicle", str(vpath),
+                      "--f-r", "0.03,0.05", "--duration", "20", "--population", "8",
+                      "--rounds", "1", "--neighbours", "0", "--json", "--no-progress", timeout=300)
     assert p.returncode == 0, p.stderr
     d = json.loads(p.stdout)
     assert d["references"] == ["ellipse 0.03 Hz", "ellipse 0.05 Hz"]
@@ -169,8 +166,7 @@ def test_tune_vehicle_on_the_frequencies_f_r_names(tmp_path):
     ([], "--rate is required"),
 ])
 def test_tune_errors_are_one_line(argv, message):
-    p = subprocess.run([sys.executable, "-m", "companion", "tune", *argv, "--no-progress"],
-                       capture_output=True, text=True, timeout=60, cwd=ROOT)
+    p = companion_cli("tune", *argv, "--no-progress", timeout=60)
     assert p.returncode == 2 and message in p.stderr and "Traceback" not in p.stderr
 
 
@@ -368,11 +364,10 @@ def test_companion_tune_records_a_px4_vehicles_own_neighbours(tmp_path):
     for path, delays, over in ((px4, "+2 samples", "speed up to x1.4 the command"),
                                (skid, "+1 samples", None)):
         out = tmp_path / f"{path.stem}.gains.toml"
-        p = subprocess.run([sys.executable, "-m", "companion", "tune", "--vehicle", str(path),
-                            "--population", "8", "--rounds", "1", "--neighbours", "2",
-                            "--f-r", "0.04", "--duration", "20", "--out", str(out),
-                            "--no-progress"],
-                           capture_output=True, text=True, timeout=300, cwd=ROOT)
+        p = companion_cli("tune", "--vehicle", str(path),
+                          "--population", "8", "--rounds", "1", "--neighbours", "2",
+                          "--f-r", "0.04", "--duration", "20", "--out", str(out),
+                          "--no-progress", timeout=300)
         assert p.returncode == 0, p.stderr
         header = out.read_text()
         assert f"delays {delays}" in header, header
