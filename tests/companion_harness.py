@@ -18,6 +18,7 @@ import sys
 import tempfile
 import threading
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -32,6 +33,11 @@ ROOT = Path(__file__).resolve().parents[1]
 _LOGS: Path | None = None
 
 
+# the commands that write flight logs, and the flags that say where (or that none is written)
+_LOGGING = ("run", "demo", "identify", "calibrate")
+_LOG_SAID = ("--log-dir", "--no-log", "--config", "--help", "-h", "--print-config")
+
+
 def scratch_log_dir() -> Path:
     """A folder for the flight logs of runs whose test did not name one (never the checkout's
     ``logs/``), one per test process, removed when it exits (after every test has read them)."""
@@ -42,11 +48,23 @@ def scratch_log_dir() -> Path:
     return _LOGS
 
 
+def with_log_dir(args: Sequence[str], folder: Path | None = None) -> list[str]:
+    """``companion`` arguments with ``--log-dir`` added (``folder``, else the scratch folder)
+    when the command writes flight logs and the test said nothing of where (a config file
+    may say it; the default, ./logs, is the checkout's when run from it)."""
+    args = list(args)
+    if args[:1] and args[0] in _LOGGING and not any(a in _LOG_SAID for a in args):
+        args += ["--log-dir", str(folder or scratch_log_dir())]
+    return args
+
+
 def companion_cli(*args: str, timeout: float, cwd: Path = ROOT, env: dict[str, str] | None = None,
                   prefix: tuple[str, ...] = ()) -> subprocess.CompletedProcess:
     """``python -m companion ARGS`` run to its end, output captured. ``timeout`` is each test
-    file's guard against a hung run (it fails the test), not a speed target."""
-    return subprocess.run([*prefix, sys.executable, "-m", "companion", *args], capture_output=True,
+    file's guard against a hung run (it fails the test), not a speed target. Run from the
+    checkout, its flight logs go to the scratch folder unless the test says where."""
+    argv = with_log_dir(args) if Path(cwd) == ROOT else list(args)
+    return subprocess.run([*prefix, sys.executable, "-m", "companion", *argv], capture_output=True,
                           text=True, timeout=timeout, cwd=cwd, env=env)
 
 
@@ -66,10 +84,8 @@ class Companion:
 
     def __init__(self, port: int | None, *args: str, command: str = "run",
                  url: str | None = None):
-        self.argv = [sys.executable, "-m", "companion", command,
-                     "--connect", url or f"udpin:127.0.0.1:{port}", *args]
-        if "--log-dir" not in args and "--no-log" not in args:
-            self.argv += ["--log-dir", str(scratch_log_dir())]
+        self.argv = [sys.executable, "-m", "companion", *with_log_dir(
+            [command, "--connect", url or f"udpin:127.0.0.1:{port}", *args])]
         self.proc: subprocess.Popen | None = None
         self.stdout = self.stderr = ""
         self._out: list[str] = []

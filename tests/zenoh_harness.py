@@ -24,6 +24,7 @@ from typing import Any
 import zenoh
 
 from companion.bus import decode
+from companion_harness import with_log_dir
 from sitl_plant.testing import free_port
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -224,7 +225,7 @@ class Proc:
     SIGKILL would leave running), SIGKILL after 3 s."""
 
     def __init__(self, *args: str, tmp: Path, name: str):
-        self.argv = [sys.executable, "-m", "companion", *args]
+        self.argv = [sys.executable, "-m", "companion", *with_log_dir(args, tmp / "logs")]
         self.out_path, self.err_path = tmp / f"{name}.out", tmp / f"{name}.err"
         self.proc: subprocess.Popen | None = None
 
@@ -387,7 +388,8 @@ def run_fleet(n: int, tmp: Path, rate: float = 20.0, duration: float = 10.0,
             c = _popen([sys.executable, "-m", "companion", "run", "--connect",
                         f"udpin:127.0.0.1:{port}", "--sysid", str(i), "--mission", str(mission),
                         "--arm", "--arm-timeout", "120", "--json", "-q", "--rate", f"{rate:g}",
-                        *zenoh_client, *who(f"rover{i}")], tmp / f"companion{i}.out")
+                        "--log-dir", str(tmp / "logs"), *zenoh_client, *who(f"rover{i}")],
+                       tmp / f"companion{i}.out")
             procs.append(c)
             companions.append(c)
         deadline = t0 + timeout
