@@ -170,6 +170,22 @@ def test_the_companions_own_stall_is_not_taken_for_stale_telemetry(tmp_path):
     assert r["stalls"] >= 1
 
 
+def test_the_first_pose_sample_goes_with_the_attitude_heard_during_the_setup(tmp_path):
+    """The setup (rate negotiation, parameters) reads the vehicle's streams while it waits for
+    answers; the loop's first pose sample goes with the ATTITUDE read there, so none is refused
+    for want of one. The vehicle sends ATTITUDE every 16th tick (0.4 s: within the 0.5 s an
+    attitude serves), so before the change the samples until the next one were refused
+    ("no_attitude"; the lockstep plant on a loaded machine lost its first sample that way)."""
+    mission = ellipse_mission(tmp_path / "m.toml", 3.0)
+    port = free_udp_port()
+    with Companion(port, "--arm", "--json", "--mission", str(mission)) as comp, \
+            FakeVehicle(port, script=lambda k, ms: {"attitude": k % 16 == 0}) as fake:
+        assert comp.wait(30.0) == 0, comp.stderr
+        r = comp.result()
+    assert r["reason"] == "mission_done" and len(fake.setpoints) > 100
+    assert sum(r["telemetry_rejected"].values()) == 0, (r["telemetry_rejected"], comp.stderr)
+
+
 def test_a_rebooted_vehicle_is_stopped_not_resumed(tmp_path):
     mission = ellipse_mission(tmp_path / "m.toml", 30.0)
 

@@ -142,6 +142,12 @@ class Link:
         return signing.rejected(self.master) if self.config.signing_key is not None else 0
 
     # --- receiving ----------------------------------------------------------------------------
+    def last_heard(self, kind: str) -> Any | None:
+        """The last ``kind`` message the followed vehicle's system sent, read by anything
+        before now (the setup's command waits too): pymavlink keeps one per system."""
+        state = self.master.sysid_state.get(self.vehicle.sysid)
+        return None if state is None else state.messages.get(kind)
+
     def _tcp_dropped(self) -> None:
         if not self._dropped:
             self.log(f"the vehicle closed the TCP connection {self.config.url}; reopening it")
