@@ -262,7 +262,8 @@ class FakeVehicle:
     streamed until asked again; it answers MAV_CMD_REQUEST_MESSAGE for SYSTEM_TIME); the autopilot's own doings: ``ekf`` (an
     EKF_STATUS_REPORT with these flags), ``text`` (a STATUSTEXT), ``status`` (the heartbeat's
     system_status from now on), ``mode`` (it switches mode itself), ``silent`` (no pose this
-    tick), ``attitude`` (False: a LOCAL_POSITION_NED without an ATTITUDE this tick); the link: ``deaf`` (nothing the companion sends arrives this tick: kept in ``lost``).
+    tick), ``attitude`` (False: a LOCAL_POSITION_NED without an ATTITUDE this tick); the link:
+    ``deaf`` (nothing the companion sends arrives this tick: kept in ``lost``).
     Records every setpoint and command.
     """
 

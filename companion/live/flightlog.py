@@ -48,7 +48,7 @@ DEFAULT_DIR = "logs"
 _stamp = struct.Struct(">Q").pack
 CSV_FIELDS = [f.name for f in dataclasses.fields(LoopRecord)] + ["event"]
 # the command cells of an event row that sent the zero setpoint (see the module docstring)
-_STOP_FIELDS = ("ux", "uy", "speed_cmd", "yaw_rate_cmd")
+STOP_FIELDS = ("ux", "uy", "speed_cmd", "yaw_rate_cmd")
 # Format of a loop row: times to the microsecond, positions to 0.1 mm, angles to 1 urad.
 _ROW = ("%.6f,%.6f,%.4f,%.4f,%.6f,%.4f,%.4f,%.6f,%.4f,%.4f,%.4f,%.6f,"
         "%.5f,%.5f,%.5f,%.6f,%s,%d,%s,\n")
@@ -144,7 +144,7 @@ class CsvLog:
         cells = [vt] + [""] * (len(CSV_FIELDS) - 3) + [_clean(self.failsafe),
                                                         _clean(f"{event.kind}: {event.reason}")]
         if event.detail.get("stop"):
-            for name in _STOP_FIELDS:
+            for name in STOP_FIELDS:
                 cells[CSV_FIELDS.index(name)] = "0"
         self.out.write((",".join(cells) + "\n").encode())
         self.out.flush()

@@ -29,11 +29,11 @@ import numpy as np
 
 from ..errors import UserError
 from ..live.config import RunnerConfig, segment_gap
-from ..live.flightlog import CSV_FIELDS
+from ..live.flightlog import CSV_FIELDS, STOP_FIELDS
 
 _NUMERIC = CSV_FIELDS[:16]          # vehicle_time ... yaw_rate_cmd
 # the command cells (ux, uy, speed_cmd, yaw_rate_cmd): set in an event row that sent a stop
-_CMD = tuple(CSV_FIELDS.index(name) for name in ("ux", "uy", "speed_cmd", "yaw_rate_cmd"))
+_CMD = tuple(CSV_FIELDS.index(name) for name in STOP_FIELDS)
 
 
 @dataclass

@@ -140,9 +140,9 @@ class RobustConfig:
         1.0); for SITL's car its log RMS in the objective bought small relative gains there with
         the 0.08 Hz tracking (four robust tunes on all four ellipses: 0.174 / 0.266 / 0.341 m
         simulated at 0.08 Hz; four without 0.12 Hz: 0.162-0.186 m; 0.022-0.026 m at 0.04 Hz
-        either way, 2026-12-03), so a car's tune leaves it out (``accel_room`` 1: profiles.ackermann). A
-        skid-steer rover's does not need to (stock rover-skid 0.049 / 0.052 m at 0.08 Hz with
-        and without), and PX4's deceleration is too loosely identified to judge by (0.65 to
+        either way, 2026-12-03), so a car's tune leaves it out (``accel_room`` 1:
+        profiles.ackermann). A skid-steer rover's does not need to (stock rover-skid 0.049 /
+        0.052 m at 0.08 Hz with and without), and PX4's deceleration is too loosely identified to judge by (0.65 to
         3 m/s^2 over sessions of one SIH rover)."""
         if self.references:
             return self.references
