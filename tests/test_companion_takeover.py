@@ -75,6 +75,50 @@ def test_pilot_takeover_stops_the_companion_within_one_cycle(tmp_path, how):
           f"proxy; 0 setpoints or commands after it; companion exit {code}")
 
 
+CRITICAL = 5    # MAV_STATE_CRITICAL: the autopilot's failsafe
+
+
+@pytest.mark.parametrize("who", ["pilot", "autopilot"])
+def test_a_mode_chosen_by_someone_else_before_the_companion_engaged_is_not_taken(tmp_path, who):
+    """While the companion sets up (telemetry flowing, the estimator's first report awaited for
+    a second), the pilot flips the mode switch to HOLD, or the autopilot's EKF failsafe does.
+    The vehicle was never the companion's: it asks for no mode, does not arm, sends no tracking
+    setpoint, and ends saying whose choice it was (exit 4, or 5 for the failsafe)."""
+    mission = ellipse_mission(tmp_path / "m.toml", 5.0)
+    at: list[int] = []       # the tick of the switch: once the loop answers (its stop setpoints)
+
+    def script(k, ms):
+        # the setup's rate negotiation reads ticks too, so count from the loop's first answer;
+        # 4 ticks on is 0.1 vehicle s, well inside the second it waits before asking a mode
+        if not at and fake.setpoints:
+            at.append(k + 4)
+        if at and k == at[0]:
+            return ({"mode": HOLD} if who == "pilot" else
+                    {"mode": HOLD, "status": CRITICAL, "text": "EKF failsafe"})
+        return None
+
+    port = free_udp_port()
+    fake = FakeVehicle(port, script=script)     # bound before its thread runs the script
+    with Companion(port, "--arm", "--no-zenoh", "--json", "--mission", str(mission),
+                   "--log-dir", str(tmp_path)) as comp, fake:
+        code = comp.wait(30.0)
+        r = comp.result()
+    assert not [c.command for c in fake.commands if c.command in (176, 400)], comp.stderr
+    assert fake.setpoints and all(is_zero(sp) for sp in fake.setpoints)
+    if who == "pilot":
+        assert code == 4, comp.stderr
+        assert r["reason"] == ("pilot_override: mode changed to HOLD by someone else before "
+                               "the companion engaged"), r
+        assert "pilot took over" in comp.stderr
+    else:
+        assert code == 5, comp.stderr
+        assert r["reason"].startswith("autopilot_failsafe: the autopilot's ekf failsafe"), r
+        assert r["reason"].endswith("switched to HOLD before the companion engaged"), r
+    # and nothing after the vehicle said so: not one setpoint for a later sample
+    t_mode = fake.sent_ms[at[0]][0]
+    assert not [sp for sp in fake.setpoints if sp.time_boot_ms > t_mode], comp.stderr
+
+
 class QuietVehicle(FakeVehicle):
     """The scripted vehicle, with heartbeats that can be switched off, and wall times of what
     the companion sent it."""

@@ -118,7 +118,8 @@ class Runner:
         self.outcome: Outcome | None = None
         self.heard = Heard()
         self.clock = MissionClock(max_gap=segment_gap(config.max_gap, config.period))
-        self.engagement = Engagement(after=State.TRACKING if config.autostart else State.READY)
+        self.engagement = Engagement(after=State.TRACKING if config.autostart else State.READY,
+                                     start_mode=link.mode)
         self.mode_request = ModeRequest()
         self.stopping = Stopping()
         self.timers = Timers()
@@ -407,9 +408,16 @@ class Runner:
         mode, armed = self.link.mode, self.link.armed
         state, now = self.state, self.heard.heartbeat_wall
         self.autopilot_fs.heartbeat(msg.system_status)
-        if state in ACTIVE and mode == self.track_mode and not self.engagement.need_ack:
-            self.engagement.mode_seen = True
-        if state in (State.READY, State.TRACKING, State.PAUSED) and self.engagement.mode_seen:
+        e = self.engagement
+        if e.start_mode is None:
+            e.start_mode = mode
+        if state in ACTIVE and mode == self.track_mode and not e.need_ack:
+            e.mode_seen = True
+        if self._not_yet_engaged(state) and mode != self.track_mode and (
+                mode != e.start_mode or e.mode_seen):
+            self._chosen_before_engaged(mode, now)
+            return
+        if state in (State.READY, State.TRACKING, State.PAUSED) and e.mode_seen:
             if mode != self.track_mode:
                 self._left(mode, now, stalled=False)
             elif not armed:
@@ -434,6 +442,27 @@ class Runner:
                 self.state = State.ENGAGING
         if self.state is State.ENGAGING:
             self._engage(time.perf_counter())
+
+    def _not_yet_engaged(self, state: State) -> bool:
+        """Setting up, or engaging the first time on our own (not --start-on-guided /
+        --handover, where the pilot or AUTO chooses the modes): the vehicle is not ours yet."""
+        return (not self.config.wait_for_mode
+                and (state is State.WAITING or self.engagement.first(state)))
+
+    def _chosen_before_engaged(self, mode: str, now: float) -> None:
+        """Before the companion engaged, someone else chose ``mode`` (a pilot's switch, a
+        ground station, the autopilot's own failsafe): the vehicle was never ours, so it is not
+        taken, as a pilot's takeover or the autopilot's failsafe mid-mission is not taken back."""
+        who, why = self.autopilot_fs.who_left(mode, self.hold_mode, now,
+                                              companion_stalled=False, hold_asked=False)
+        why = f"{why} before the companion engaged"
+        if who == health.AUTOPILOT:
+            self.log(f"{why}: not taking the vehicle; no more setpoints")
+            self._emit(ev.AUTOPILOT_FAILSAFE, why)
+            self._finish(f"autopilot_failsafe: {why}", ExitCode.AUTOPILOT_FAILSAFE, hold=False,
+                         stop=False)
+        else:
+            self._override(why)
 
     def _on_ack(self, msg: Any) -> None:
         if not self.link.is_vehicle(msg) or not self.link.is_for_us(msg):
