@@ -67,9 +67,11 @@ def test_a_fresh_runner_has_all_its_state(monkeypatch):
     from companion.core.limits import Limits
     from companion.live.runner import Runner, RunnerConfig
     from companion.profiles import px4
-    link = SimpleNamespace(vehicle=SimpleNamespace(sysid=1, compid=1, profile=px4.PROFILE))
+    link = SimpleNamespace(vehicle=SimpleNamespace(sysid=1, compid=1, profile=px4.PROFILE),
+                           mode="HOLD")      # as the setup left it: the mode it found
     mission = SimpleNamespace(duration=10.0, name="m")
     r = Runner(link, object(), mission, RunnerConfig(autostart=False), Limits(1.0, 1.0))
+    assert r.engagement.start_mode == "HOLD"
     assert (r.track_mode, r.hold_mode) == ("OFFBOARD", "LOITER")
     assert r.engagement.after is loop_state.State.READY and r.stopping.wants_hold is False
     assert (r.mission_time, r.failsafes, r.sink_errors, r.tracker_resets) == (0.0, 0, 0, 0)
