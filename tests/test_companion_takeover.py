@@ -119,6 +119,29 @@ def test_a_mode_chosen_by_someone_else_before_the_companion_engaged_is_not_taken
     assert not [sp for sp in fake.setpoints if sp.time_boot_ms > t_mode], comp.stderr
 
 
+def test_an_autopilot_leaving_its_boot_mode_is_nobodys_choice(tmp_path):
+    """ArduPilot reports INITIALISING while it starts, then its INITIAL_MODE on its own: a
+    companion started with it engages as usual once the vehicle has settled."""
+    mission = ellipse_mission(tmp_path / "m.toml", 3.0)
+    at: list[int] = []
+
+    def script(k, ms):
+        if not at and fake.setpoints:
+            at.append(k + 4)
+        return {"mode": 0} if at and k == at[0] else None        # INITIALISING -> MANUAL
+
+    port = free_udp_port()
+    fake = FakeVehicle(port, script=script)
+    fake.mode = 16                                              # INITIALISING
+    with Companion(port, "--arm", "--no-zenoh", "--json", "--mission", str(mission),
+                   "--log-dir", str(tmp_path)) as comp, fake:
+        code = comp.wait(30.0)
+        r = comp.result()
+    assert code == 0 and r["reason"] == "mission_done", comp.stderr
+    assert "mode INITIALISING" in comp.stderr
+    assert [c for c in fake.commands if is_mode_command(c, GUIDED)], comp.stderr
+
+
 class QuietVehicle(FakeVehicle):
     """The scripted vehicle, with heartbeats that can be switched off, and wall times of what
     the companion sent it."""

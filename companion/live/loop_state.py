@@ -75,8 +75,9 @@ class Engagement:
     after_failsafe: bool = False          # re-engaging after a failsafe (not the first time)
     said_estimate_wait: bool = False      # "waiting for a healthy estimate" logged
     estimate_waited: bool = False         # engaging stood still for the estimate
-    # the mode the vehicle was in when the companion first looked, before it asked for any:
-    # another one before the first engagement is someone else's choice (Runner._on_heartbeat)
+    # the mode the vehicle was in when the companion first looked (or the first it settled
+    # in, after a boot mode), before it asked for any: another one before the first engagement
+    # is someone else's choice (Runner._on_heartbeat)
     start_mode: str | None = None
 
     def first(self, state: State) -> bool:

@@ -409,8 +409,8 @@ class Runner:
         state, now = self.state, self.heard.heartbeat_wall
         self.autopilot_fs.heartbeat(msg.system_status)
         e = self.engagement
-        if e.start_mode is None:
-            e.start_mode = mode
+        if not self.profile.settled(e.start_mode):
+            e.start_mode = mode          # still starting (ArduPilot's INITIALISING): its own
         if state in ACTIVE and mode == self.track_mode and not e.need_ack:
             e.mode_seen = True
         if self._not_yet_engaged(state) and mode != self.track_mode and (

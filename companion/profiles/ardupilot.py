@@ -301,7 +301,7 @@ PROFILE = AutopilotProfile(
         params=plant_params),
     failsafe=FAILSAFE,
     estimate=ESTIMATE,
-    mission_home_item=True, auto_mode="AUTO",
+    mission_home_item=True, auto_mode="AUTO", boot_modes=frozenset({"INITIALISING"}),
     presets={"ardupilot-skid": skid.PROFILE.name},   # stock rover-skid (its [source] says so)
     # Every candidate steers the course over ground (core.course) with this time constant (s):
     # on turn-rate setpoints the law steers the heading, and ArduPilot SITL's heading drifts

@@ -297,6 +297,9 @@ class AutopilotProfile:
     # mapping of Spread's) for a vehicle flown by these setpoints: what the identified model
     # leaves out of how this autopilot drives (companion.profiles.tune_settings).
     tune: Mapping[str, Any] = field(default_factory=dict)
+    # modes the autopilot reports while it starts and leaves on its own (ArduPilot's
+    # INITIALISING, then its INITIAL_MODE): nobody's choice (companion.live.runner)
+    boot_modes: frozenset[str] = frozenset()
 
     def modes_for(self, mav_type: int) -> ModeTable:
         """The mode table for a vehicle of this MAV_TYPE (empty for a type it does not cover)."""
@@ -307,6 +310,11 @@ class AutopilotProfile:
     def priors_from(self, values: Mapping[str, float]) -> Priors:
         """The identification priors from the parameters read (only this profile's count)."""
         return self.ident.priors({k: v for k, v in values.items() if k in self.ident.params})
+
+    def settled(self, mode: str | None) -> bool:
+        """A mode someone chose: one of the table's, not one the autopilot starts in (a name
+        outside the table, e.g. a heartbeat without a custom mode, is not yet a choice)."""
+        return mode in self.modes.names() and mode not in self.boot_modes
 
     def mode_number(self, name: str) -> int:
         """``custom_mode`` of a mode of the table (KeyError for another name)."""
