@@ -457,10 +457,7 @@ class Runner:
                                               companion_stalled=False, hold_asked=False)
         why = f"{why} before the companion engaged"
         if who == health.AUTOPILOT:
-            self.log(f"{why}: not taking the vehicle; no more setpoints")
-            self._emit(ev.AUTOPILOT_FAILSAFE, why)
-            self._finish(f"autopilot_failsafe: {why}", ExitCode.AUTOPILOT_FAILSAFE, hold=False,
-                         stop=False)
+            self._autopilot_took(why, now)
         else:
             self._override(why)
 
@@ -649,9 +646,12 @@ class Runner:
             self._failsafe(now, why, cause="link")
 
     def _autopilot_took(self, why: str, now: float) -> None:
-        """The autopilot's own failsafe has the vehicle: never taken back on our own."""
-        if not self.config.retake_after_failsafe:
-            self.log(f"{why}: not taking the vehicle back; no more setpoints")
+        """The autopilot's own failsafe has the vehicle: never taken back on our own (nor
+        taken at all, --retake-after-failsafe or not, when it was never ours)."""
+        never_ours = self._not_yet_engaged(self.state)
+        if not self.config.retake_after_failsafe or never_ours:
+            self.log(f"{why}: not taking the vehicle{'' if never_ours else ' back'}; "
+                     "no more setpoints")
             self._emit(ev.AUTOPILOT_FAILSAFE, why)
             self._finish(f"autopilot_failsafe: {why}", ExitCode.AUTOPILOT_FAILSAFE, hold=False,
                          stop=False)
@@ -700,7 +700,7 @@ class Runner:
 
     def _engage(self, now: float) -> None:
         cfg, link, e = self.config, self.link, self.engagement
-        first = e.first(self.state) and not cfg.wait_for_mode
+        first = self._not_yet_engaged(self.state)
         if first and self.estimate.reports == 0 and (
                 e.warm_t0 is None or self.heard.vehicle_t - e.warm_t0 < FIRST_REPORT_GRACE):
             return
