@@ -99,7 +99,8 @@ def main() -> int:
                                  str(work / "logs"), "--json"], timeout=1200)
                 out["calibrate_wall_s"] = time.monotonic() - t0
             vehicle = cal["vehicle"]
-            out["calibrate"] = {k: cal[k] for k in ("vehicle", "identify") if k in cal}
+            out["calibrate"] = {k: cal[k] for k in ("vehicle", "identify", "refine",
+                                                    "timings_s", "cpu_s") if k in cal}
         for f_r in speeds:
             row: dict = {"f_r": f_r}
             mission = ellipse_mission(work / f"ellipse_{f_r:g}.toml", f_r, args.duration)

@@ -327,6 +327,32 @@ def test_braking_holds_the_integrators_beyond_the_linear_zone():
     assert law.int_yaw == pytest.approx(-0.05 * 49 * 0.02)
 
 
+
+def test_brake_integrate_lets_the_position_integrators_run_out_to_that_many_knees():
+    # knee 0.5 m (K_P 1, 0.5 m/s^2): 1.5 m is three knees out, 3 m six
+    g = PZCGains(0.5, 0.5, brake_accel=0.5)
+
+    def int_x(knees: float, error: float, n: int | None = None) -> float:
+        law = PZCLaw(replace(g, brake_integrate=knees), n=n)
+        for k in range(50):
+            law.step(0.02 * k, Estimate(0.0, 0.0, 0.0, 0.0, 0.0, 0.0), Reference(error, 0.0))
+        return law.int_x
+    assert int_x(1.0, 1.5) == 0.0                                  # the default: held
+    assert int_x(4.0, 1.5) == pytest.approx(1.5 * 49 * 0.02)       # within four knees
+    assert int_x(4.0, 3.0) == 0.0                                  # beyond them: held
+    # the P term is the braking curve's either way
+    law = PZCLaw(replace(g, brake_integrate=4.0))
+    cmd = law.step(0.0, Estimate(0.0, 0.0, 0.0, 0.0, 0.0, 0.0), Reference(1.5, 0.0))
+    assert cmd.ux == pytest.approx(math.sqrt(2 * 0.5 * (1.5 - 0.25)))
+    # lanes of an array: each its own zone
+    law = PZCLaw(replace(g, brake_integrate=np.array([1.0, 4.0])), n=2)
+    for k in range(50):
+        law.step(0.02 * k, Estimate(*(np.zeros(2),) * 6), Reference(np.full(2, 1.5), np.zeros(2)))
+    assert law.int_x == pytest.approx([0.0, 1.5 * 49 * 0.02])
+    with pytest.raises(ValueError, match="brake_integrate"):
+        PZCGains(brake_integrate=0.5)
+
+
 def test_split_feed_forward_previews_speed_without_turning_the_heading():
     # A circle at 2 m/s speeding up at 0.5 m/s^2: accel_ff turns u_p into the curve by
     # atan(tau v w / (v + tau a_t)), accel_ff_turn = 0 keeps u_p along p_ref' (lengthened by

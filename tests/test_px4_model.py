@@ -9,6 +9,7 @@ course atan2(u_p) through PX4's proportional course loop into the turn-rate chan
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -122,6 +123,39 @@ def test_the_progress_floor_prevents_loops_where_the_plain_law_orbits():
         d -= 2 * np.pi * np.round(d[0] / (2 * np.pi))
         return float(np.degrees(np.max(np.abs(d))))
     assert lead(0.3) < 360.0
+
+
+
+def test_integrating_past_the_braking_knee_takes_back_an_over_driving_speed_loop():
+    """PX4 SIH's speed settles above its command (a throttle feed-forward, no integral action):
+    with the position integrators held at the braking curve's knee (0.13 m for these gains, one
+    calibration's of 2026-12-04) the rover runs a steady quarter metre ahead, as SIH flew them
+    (0.35-0.50 m); integrating on out to four knees (the PX4 profile's) takes the offset back,
+    as on SIH (0.085 m). A speed loop that closes is untouched."""
+    gains = PZCGains(1.18, 0.855, k_dc_yaw=1.4, lambda_c_yaw=3.0, velocity_ff=True,
+                     heading_rate_ff=True, accel_ff=0.38, brake_accel=0.55, brake_yaw_accel=3.47,
+                     min_progress=0.3)
+    assert px4.PROFILE.tune["brake_integrate"] == 4.0
+
+    def fly(over_drive: float, knees: float) -> tuple[float, float]:
+        vehicle = PX4_ROVER.with_(speed_overshoot=over_drive, speed_overshoot_s=math.inf)
+        tracker = PZCTracker(FilterGains(948.0, 103.0), replace(gains, brake_integrate=knees),
+                             Limits(3.0, math.pi))
+        ellipse = Ellipse.paper(0.04)
+        r = simulate(tracker, vehicle, ellipse, None,
+                     SimConfig(duration=60.0, control_rate=40.0, max_plant_dt=0.02,
+                               trace_every=0.05))
+        last = r.trace["t"] >= 30.0
+        refs = [ellipse.sample(float(t)) for t in r.trace["t"][last]]
+        ex, ey = r.trace["x"][last] - r.trace["x_ref"][last], r.trace["y"][last] - r.trace["y_ref"][last]
+        ahead = [(x * q.vx + y * q.vy) / math.hypot(q.vx, q.vy) for x, y, q in zip(ex, ey, refs, strict=True)]
+        return float(r.steady_rms), float(np.mean(ahead))
+
+    held, ahead_held = fly(0.5, 1.0)
+    integrated, ahead_integrated = fly(0.5, 4.0)
+    assert held > 0.2 and ahead_held > 0.2                 # 0.25 m, 0.24 m ahead
+    assert integrated < 0.5 * held and abs(ahead_integrated) < 0.05
+    assert fly(0.0, 4.0) == pytest.approx(fly(0.0, 1.0))   # closed speed loop: inside the knee
 
 
 # --------------------------------------------------------------------------- vehicle files

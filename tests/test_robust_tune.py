@@ -263,7 +263,7 @@ def test_gains_files_keep_every_law_parameter(tmp_path):
     pzc = PZCGains(0.7, 0.6, k_dc_yaw=2.0, lambda_c_yaw=2.5, velocity_ff=True,
                    heading_rate_ff=True, accel_ff=0.34, lead_tau=0.2, lead_max_gain=3.0,
                    speed_law="paper", accel_ff_turn=0.005, brake_accel=0.21, brake_yaw_accel=0.98,
-                   min_progress=0.3, course_tau=2.0)
+                   min_progress=0.3, course_tau=2.0, brake_integrate=4.0)
     defaults = PZCGains(0.7, 0.6)
     changed = [f.name for f in fields(PZCGains) if getattr(pzc, f.name) != getattr(defaults, f.name)]
     assert len(changed) == len(fields(PZCGains)) - 2          # all but k_dc, lambda_c
@@ -372,3 +372,6 @@ def test_companion_tune_records_a_px4_vehicles_own_neighbours(tmp_path):
         header = out.read_text()
         assert f"delays {delays}" in header, header
         assert (over in header) if over else ("speed up to" not in header), header
+        # PX4's gains integrate past the braking knee (core.pzc), and run reads it back
+        assert ("brake_integrate = 4.0" in header) == (path == px4), header
+        assert gains_mod.load(out).pzc.brake_integrate == (4.0 if path == px4 else 1.0)

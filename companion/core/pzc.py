@@ -31,6 +31,8 @@ Extensions beyond the paper, each off by default (the paper's law exactly) and c
   linear zone:
       P(e) = K_P e                                            for |e| <= alpha / K_P^2
            = sign(e) sqrt(2 alpha (|e| - alpha / (2 K_P^2)))  beyond;
+  with ``brake_integrate`` = n (>= 1, knees) the position integrators integrate on beyond the
+  knee out to |p~| <= n alpha / K_P^2 and hold only further out;
 * ``min_progress`` = gamma: with t = p_ref' / |p_ref'|, u_p += max(0, gamma |p_ref'| - u_p . t) t,
   the position integrators held while it acts (nothing changes where |p_ref'| = 0);
 * ``lead_tau``, ``lead_max_gain``: the actuator lead of :mod:`companion.core.lead`;
@@ -66,7 +68,8 @@ class PZCGains:
     Numeric fields may be numpy arrays in batch simulation; the feed-forward switches may then
     be arrays of 0.0/1.0. ``accel_ff_turn`` (s; ``None``: as ``accel_ff``), ``brake_accel``
     (m/s^2) and ``brake_yaw_accel`` (rad/s^2; 0: off) are the extensions for rate-limited,
-    delayed inner loops described in the module docstring.
+    delayed inner loops described in the module docstring; ``brake_integrate`` (knees, 1: hold
+    at the knee) how far past the position braking curve's knee its integrators still run.
     """
 
     k_dc: Num = 5.0
@@ -84,6 +87,7 @@ class PZCGains:
     brake_yaw_accel: Num = 0.0
     min_progress: Num = 0.0
     course_tau: Num = 0.0
+    brake_integrate: Num = 1.0
 
     def __post_init__(self) -> None:
         if self.speed_law not in SPEED_LAWS:
@@ -93,6 +97,8 @@ class PZCGains:
             value = getattr(self, name)
             if value is not None and _any_negative(value):
                 raise ValueError(f"{name} must be >= 0, not {value!r}")
+        if _any_negative(self.brake_integrate - 1.0):
+            raise ValueError(f"brake_integrate must be >= 1 (knees), not {self.brake_integrate!r}")
 
     @property
     def kp(self) -> Num:
@@ -167,6 +173,8 @@ class PZCLaw:
             self._split_ff and not _ops.is_plain_zero(gains.accel_ff_turn))
         self._brake = not _ops.is_plain_zero(gains.brake_accel)
         self._brake_yaw = not _ops.is_plain_zero(gains.brake_yaw_accel)
+        self._brake_zone = not (isinstance(gains.brake_integrate, (int, float))
+                                and gains.brake_integrate <= 1.0)
         self._progress = not _ops.is_plain_zero(gains.min_progress)
         self.reset()
 
@@ -191,8 +199,13 @@ class PZCLaw:
             demand, beyond = braking_p(m, kp, g.brake_accel, err)
             if beyond is not False:
                 kp = m.where(beyond, demand / m.maximum(err, 1e-12), kp)
-                int_x = m.where(beyond, self.int_x, int_x)
-                int_y = m.where(beyond, self.int_y, int_y)
+                hold = beyond
+                if self._brake_zone:
+                    # integrate on out to brake_integrate knees: a steady offset there (a
+                    # speed loop that over-drives) is the integrator's to take back
+                    hold = beyond & (err > g.brake_integrate * g.brake_accel / (g.kp * g.kp))
+                int_x = m.where(hold, self.int_x, int_x)
+                int_y = m.where(hold, self.int_y, int_y)
         ux = kp * ex + g.ki * int_x + g.velocity_ff * ref.vx
         uy = kp * ey + g.ki * int_y + g.velocity_ff * ref.vy
         heading_rate = None

@@ -273,5 +273,12 @@ PROFILE = AutopilotProfile(
         #   m); the model with the speed at 1.35 x said 0.531 m for it, and 0.11 / 0.10 m for
         #   two sets that flew 0.120 / 0.107 m.
         "spread": {"delay_samples": 2, "over_drive": 0.4},
+        # - and the position integrators run on past the braking curve's knee out to four
+        #   knees (core.pzc, brake_integrate): held at the knee they left that over-drive's
+        #   offset standing, the rover a steady 0.25-0.49 m ahead of the reference (sessions
+        #   c2 and c4 of 2026-12-03; 2026-12-04 one calibration's gains, knee 0.13 m: 0.372 and
+        #   0.498 m, 0.25-0.30 m ahead; the same gains integrating out to four knees 0.086 and
+        #   0.085 m, 0.004 m ahead). Further out (the start's metres) they still hold.
+        "brake_integrate": 4.0,
     },
 )

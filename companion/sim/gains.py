@@ -69,7 +69,8 @@ class TunedGains:
                   f"lambda_f = {float(self.filter.lambda_f)!r}", "", "[pzc]"]
         for f in fields(PZCGains):
             value = getattr(self.pzc, f.name)
-            if value is None or (f.name in ("min_progress", "course_tau") and not value):
+            if value is None or (f.name in ("min_progress", "course_tau") and not value) or (
+                    f.name == "brake_integrate" and value == 1.0):
                 continue              # off: not written (older files stay as they were)
             if f.name in ("velocity_ff", "heading_rate_ff"):
                 lines.append(f"{f.name} = {'true' if value else 'false'}")
@@ -132,6 +133,11 @@ def parse(data: dict, where: str) -> TunedGains:
             kwargs[key] = _number(pzc, key, f"{where}: pzc", positive=False)
             if kwargs[key] < 0:
                 raise UserError(f"{where}: pzc.{key} must be >= 0, not {kwargs[key]!r}")
+    if "brake_integrate" in pzc:
+        kwargs["brake_integrate"] = _number(pzc, "brake_integrate", f"{where}: pzc")
+        if kwargs["brake_integrate"] < 1:
+            raise UserError(f"{where}: pzc.brake_integrate must be >= 1 (knees), not "
+                            f"{kwargs['brake_integrate']!r}")
     for key in ("velocity_ff", "heading_rate_ff"):
         if key in pzc:
             if not isinstance(pzc[key], bool):

@@ -117,6 +117,9 @@ class RobustConfig:
     min_progress: float = 0.0          # the law's progress floor for every candidate (PX4, a car)
     speed_law: str = "projected"       # every candidate's (a car: "paper", it turns only moving)
     course_tau: float = 0.0            # s, every candidate's course correction (core.course)
+    # every candidate's integration zone past the braking curve's knee, in knees (core.pzc;
+    # 1: the integrators hold at the knee; PX4's over-driving speed loop: more)
+    brake_integrate: float = 1.0
     # None: the references are not checked against the vehicle's acceleration; a number: those
     # whose peak acceleration along the path exceeds that share of it are left out (a car's)
     accel_room: float | None = None
@@ -284,7 +287,7 @@ def _extension_values(cands: Candidates, scales: tuple[float, float]) -> dict[st
 def _tracker(cands: Candidates, repeat: int, limits: Limits,
              scales: tuple[float, float] = DEFAULT_BRAKE_SCALE,
              min_progress: float = 0.0, speed_law: str = "projected",
-             course_tau: float = 0.0) -> PZCTracker:
+             course_tau: float = 0.0, brake_integrate: float = 1.0) -> PZCTracker:
     p, f = cands.params, cands.flags
     rep = lambda a: np.repeat(a, repeat)  # noqa: E731
     separate = f["separate_yaw"] > 0.5
@@ -305,7 +308,8 @@ def _tracker(cands: Candidates, repeat: int, limits: Limits,
                  brake_accel=rep(ext["brake_accel"]) if np.any(ext["brake_accel"] > 0) else 0.0,
                  brake_yaw_accel=(rep(ext["brake_yaw_accel"])
                                   if np.any(ext["brake_yaw_accel"] > 0) else 0.0),
-                 min_progress=min_progress, speed_law=speed_law, course_tau=course_tau),
+                 min_progress=min_progress, speed_law=speed_law, course_tau=course_tau,
+                 brake_integrate=brake_integrate),
         limits, n=len(cands) * repeat)
 
 
@@ -338,7 +342,8 @@ def _simulate_part(cands: Candidates, cfg: RobustConfig, vehicles: Sequence[Rove
                     noise_slice=(total * n_v * n_r, first * n_v * n_r))
     with np.errstate(all="ignore"):
         result = simulate(_tracker(cands, n_v * n_r, cfg.limits, brake_scales(cfg.vehicle),
-                                   cfg.min_progress, cfg.speed_law, cfg.course_tau), params,
+                                   cfg.min_progress, cfg.speed_law, cfg.course_tau,
+                                   cfg.brake_integrate), params,
                           _reference(refs, n_c, n_v), n, sim, progress)
     shape = (n_c, n_v, n_r)
     return (np.asarray(result.steady_rms).reshape(shape),
@@ -522,7 +527,7 @@ def tune(cfg: RobustConfig, progress: Callable[[float], None] | None = None) -> 
                   None if progress is None else (lambda f: progress((cfg.rounds + f) / total)))
     fg, pg = candidate_gains(winner, 0, brake_scales(cfg.vehicle))
     pg = replace(pg, min_progress=cfg.min_progress, speed_law=cfg.speed_law,
-                 course_tau=cfg.course_tau)
+                 course_tau=cfg.course_tau, brake_integrate=cfg.brake_integrate)
     labels = [label for label, _ in cfg.reference_list()]
     if not math.isfinite(float(ev.objective[0])):
         raise RuntimeError("no gain set held on every neighbour: widen the search "
