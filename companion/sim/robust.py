@@ -35,9 +35,10 @@ import contextlib
 import itertools
 import math
 import multiprocessing
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from concurrent.futures import Executor, ProcessPoolExecutor
 from dataclasses import dataclass, field, replace
+from typing import Any
 
 import numpy as np
 
@@ -126,6 +127,12 @@ class RobustConfig:
     # processes that simulate each round's candidates (this one and workers - 1 spawned): the
     # same gains at any count (:func:`evaluate`), in less wall time where cores are free
     workers: int = 1
+
+    def law_settings(self) -> dict[str, Any]:
+        """The law's settings every candidate shares (PZCGains fields): the tuner flies each
+        candidate with them and the tuned gains carry them."""
+        return {"min_progress": self.min_progress, "speed_law": self.speed_law,
+                "course_tau": self.course_tau, "brake_integrate": self.brake_integrate}
 
     def reference_list(self) -> tuple[tuple[str, Trajectory], ...]:
         """The references given, else the paper's ellipses this vehicle can turn through with
@@ -286,8 +293,9 @@ def _extension_values(cands: Candidates, scales: tuple[float, float]) -> dict[st
 
 def _tracker(cands: Candidates, repeat: int, limits: Limits,
              scales: tuple[float, float] = DEFAULT_BRAKE_SCALE,
-             min_progress: float = 0.0, speed_law: str = "projected",
-             course_tau: float = 0.0, brake_integrate: float = 1.0) -> PZCTracker:
+             law: Mapping[str, Any] | None = None) -> PZCTracker:
+    """The candidates as one tracker of ``len(cands) * repeat`` vehicles, each candidate's
+    gains ``repeat`` times, with the ``law`` settings they share (RobustConfig.law_settings)."""
     p, f = cands.params, cands.flags
     rep = lambda a: np.repeat(a, repeat)  # noqa: E731
     separate = f["separate_yaw"] > 0.5
@@ -308,8 +316,7 @@ def _tracker(cands: Candidates, repeat: int, limits: Limits,
                  brake_accel=rep(ext["brake_accel"]) if np.any(ext["brake_accel"] > 0) else 0.0,
                  brake_yaw_accel=(rep(ext["brake_yaw_accel"])
                                   if np.any(ext["brake_yaw_accel"] > 0) else 0.0),
-                 min_progress=min_progress, speed_law=speed_law, course_tau=course_tau,
-                 brake_integrate=brake_integrate),
+                 **(law or {})),
         limits, n=len(cands) * repeat)
 
 
@@ -342,8 +349,7 @@ def _simulate_part(cands: Candidates, cfg: RobustConfig, vehicles: Sequence[Rove
                     noise_slice=(total * n_v * n_r, first * n_v * n_r))
     with np.errstate(all="ignore"):
         result = simulate(_tracker(cands, n_v * n_r, cfg.limits, brake_scales(cfg.vehicle),
-                                   cfg.min_progress, cfg.speed_law, cfg.course_tau,
-                                   cfg.brake_integrate), params,
+                                   cfg.law_settings()), params,
                           _reference(refs, n_c, n_v), n, sim, progress)
     shape = (n_c, n_v, n_r)
     return (np.asarray(result.steady_rms).reshape(shape),
@@ -526,8 +532,7 @@ def tune(cfg: RobustConfig, progress: Callable[[float], None] | None = None) -> 
     ev = evaluate(winner, cfg, vehicles,
                   None if progress is None else (lambda f: progress((cfg.rounds + f) / total)))
     fg, pg = candidate_gains(winner, 0, brake_scales(cfg.vehicle))
-    pg = replace(pg, min_progress=cfg.min_progress, speed_law=cfg.speed_law,
-                 course_tau=cfg.course_tau, brake_integrate=cfg.brake_integrate)
+    pg = replace(pg, **cfg.law_settings())
     labels = [label for label, _ in cfg.reference_list()]
     if not math.isfinite(float(ev.objective[0])):
         raise RuntimeError("no gain set held on every neighbour: widen the search "
