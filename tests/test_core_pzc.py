@@ -353,6 +353,43 @@ def test_brake_integrate_lets_the_position_integrators_run_out_to_that_many_knee
         PZCGains(brake_integrate=0.5)
 
 
+def test_the_approach_cone_holds_u_p_within_its_angle_of_the_reference_direction():
+    # reference east at 1 m/s, K_P 1 (K_I 0.25): 0.2 m to the side is 11 deg off, well inside a
+    # 30 deg cone (untouched); 3 m to the side would be 72 deg off: held at 30 deg, |u . t| kept
+    g = PZCGains(0.5, 0.5, velocity_ff=True)
+    cone = replace(g, approach_cone=math.radians(30.0))
+    est = Estimate(0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+
+    def step(gains: PZCGains, side: float, speed: float = 1.0, steps: int = 1) -> tuple:
+        law = PZCLaw(gains)
+        for k in range(steps):
+            cmd = law.step(0.02 * k, est, Reference(0.0, side, speed, 0.0))
+        return cmd.ux, cmd.uy, law.int_y
+
+    assert step(cone, 0.2) == step(g, 0.2)
+    ux, uy, _ = step(cone, 3.0)
+    assert ux == pytest.approx(1.0) and uy == pytest.approx(math.tan(math.radians(30.0)))
+    ux, uy, _ = step(cone, -3.0)
+    assert uy == pytest.approx(-math.tan(math.radians(30.0)))
+    # while it acts the position integrators hold (as the progress floor's do)
+    assert step(cone, 3.0, steps=20)[2] == 0.0 and step(g, 3.0, steps=20)[2] > 0.0
+    # a rover far ahead (u_p . t below half the reference speed) still gets half of it to turn on
+    law = PZCLaw(cone)
+    cmd = law.step(0.0, Estimate(5.0, 0.0, 0.0, 0.0, 0.0, 0.0), Reference(0.0, 3.0, 1.0, 0.0))
+    assert abs(cmd.uy) == pytest.approx(0.5 * math.tan(math.radians(30.0)))
+    # a reference standing still: no direction, no cone
+    assert step(cone, 3.0, speed=0.0) == step(g, 3.0, speed=0.0)
+    # array lanes: each its own cone (0: none)
+    law = PZCLaw(replace(g, approach_cone=np.array([0.0, math.radians(30.0)])), n=2)
+    cmd = law.step(0.0, Estimate(*(np.zeros(2),) * 6),
+                   Reference(np.zeros(2), np.full(2, 3.0), np.ones(2), np.zeros(2)))
+    assert cmd.uy == pytest.approx([step(g, 3.0)[1], math.tan(math.radians(30.0))])
+    with pytest.raises(ValueError, match="approach_cone"):
+        PZCGains(approach_cone=math.pi / 2)
+    with pytest.raises(ValueError, match="approach_cone"):
+        PZCGains(approach_cone=-0.1)
+
+
 def test_split_feed_forward_previews_speed_without_turning_the_heading():
     # A circle at 2 m/s speeding up at 0.5 m/s^2: accel_ff turns u_p into the curve by
     # atan(tau v w / (v + tau a_t)), accel_ff_turn = 0 keeps u_p along p_ref' (lengthened by

@@ -158,6 +158,48 @@ def test_integrating_past_the_braking_knee_takes_back_an_over_driving_speed_loop
     assert fly(0.0, 4.0) == pytest.approx(fly(0.0, 1.0))   # closed speed loop: inside the knee
 
 
+def test_the_approach_cone_keeps_a_late_course_loop_from_swinging_across_the_path():
+    """PX4 SIH swung one calibration's gains across the path in 2 of 4 flights (2026-12-04):
+    a metre's error sent u_p at 60-90 deg to the path, the rover over it at 3-3.6 m/s, and its
+    course could not turn back in time. The model does it too on the neighbours of that
+    session's vehicle file whose course loop is quicker or later than the fit and whose speed
+    over-drives; u_p held within 30 deg of the reference's direction (the PX4 profile's
+    approach_cone) swings on none of them, and the vehicle's own figure is unchanged."""
+    vehicle = RoverParams(                               # session e2's vehicle file
+        w_c=5.974, w_c_yaw=28.84, max_speed=3.0, max_yaw_rate=2.1739, max_accel=3.003,
+        max_decel=2.273, max_yaw_accel=5.452, max_yaw_decel=5.238, speed_delay=0.1726,
+        yaw_delay=0.0879, speed_turn_coupling=0.0036, course_gain=3.92, min_turn_radius=0.667)
+    gains = PZCGains(1.0546, 0.9000, k_dc_yaw=4.710, lambda_c_yaw=1.846, velocity_ff=True,
+                     heading_rate_ff=True, accel_ff=0.4325, accel_ff_turn=0.2505,
+                     brake_accel=1.5727, min_progress=0.3, brake_integrate=4.0)
+    assert px4.PROFILE.tune["approach_cone"] == pytest.approx(math.radians(30.0))
+    corners = [(k, late, over) for k in (1.0, 1 / 0.85) for late in (1, 2, 3) for over in (0.2, 0.4)]
+    stack = [vehicle.with_(course_gain=vehicle.course_gain * k,
+                           yaw_delay=vehicle.yaw_delay + late / 40,
+                           speed_delay=vehicle.speed_delay + late / 40,
+                           speed_overshoot=over, speed_overshoot_s=math.inf)
+             for k, late, over in corners] + [vehicle]
+    params = RoverParams(**{f: np.array([float(getattr(v, f)) for v in stack])
+                            for f in ("w_c", "w_c_yaw", "max_speed", "max_yaw_rate", "max_accel",
+                                      "max_decel", "max_yaw_accel", "max_yaw_decel",
+                                      "speed_delay", "yaw_delay", "speed_turn_coupling",
+                                      "course_gain", "min_turn_radius", "speed_overshoot",
+                                      "speed_overshoot_s")})
+
+    def fly(cone: float) -> np.ndarray:
+        tracker = PZCTracker(FilterGains(1179.6, 111.8), replace(gains, approach_cone=cone),
+                             Limits(3.0, 2.1739), n=len(stack))
+        return np.asarray(simulate(tracker, params, Ellipse.paper(0.04), len(stack),
+                                   SimConfig(duration=60.0, control_rate=40.0, max_plant_dt=0.02,
+                                             tick=0.02, noise_pos=0.005, noise_yaw=0.002,
+                                             seed=1)).steady_rms)
+
+    plain, coned = fly(0.0), fly(math.radians(30.0))
+    assert (plain[:-1] > 0.3).sum() >= len(corners) // 2          # most swing, a metre or more
+    assert coned[:-1].max() < 0.15                                # none does
+    assert coned[-1] == pytest.approx(plain[-1], abs=0.005)       # the vehicle itself: the same
+
+
 # --------------------------------------------------------------------------- vehicle files
 
 def test_vehicle_file_course_section_round_trips_and_is_optional(tmp_path):

@@ -263,13 +263,24 @@ def test_gains_files_keep_every_law_parameter(tmp_path):
     pzc = PZCGains(0.7, 0.6, k_dc_yaw=2.0, lambda_c_yaw=2.5, velocity_ff=True,
                    heading_rate_ff=True, accel_ff=0.34, lead_tau=0.2, lead_max_gain=3.0,
                    speed_law="paper", accel_ff_turn=0.005, brake_accel=0.21, brake_yaw_accel=0.98,
-                   min_progress=0.3, course_tau=2.0, brake_integrate=4.0)
+                   min_progress=0.3, course_tau=2.0, brake_integrate=4.0,
+                   approach_cone=0.5)
     defaults = PZCGains(0.7, 0.6)
     changed = [f.name for f in fields(PZCGains) if getattr(pzc, f.name) != getattr(defaults, f.name)]
     assert len(changed) == len(fields(PZCGains)) - 2          # all but k_dc, lambda_c
     path = tmp_path / "g.toml"
     gains_mod.TunedGains(FilterGains(900.0, 50.0), pzc, rate_hz=40.0, w_c=5.0).save(path)
     assert gains_mod.load(path).pzc == pzc
+
+
+def test_a_gains_file_with_an_approach_cone_of_a_right_angle_or_more_is_refused(tmp_path):
+    from companion.errors import UserError
+    path = tmp_path / "g.toml"
+    gains_mod.TunedGains(FilterGains(900.0, 50.0), PZCGains(0.7, 0.6, approach_cone=0.5),
+                         rate_hz=40.0, w_c=5.0).save(path)
+    path.write_text(path.read_text().replace("approach_cone = 0.5", "approach_cone = 1.6"))
+    with pytest.raises(UserError, match=r"g.toml: pzc.approach_cone must be below pi/2 rad"):
+        gains_mod.load(path)
 
 
 def test_the_tuner_leaves_out_references_the_vehicle_cannot_turn_through():
@@ -375,3 +386,7 @@ def test_companion_tune_records_a_px4_vehicles_own_neighbours(tmp_path):
         # PX4's gains integrate past the braking knee (core.pzc), and run reads it back
         assert ("brake_integrate = 4.0" in header) == (path == px4), header
         assert gains_mod.load(out).pzc.brake_integrate == (4.0 if path == px4 else 1.0)
+        # and keep u_p within 30 deg of the path (the approach cone)
+        assert ("approach_cone = 0.52359" in header) == (path == px4), header
+        assert gains_mod.load(out).pzc.approach_cone == pytest.approx(
+            math.radians(30.0) if path == px4 else 0.0)

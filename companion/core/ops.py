@@ -43,13 +43,13 @@ def _where(cond: bool, a: float, b: float) -> float:
 
 
 scalar = SimpleNamespace(
-    sin=math.sin, cos=math.cos, atan2=math.atan2, hypot=math.hypot, exp=math.exp,
+    sin=math.sin, cos=math.cos, tan=math.tan, atan2=math.atan2, hypot=math.hypot, exp=math.exp,
     sqrt=math.sqrt, clip=_clip, where=_where, maximum=max, minimum=min, isfinite=math.isfinite,
     floor=math.floor, zeros=lambda n: 0.0, wrap=_scalar_wrap,
 )
 
 array = SimpleNamespace(
-    sin=np.sin, cos=np.cos, atan2=np.arctan2, hypot=np.hypot, exp=np.exp, sqrt=np.sqrt,
+    sin=np.sin, cos=np.cos, tan=np.tan, atan2=np.arctan2, hypot=np.hypot, exp=np.exp, sqrt=np.sqrt,
     clip=_array_clip, where=np.where, maximum=np.maximum, minimum=np.minimum, isfinite=np.isfinite,
     floor=np.floor, zeros=lambda n: np.zeros(n), wrap=_array_wrap,
 )

@@ -35,6 +35,11 @@ Extensions beyond the paper, each off by default (the paper's law exactly) and c
   knee out to |p~| <= n alpha / K_P^2 and hold only further out;
 * ``min_progress`` = gamma: with t = p_ref' / |p_ref'|, u_p += max(0, gamma |p_ref'| - u_p . t) t,
   the position integrators held while it acts (nothing changes where |p_ref'| = 0);
+* ``approach_cone`` = chi (rad, below pi/2): u_p's part across the reference's direction t is
+  held within the cone about it, |u_p . n| <= tan(chi) max(u_p . t, |p_ref'| / 2) (n = J t), the
+  position integrators held while it acts (nothing changes where |p_ref'| = 0). A rover that
+  steers along u_p (PX4) cannot reverse a velocity across the path faster than it turns; without
+  the cone a metre's error sends it across at right angles and over the path, into a swing;
 * ``lead_tau``, ``lead_max_gain``: the actuator lead of :mod:`companion.core.lead`;
 * ``course_tau`` (s): the law steers the course over ground, phi-hat + beta-hat, beta-hat the
   angle from the heading to the filtered pose's displacement, summed with forgetting time
@@ -88,17 +93,20 @@ class PZCGains:
     min_progress: Num = 0.0
     course_tau: Num = 0.0
     brake_integrate: Num = 1.0
+    approach_cone: Num = 0.0
 
     def __post_init__(self) -> None:
         if self.speed_law not in SPEED_LAWS:
             raise ValueError(f"speed_law must be one of {SPEED_LAWS}, not {self.speed_law!r}")
         for name in ("accel_ff_turn", "brake_accel", "brake_yaw_accel", "min_progress",
-                     "course_tau"):
+                     "course_tau", "approach_cone"):
             value = getattr(self, name)
             if value is not None and _any_negative(value):
                 raise ValueError(f"{name} must be >= 0, not {value!r}")
         if _any_negative(self.brake_integrate - 1.0):
             raise ValueError(f"brake_integrate must be >= 1 (knees), not {self.brake_integrate!r}")
+        if _any_negative(0.5 * math.pi - 1e-9 - self.approach_cone):
+            raise ValueError(f"approach_cone must be below pi/2 rad, not {self.approach_cone!r}")
 
     @property
     def kp(self) -> Num:
@@ -176,6 +184,10 @@ class PZCLaw:
         self._brake_zone = not (isinstance(gains.brake_integrate, (int, float))
                                 and gains.brake_integrate <= 1.0)
         self._progress = not _ops.is_plain_zero(gains.min_progress)
+        self._cone = not _ops.is_plain_zero(gains.approach_cone)
+        # tan(chi); a lane of 0 (no cone) an unbounded one
+        self._cone_tan = (self._m.where(gains.approach_cone > 0, self._m.tan(gains.approach_cone),
+                                        math.inf) if self._cone else math.inf)
         self.reset()
 
     def reset(self) -> None:
@@ -233,6 +245,11 @@ class PZCLaw:
             int_x = m.where(lifting, self.int_x, int_x)
             int_y = m.where(lifting, self.int_y, int_y)
 
+        if self._cone:
+            ux, uy, held = self._in_cone(ref, ux, uy)
+            int_x = m.where(held, self.int_x, int_x)
+            int_y = m.where(held, self.int_y, int_y)
+
         yaw_ref = m.atan2(uy, ux)
         eyaw = m.wrap(yaw_ref - est.yaw)
         int_yaw = self.int_yaw + eyaw * dt
@@ -256,6 +273,21 @@ class PZCLaw:
         self.int_y = keep_if(m, speed_free, int_y, self.int_y)
         self.int_yaw = keep_if(m, rate_free, int_yaw, self.int_yaw)
         return cmd
+
+
+    def _in_cone(self, ref: Reference, ux: Num, uy: Num) -> tuple[Num, Num, Num]:
+        """u_p with its part across the reference's direction held within ``approach_cone``
+        (module docstring), and where that acted."""
+        m = self._m
+        ref_speed = m.hypot(ref.vx, ref.vy)
+        safe = m.maximum(ref_speed, 1e-6)
+        tx, ty = ref.vx / safe, ref.vy / safe
+        along, across = ux * tx + uy * ty, uy * tx - ux * ty
+        cap = self._cone_tan * m.maximum(along, 0.5 * ref_speed)
+        acting = (ref_speed > 1e-6) & (abs(across) > cap)
+        across = m.where(acting, m.clip(across, -cap, cap), across)
+        return (m.where(acting, along * tx - across * ty, ux),
+                m.where(acting, along * ty + across * tx, uy), acting)
 
 
 class PZCTracker:

@@ -280,5 +280,16 @@ PROFILE = AutopilotProfile(
         #   0.498 m, 0.25-0.30 m ahead; the same gains integrating out to four knees 0.086 and
         #   0.085 m, 0.004 m ahead). Further out (the start's metres) they still hold.
         "brake_integrate": 4.0,
+        # - u_p keeps within 30 deg of the reference's direction (core.pzc, approach_cone): PX4
+        #   steers its course along u_p and cannot reverse a velocity across the path faster
+        #   than it turns (about 2.2 rad/s, 5 rad/s^2 on SIH), so a metre's error sent it across
+        #   at 60-90 deg, over the path at 3-3.6 m/s and into a swing (heading 40-55 deg RMS
+        #   off the path, a 3 s period) that decayed in 30-50 s or not at all: one calibration's
+        #   gains in 2 of 4 flights (2026-12-04). The model swings too where its course loop is
+        #   quicker or later than the fit: those gains on 18 of 36 neighbours of their vehicle
+        #   file (course gain x0.85-1.18, 0-3 samples late, over-drive 0-0.4), on none with the
+        #   cone at 30 deg, nor do three other sessions' gains (0 / 0 / 1 of 36), each vehicle's
+        #   own figure unchanged.
+        "approach_cone": math.radians(30.0),
     },
 )

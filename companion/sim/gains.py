@@ -69,7 +69,8 @@ class TunedGains:
                   f"lambda_f = {float(self.filter.lambda_f)!r}", "", "[pzc]"]
         for f in fields(PZCGains):
             value = getattr(self.pzc, f.name)
-            if value is None or (f.name in ("min_progress", "course_tau") and not value) or (
+            if value is None or (f.name in ("min_progress", "course_tau", "approach_cone")
+                                     and not value) or (
                     f.name == "brake_integrate" and value == 1.0):
                 continue              # off: not written (older files stay as they were)
             if f.name in ("velocity_ff", "heading_rate_ff"):
@@ -128,7 +129,7 @@ def parse(data: dict, where: str) -> TunedGains:
                                 f"not {kwargs[key]!r}")
     # seconds and accelerations that are off at 0 (accel_ff_turn absent: as accel_ff)
     for key in ("accel_ff", "accel_ff_turn", "brake_accel", "brake_yaw_accel", "min_progress",
-                "course_tau"):
+                "course_tau", "approach_cone"):
         if key in pzc:
             kwargs[key] = _number(pzc, key, f"{where}: pzc", positive=False)
             if kwargs[key] < 0:
@@ -138,6 +139,9 @@ def parse(data: dict, where: str) -> TunedGains:
         if kwargs["brake_integrate"] < 1:
             raise UserError(f"{where}: pzc.brake_integrate must be >= 1 (knees), not "
                             f"{kwargs['brake_integrate']!r}")
+    if kwargs.get("approach_cone", 0.0) >= 0.5 * math.pi:
+        raise UserError(f"{where}: pzc.approach_cone must be below pi/2 rad (90 deg), not "
+                        f"{kwargs['approach_cone']!r}")
     for key in ("velocity_ff", "heading_rate_ff"):
         if key in pzc:
             if not isinstance(pzc[key], bool):

@@ -121,6 +121,7 @@ class RobustConfig:
     # every candidate's integration zone past the braking curve's knee, in knees (core.pzc;
     # 1: the integrators hold at the knee; PX4's over-driving speed loop: more)
     brake_integrate: float = 1.0
+    approach_cone: float = 0.0         # rad, every candidate's approach cone (core.pzc; 0: none)
     # None: the references are not checked against the vehicle's acceleration; a number: those
     # whose peak acceleration along the path exceeds that share of it are left out (a car's)
     accel_room: float | None = None
@@ -132,7 +133,8 @@ class RobustConfig:
         """The law's settings every candidate shares (PZCGains fields): the tuner flies each
         candidate with them and the tuned gains carry them."""
         return {"min_progress": self.min_progress, "speed_law": self.speed_law,
-                "course_tau": self.course_tau, "brake_integrate": self.brake_integrate}
+                "course_tau": self.course_tau, "brake_integrate": self.brake_integrate,
+                "approach_cone": self.approach_cone}
 
     def reference_list(self) -> tuple[tuple[str, Trajectory], ...]:
         """The references given, else the paper's ellipses this vehicle can turn through with
