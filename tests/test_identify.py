@@ -5,6 +5,7 @@ and a bad log is one line with exit code 2. Real processes over loopback UDP, re
 
 from __future__ import annotations
 
+import csv
 import functools
 import json
 import math
@@ -399,6 +400,29 @@ def test_live_identify_stays_within_space_ends_in_hold_and_writes_the_file(vehic
     assert written.params.max_yaw_accel == pytest.approx(
         r["params"]["turn_rate"]["accel_max_rad_s2"], rel=1e-5)
     assert "--connect" in written.source["command"] and written.source["log"] == flight["tlog"]
+
+
+def test_live_identify_ends_when_the_manoeuvre_script_does(tmp_path):
+    """PX4's velocity-vector script is over in about a minute: the flight ends there, in Hold,
+    not after the identify mission's 85 s of the rover standing still (which only cost
+    calibrate's time)."""
+    vehicle = tmp_path / "px4.toml"
+    save(VehicleFile(RoverParams(w_c=4.0, w_c_yaw=20.0, speed_delay=0.1, yaw_delay=0.04,
+                                 max_speed=3.0, max_accel=3.0, max_yaw_rate=math.pi,
+                                 max_yaw_accel=7.0, course_gain=5.0, min_turn_radius=0.556),
+                     name="px4-like"), vehicle)
+    out, logs = tmp_path / "live.toml", tmp_path / "logs"
+    with PlantProcess("--lockstep", "--autopilot", "px4", "--vehicle", str(vehicle)) as plant:
+        p = companion("identify", "--connect", f"udpin:127.0.0.1:{plant.port}", "--arm",
+                      "--space", "10", "--out", str(out), "--json", "--no-zenoh",
+                      "--log-dir", str(logs), timeout=240.0)
+    assert p.returncode == 0, p.stderr
+    flight = json.loads(p.stdout)["flight"]
+    assert flight["reason"] == "mission_done" and flight["hold_confirmed"], flight
+    assert 45.0 < flight["duration_s"] < 75.0, flight
+    events = [row["event"] for row in csv.DictReader(open(flight["csv"])) if row["event"]]
+    assert any("the script is over" in e for e in events), events
+    assert load(out).params.velocity_vector
 
 
 def test_sigterm_stops_the_manoeuvre_in_hold_and_fits_nothing(vehicle_file, tmp_path):

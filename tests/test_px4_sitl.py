@@ -198,6 +198,7 @@ def test_identify_on_px4_flies_the_velocity_vector_manoeuvre_and_fits_the_course
     assert code == 0, comp.stderr
     r = comp.result()
     assert r["flight"]["hold_confirmed"] and r["flight"]["max_distance_m"] <= 8.0 + 1.0, r
+    assert r["flight"]["duration_s"] < 80.0, r["flight"]     # over with its script (about 60 s)
     assert r["autopilot_params"]["RO_YAW_P"] == 5.0
     assert set(r["params"]) >= {"speed", "turn_rate", "course"}
     from companion.sim.vehicle_file import load

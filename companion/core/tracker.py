@@ -42,6 +42,11 @@ class Tracker(Protocol):
         (:func:`raw_estimate`); ``None`` before the first step and after ``reset()``. The live
         loop logs it beside the measurement (the flight log's filtered pose).
 
+    ``finished`` (optional)
+        True once a scripted tracker (the identification manoeuvre,
+        :mod:`companion.ident.excite`) has nothing more to ask: the live loop then ends the
+        mission as done before its length. A tracker without it follows the mission to its end.
+
     Scalars or arrays: a tracker built with ``n=None`` runs one vehicle on Python floats; built
     with ``n=k`` it runs k vehicles at once and every field of ``meas``, ``ref``, the command
     and ``estimate`` is a numpy array of shape (k,) (``t`` stays one float: the vehicles share

@@ -17,6 +17,10 @@ The script, for a vehicle whose setpoints may go up to ``max_speed`` and ``max_y
    speed the skid-steer mixing leaves shows (coupling);
 5. back home and stand still.
 
+Once the script stands at its last segment ("done") the tracker says so (``finished``) and the
+live loop ends the manoeuvre there rather than at the identify mission's length (PX4's script is
+over at about 57 s of the 85: the rest was the rover standing still).
+
 Staying inside ``space`` metres of home adapts the script to the pose: each step predicts where
 the rover would stop if it braked now (half a second at the current speed, then the
 deceleration, along the arc of its current turn: braking keeps the turn) and when that is past
@@ -176,6 +180,11 @@ class Excitation:
             return f"return: {self._guard}"
         seg = self.segments[min(self.index, len(self.segments) - 1)]
         return seg.label or seg.kind
+
+    @property
+    def finished(self) -> bool:
+        """The script is over: the rover home and standing still (its last segment)."""
+        return self._guard is None and self.index == len(self.segments) - 1
 
     def reset(self) -> None:
         """After a failsafe or a gap: the current segment starts again from its beginning."""
@@ -524,6 +533,11 @@ class VectorExcitation:
         if self._returning:
             return "return"
         return self.segments[min(self.index, len(self.segments) - 1)].label
+
+    @property
+    def finished(self) -> bool:
+        """The script is over: the rover stopped (its last segment)."""
+        return not self._returning and self.index == len(self.segments) - 1
 
     def reset(self) -> None:
         self._seg_t0 = None

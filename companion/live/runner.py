@@ -359,6 +359,10 @@ class Runner:
             self._emit(ev.MISSION_DONE, f"{self.mission.duration:g} s of mission tracked")
             self._finish("mission_done", ExitCode.OK, s.time_boot_ms)
             return
+        if getattr(self.tracker, "finished", False):       # a script with nothing more to ask
+            self._emit(ev.MISSION_DONE, f"{mt:.1f} s of mission tracked: the script is over")
+            self._finish("mission_done", ExitCode.OK, s.time_boot_ms)
+            return
         assert self.trajectory is not None   # anchored when tracking began
         ref = self.trajectory.sample(mt)
         cmd = self.tracker.step(s.t, Measurement(s.x, s.y, s.yaw, s.vx, s.vy, s.yaw_rate), ref)
