@@ -125,6 +125,9 @@ class RobustConfig:
     # None: the references are not checked against the vehicle's acceleration; a number: those
     # whose peak acceleration along the path exceeds that share of it are left out (a car's)
     accel_room: float | None = None
+    # None: not checked against the vehicle's top speed; a number: references whose peak speed
+    # exceeds that share of it are left out (PX4's SIH rover, 3 m/s, and the 0.12 Hz ellipse)
+    speed_room: float | None = None
     # processes that simulate each round's candidates (this one and workers - 1 spawned): the
     # same gains at any count (:func:`evaluate`), in less wall time where cores are free
     workers: int = 1
@@ -155,14 +158,20 @@ class RobustConfig:
         either way, 2026-12-03), so a car's tune leaves it out (``accel_room`` 1:
         profiles.ackermann). A skid-steer rover's does not need to (stock rover-skid 0.049 /
         0.052 m at 0.08 Hz with and without), and PX4's deceleration is too loosely identified to judge by (0.65 to
-        3 m/s^2 over sessions of one SIH rover)."""
+        3 m/s^2 over sessions of one SIH rover). With ``speed_room``, those whose peak speed
+        exceeds that share of the vehicle's top speed are left out too: PX4 SIH's rover (3 m/s)
+        flew the 0.12 Hz ellipse (4.77 m/s) to 1.4-1.9 m whatever the gains, and it cost a
+        quarter of calibrate's final tune (2026-12-04)."""
         if self.references:
             return self.references
         top = TURN_ROOM * float(np.min(self.vehicle.max_yaw_rate))
         accel = (math.inf if self.accel_room is None else self.accel_room
                  * float(np.min(np.minimum(self.vehicle.max_accel, self.vehicle.decel))))
+        fastest = (math.inf if self.speed_room is None
+                   else self.speed_room * float(np.min(self.vehicle.max_speed)))
         kept = [f for f in PAPER_F_R if f == min(PAPER_F_R)
-                or (ellipse_turn_rate(f) <= top and ellipse_path_accel(f) <= accel)]
+                or (ellipse_turn_rate(f) <= top and ellipse_path_accel(f) <= accel
+                    and ellipse_speed(f) <= fastest)]
         return tuple((f"ellipse {f:g} Hz", Ellipse.paper(f)) for f in kept)
 
 
@@ -171,6 +180,14 @@ def ellipse_turn_rate(f_r: float, samples: int = 2000) -> float:
     ellipse = Ellipse.paper(f_r)
     return max(abs(reference_heading_rate(ellipse.sample(float(t))))
                for t in np.linspace(0.0, 1.0 / f_r, samples, endpoint=False))
+
+
+def ellipse_speed(f_r: float, samples: int = 2000) -> float:
+    """The paper's ellipse's peak speed at ``f_r`` (m/s; 3.18 at 0.08 Hz, 4.77 at 0.12 Hz)."""
+    ellipse = Ellipse.paper(f_r)
+    return max(math.hypot(r.vx, r.vy) for r in
+               (ellipse.sample(float(t)) for t in np.linspace(0.0, 1.0 / f_r, samples,
+                                                              endpoint=False)))
 
 
 def ellipse_path_accel(f_r: float, samples: int = 2000) -> float:
