@@ -291,9 +291,10 @@ PROFILE = AutopilotProfile(
         #   cone at 30 deg, nor do three other sessions' gains (0 / 0 / 1 of 36), each vehicle's
         #   own figure unchanged.
         "approach_cone": math.radians(30.0),
-        # - and no reference faster than 1.25 x its top speed (RobustConfig.speed_room): the SIH
-        #   rover (3 m/s) flew the 0.12 Hz ellipse (4.77 m/s) to 1.4-1.9 m whatever the gains, a
-        #   quarter of calibrate's final tune (the 0.08 Hz one, 3.18 m/s, stays)
-        "speed_room": 1.25,
+        # - and no reference faster than 1.5 x its top speed (RobustConfig.speed_room): the SIH
+        #   rover (2.5-3 m/s identified) flew the 0.12 Hz ellipse (4.77 m/s) to 1.4-1.9 m
+        #   whatever the gains, a quarter of calibrate's final tune; the 0.08 Hz one (3.18 m/s)
+        #   stays (at 1.25 a session that fitted 2.54 m/s left it out too)
+        "speed_room": 1.5,
     },
 )

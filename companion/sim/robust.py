@@ -126,7 +126,7 @@ class RobustConfig:
     # whose peak acceleration along the path exceeds that share of it are left out (a car's)
     accel_room: float | None = None
     # None: not checked against the vehicle's top speed; a number: references whose peak speed
-    # exceeds that share of it are left out (PX4's SIH rover, 3 m/s, and the 0.12 Hz ellipse)
+    # exceeds that share of it are left out (PX4 SIH's rover, 2.5-3 m/s, and the 0.12 Hz ellipse)
     speed_room: float | None = None
     # processes that simulate each round's candidates (this one and workers - 1 spawned): the
     # same gains at any count (:func:`evaluate`), in less wall time where cores are free
