@@ -167,6 +167,14 @@ def reference_heading_rate(ref: Reference, m: _ops.Ops = _ops.scalar) -> Num:
     return (ref.vx * ref.ay - ref.vy * ref.ax) / m.maximum(speed2, 1e-6)
 
 
+def reference_direction(ref: Reference, m: _ops.Ops = _ops.scalar) -> tuple[Num, Num, Num]:
+    """|p_ref'| and the unit vector t = p_ref' / |p_ref'| (arbitrary where |p_ref'| = 0: the
+    callers act only where it moves)."""
+    speed = m.hypot(ref.vx, ref.vy)
+    safe = m.maximum(speed, 1e-6)
+    return speed, ref.vx / safe, ref.vy / safe
+
+
 class PZCLaw:
     """Eqs. (20), (22), (23), (25) on the filtered pose, with limits and anti-windup."""
 
@@ -233,10 +241,8 @@ class PZCLaw:
 
         if self._progress:
             # Progress floor: u_p's component along the reference's direction >= gamma |p_ref'|.
-            ref_speed = m.hypot(ref.vx, ref.vy)
+            ref_speed, tx, ty = reference_direction(ref, m)
             moving = ref_speed > 1e-6
-            safe = m.maximum(ref_speed, 1e-6)
-            tx, ty = ref.vx / safe, ref.vy / safe
             lift = m.maximum(g.min_progress * ref_speed - (ux * tx + uy * ty), 0.0)
             lifting = moving & (lift > 0) if m is not _ops.scalar else (moving and lift > 0)
             lift = m.where(lifting, lift, 0.0)
@@ -274,14 +280,11 @@ class PZCLaw:
         self.int_yaw = keep_if(m, rate_free, int_yaw, self.int_yaw)
         return cmd
 
-
     def _in_cone(self, ref: Reference, ux: Num, uy: Num) -> tuple[Num, Num, Num]:
         """u_p with its part across the reference's direction held within ``approach_cone``
         (module docstring), and where that acted."""
         m = self._m
-        ref_speed = m.hypot(ref.vx, ref.vy)
-        safe = m.maximum(ref_speed, 1e-6)
-        tx, ty = ref.vx / safe, ref.vy / safe
+        ref_speed, tx, ty = reference_direction(ref, m)
         along, across = ux * tx + uy * ty, uy * tx - ux * ty
         cap = self._cone_tan * m.maximum(along, 0.5 * ref_speed)
         acting = (ref_speed > 1e-6) & (abs(across) > cap)

@@ -175,27 +175,27 @@ class RobustConfig:
         return tuple((f"ellipse {f:g} Hz", Ellipse.paper(f)) for f in kept)
 
 
+def _ellipse_samples(f_r: float, samples: int) -> list[Reference]:
+    """One period of the paper's ellipse at ``f_r``, ``samples`` evenly spaced."""
+    ellipse = Ellipse.paper(f_r)
+    return [ellipse.sample(float(t)) for t in np.linspace(0.0, 1.0 / f_r, samples, endpoint=False)]
+
+
 def ellipse_turn_rate(f_r: float, samples: int = 2000) -> float:
     """The paper's ellipse's peak turn rate at ``f_r`` (rad/s; 1.13 at 0.08 Hz)."""
-    ellipse = Ellipse.paper(f_r)
-    return max(abs(reference_heading_rate(ellipse.sample(float(t))))
-               for t in np.linspace(0.0, 1.0 / f_r, samples, endpoint=False))
+    return max(abs(reference_heading_rate(r)) for r in _ellipse_samples(f_r, samples))
 
 
 def ellipse_speed(f_r: float, samples: int = 2000) -> float:
     """The paper's ellipse's peak speed at ``f_r`` (m/s; 3.18 at 0.08 Hz, 4.77 at 0.12 Hz)."""
-    ellipse = Ellipse.paper(f_r)
-    return max(math.hypot(r.vx, r.vy) for r in
-               (ellipse.sample(float(t)) for t in np.linspace(0.0, 1.0 / f_r, samples,
-                                                              endpoint=False)))
+    return max(math.hypot(r.vx, r.vy) for r in _ellipse_samples(f_r, samples))
 
 
 def ellipse_path_accel(f_r: float, samples: int = 2000) -> float:
     """The paper's ellipse's peak acceleration along its path at ``f_r`` (m/s^2: the rate of
     change of its speed, (v . a) / |v|; 0.80 at 0.08 Hz, growing with f_r squared)."""
-    ellipse = Ellipse.paper(f_r)
-    refs = [ellipse.sample(float(t)) for t in np.linspace(0.0, 1.0 / f_r, samples, endpoint=False)]
-    return max(abs(r.vx * r.ax + r.vy * r.ay) / math.hypot(r.vx, r.vy) for r in refs)
+    return max(abs(r.vx * r.ax + r.vy * r.ay) / math.hypot(r.vx, r.vy)
+               for r in _ellipse_samples(f_r, samples))
 
 
 def ensemble(vehicle: RoverParams, count: int, spread: Spread, sample_period: float,
