@@ -239,9 +239,10 @@ class PZCLaw:
                 ux = ux - turn * ref.vy
                 uy = uy + turn * ref.vx
 
+        if self._progress or self._cone:
+            ref_speed, tx, ty = reference_direction(ref, m)     # both act along/across it
         if self._progress:
             # Progress floor: u_p's component along the reference's direction >= gamma |p_ref'|.
-            ref_speed, tx, ty = reference_direction(ref, m)
             moving = ref_speed > 1e-6
             lift = m.maximum(g.min_progress * ref_speed - (ux * tx + uy * ty), 0.0)
             lifting = moving & (lift > 0) if m is not _ops.scalar else (moving and lift > 0)
@@ -252,7 +253,7 @@ class PZCLaw:
             int_y = m.where(lifting, self.int_y, int_y)
 
         if self._cone:
-            ux, uy, held = self._in_cone(ref, ux, uy)
+            ux, uy, held = self._in_cone(ref_speed, tx, ty, ux, uy)
             int_x = m.where(held, self.int_x, int_x)
             int_y = m.where(held, self.int_y, int_y)
 
@@ -280,11 +281,11 @@ class PZCLaw:
         self.int_yaw = keep_if(m, rate_free, int_yaw, self.int_yaw)
         return cmd
 
-    def _in_cone(self, ref: Reference, ux: Num, uy: Num) -> tuple[Num, Num, Num]:
-        """u_p with its part across the reference's direction held within ``approach_cone``
-        (module docstring), and where that acted."""
+    def _in_cone(self, ref_speed: Num, tx: Num, ty: Num, ux: Num, uy: Num
+                 ) -> tuple[Num, Num, Num]:
+        """u_p with its part across the reference's direction t = (tx, ty) held within
+        ``approach_cone`` (module docstring), and where that acted."""
         m = self._m
-        ref_speed, tx, ty = reference_direction(ref, m)
         along, across = ux * tx + uy * ty, uy * tx - ux * ty
         cap = self._cone_tan * m.maximum(along, 0.5 * ref_speed)
         acting = (ref_speed > 1e-6) & (abs(across) > cap)

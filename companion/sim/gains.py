@@ -43,6 +43,10 @@ from ..errors import UserError
 TUNED_DIR = Path(__file__).parent / "tuned"
 
 
+# Law settings newer than the first gains files: written only when on (not at their default)
+OMITTED_WHEN_OFF = ("min_progress", "course_tau", "brake_integrate", "approach_cone")
+
+
 @dataclass(frozen=True)
 class TunedGains:
     filter: FilterGains
@@ -69,9 +73,7 @@ class TunedGains:
                   f"lambda_f = {float(self.filter.lambda_f)!r}", "", "[pzc]"]
         for f in fields(PZCGains):
             value = getattr(self.pzc, f.name)
-            if value is None or (f.name in ("min_progress", "course_tau", "approach_cone")
-                                     and not value) or (
-                    f.name == "brake_integrate" and value == 1.0):
+            if value is None or (f.name in OMITTED_WHEN_OFF and value == f.default):
                 continue              # off: not written (older files stay as they were)
             if f.name in ("velocity_ff", "heading_rate_ff"):
                 lines.append(f"{f.name} = {'true' if value else 'false'}")
