@@ -79,6 +79,7 @@ import numpy as np
 
 from ..core import ops as _ops
 from ..core.signals import Measurement, Num
+from . import plant_lanes
 
 # m/s: ArduPilot takes the lateral-acceleration limit at no less than this speed
 # (AR_AttitudeControl.cpp, AR_ATTCONTROL_STEER_SPEED_MIN), so a rover starting off may turn.
@@ -195,7 +196,8 @@ class RoverModel:
     """Eqs. (1)-(2) plus the inner loops. ``step`` returns a new state; the one thing the model
     itself holds is the commands still in flight through a pure delay (:class:`CommandDelay`)."""
 
-    def __init__(self, params: RoverParams = RoverParams(), n: int | None = None):
+    def __init__(self, params: RoverParams = RoverParams(), n: int | None = None,
+                 compiled: bool = True):
         self.params = params
         self.n = n
         self._m = _ops.for_size(n)
@@ -210,6 +212,13 @@ class RoverModel:
         self._trig_yaw: Num = None                           # no heading is None: no hit yet
         self._trig_cs: tuple[Num, Num] = (1.0, 0.0)
         self._decay_h: float | None = None
+        # many vehicles, rate-limited: one compiled pass over them per step (numpy: compiled=False)
+        self._lanes = (plant_lanes.LaneStepper(params, n, {
+            "coupled": self._coupled, "turn_coupled": self._turn_coupled,
+            "curvature": self._curvature, "lateral": self._lateral,
+            "overshoot": self._overshoot, "yaw_overshoot": self._yaw_overshoot}, self.delay)
+            if n is not None and compiled and not self._paper and plant_lanes.available()
+            else None)
 
     def _trig(self, yaw: Num) -> tuple[Num, Num]:
         """cos and sin of a heading; the last step's end heading is remembered, so the next step and
@@ -272,18 +281,30 @@ class RoverModel:
         module docstring): speed |u_p|, turn rate from PX4's course loop on atan2(u_p), then
         each through its channel's delay, as :meth:`step` (what identification fits: the
         course loop's output on the heading of the moment, delayed)."""
+        if self._lanes is not None:
+            return self._lane_step(s, ux, uy, dt, vector=True)
         m = self._m
         course_err = m.wrap(m.atan2(uy, ux) - s.yaw)
         return self.step(s, m.hypot(ux, uy), self.params.course_gain * course_err, dt)
 
     def step(self, s: RoverState, speed_cmd: Num, yaw_rate_cmd: Num, dt: float) -> RoverState:
         """Advance ``dt`` seconds with the commands (v_ref, omega_ref) held (after the delay)."""
+        if self._lanes is not None:
+            return self._lane_step(s, speed_cmd, yaw_rate_cmd, dt, vector=False)
         if self.delay is not None:
             speed_cmd, yaw_rate_cmd = self.delay.push(speed_cmd, yaw_rate_cmd, dt)
         u, w = self.clamp_command(speed_cmd, yaw_rate_cmd, s.omega, s.v)
         if self._paper:
             return self._step_exact(s, u, w, dt)
         return self._step_limited(s, u, w, dt)
+
+    def _lane_step(self, s: RoverState, a: Num, b: Num, dt: float, vector: bool) -> RoverState:
+        """:meth:`step` / :meth:`step_vector` by :mod:`companion.sim.plant_lanes`'s loop."""
+        assert self._lanes is not None
+        out = self._lanes.step(s, a, b, dt, vector)
+        state = RoverState(out[0], out[1], out[2], out[3], out[4], out[5], out[6])
+        self._trig_yaw, self._trig_cs = state.yaw, (out[7], out[8])    # as _trig remembers
+        return state
 
     def _step_limited(self, s: RoverState, u: Num, w: Num, h: float) -> RoverState:
         """Rate-limited channels, exact per channel (:func:`_channel`), Simpson for x and y;
@@ -468,7 +489,11 @@ class CommandDelay:
         self._lag = [np.broadcast_to(np.rint(np.asarray(d, dtype=float) / h).astype(int), shape)
                      for d in (self.speed_delay, self.yaw_delay)]
         self._size = int(max(lag.max(initial=0) for lag in self._lag)) + 1
-        self._buf = [np.zeros((self._size,) + shape) for _ in range(2)]
+        # both channels' rings in one array (the compiled plant takes it whole), one view each
+        self._ring = np.zeros((2, self._size) + shape)
+        self._buf = [self._ring[0], self._ring[1]]
+        self._lags = np.stack([np.broadcast_to(lag, shape).astype(np.int64).reshape(-1)
+                               for lag in self._lag])
         self._cols = None if self.n is None else np.arange(self.n)
         self._flat = [buf.reshape(-1) for buf in self._buf]
         # one delay for every vehicle (the usual case) reads a whole row, no gather
@@ -476,13 +501,30 @@ class CommandDelay:
                          for lag in self._lag]
         self._k = 0
 
-    def push(self, speed: Num, yaw_rate: Num, h: float) -> tuple[Num, Num]:
+    def advance(self, h: float) -> int:
+        """The slot this push writes (the step count so far), the step ``h`` checked."""
         if self.h is None:
             self._setup(h)
         elif abs(h - self.h) > 1e-12:
             raise ValueError(f"a delayed plant needs a fixed step: {self.h} s, then {h} s")
-        k, size = self._k, self._size
+        k = self._k
         self._k = k + 1
+        return k
+
+    @property
+    def ring(self) -> np.ndarray:
+        """The ring buffers, [channel (speed, turn rate), slot, vehicle]: slot k % size holds
+        push k (after :meth:`advance`)."""
+        return self._ring
+
+    @property
+    def lags(self) -> np.ndarray:
+        """[channel, vehicle]: how many pushes back each command comes out (int64)."""
+        return self._lags
+
+    def push(self, speed: Num, yaw_rate: Num, h: float) -> tuple[Num, Num]:
+        k = self.advance(h)
+        size = self._size
         out = []
         for buf, flat, lag, uniform, value in zip(self._buf, self._flat, self._lag, self._uniform,
                                                   (speed, yaw_rate), strict=True):
