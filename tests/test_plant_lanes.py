@@ -134,3 +134,48 @@ def test_numba_compiles_the_step_where_it_has_wheels():
     slower (benchmarks/bench_tune.py)."""
     assert plant_lanes.available()
     assert RoverModel(RoverParams.stock_rover(), 8)._lanes is not None
+
+
+def _respond_case(case: str):
+    rng = np.random.default_rng({"skid": 11, "car": 12}[case])
+    params = _params(case, rng)
+    t = np.cumsum(rng.choice([0.02, 0.02, 0.02, 0.04], 2500))
+    speed = 2.0 * np.sin(0.3 * t) + np.where(np.sin(0.07 * t) > 0.5, 1.2, -0.3)
+    turn = 1.2 * np.sin(0.8 * t + 0.5) + np.where(np.cos(0.19 * t) > 0.6, -1.5, 0.0)
+    return params, t, speed, turn
+
+
+@needs_numba
+@pytest.mark.parametrize("case", ["skid", "car"])
+def test_compiled_respond_is_the_numpy_respond(case):
+    """Identification's model (sim.response.respond: both channels, coupled through their
+    clamps, with delays and overshoots), compiled against numpy's step loop."""
+    from companion.sim.response import respond
+    params, t, speed, turn = _respond_case(case)
+    fast = respond(params, t, speed, turn, N, 0.01, v0=0.3, omega0=-0.2)
+    ref = respond(params, t, speed, turn, N, 0.01, v0=0.3, omega0=-0.2, compiled=False)
+    assert np.ptp(ref[0]) > 2.0 and np.ptp(ref[1]) > 1.0
+    for a, b in zip(fast, ref, strict=True):
+        assert a.shape == b.shape == (len(t), N)
+        assert np.max(np.abs(a - b) / (1.0 + np.abs(b))) < 1e-10
+
+
+@needs_numba
+def test_respond_loop_as_python_is_the_numpy_respond():
+    from companion.sim import response
+    params, t, speed, turn = _respond_case("car")
+    t, speed, turn = t[:300], speed[:300], turn[:300]
+    python_loop = plant_lanes._respond_compiled.py_func
+    saved = plant_lanes.respond_series
+
+    def with_python(*args, **kwargs):
+        return saved(*args, loop=python_loop, **kwargs)
+
+    plant_lanes.respond_series = with_python
+    try:
+        python = response.respond(params, t, speed, turn, N, 0.01)
+    finally:
+        plant_lanes.respond_series = saved
+    ref = response.respond(params, t, speed, turn, N, 0.01, compiled=False)
+    for a, b in zip(python, ref, strict=True):
+        assert np.max(np.abs(a - b) / (1.0 + np.abs(b))) < 1e-10

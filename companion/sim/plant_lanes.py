@@ -1,20 +1,24 @@
-"""The plant's rate-limited step for many vehicles as one compiled loop: batch simulation's plant.
+"""The plant's step for many vehicles as compiled loops: batch simulation's and identification's.
 
 :class:`LaneStepper` advances every vehicle of a :class:`companion.sim.plant.RoverModel` built
 on arrays by one step: PX4's course loop (``step_vector``), the commands' pure delay
 (:class:`companion.sim.plant.CommandDelay`'s ring buffers), ``clamp_command``, the
 rate-limited channels with their overshoots (``_channel``, ``overshoot_step``,
 ``overshoot_integral``) and Simpson's rule for x and y (``_simpson``): the same operations in
-the same order, per vehicle on floats.
+the same order, per vehicle on floats. :func:`respond_series` is
+:func:`companion.sim.response.respond`'s loop (the two channels alone over a whole setpoint
+series, what a fit's RMS and its plots run) the same way.
 
 Stepped by numpy, a batch step costs about 150 array operations whatever the number of vehicles
 is: on the robust tuner's batches (1,344 vehicles: 64 candidates on 7 neighbours and 3
-references, 2026-12-05) the plant was 3.1 of an evaluation's 5.7 s. Compiled by numba (when it
-is installed) the step is one pass over the vehicles. Both compute the same numbers (to
-rounding: ``tests/test_plant_lanes.py``); ``RoverModel(..., compiled=False)`` forces numpy, the
-reference. The paper's exact linear step (no limits) is not compiled: nothing tunes on it.
+references, 2026-12-05) the plant was 3.1 of an evaluation's 5.7 s; respond on one model is
+all overhead (an 85 s manoeuvre's RMS 1.6 s, compiled 2 ms). Compiled by numba (when it is
+installed) a step is one pass over the vehicles. Both compute the same numbers (to rounding:
+``tests/test_plant_lanes.py``); ``RoverModel(..., compiled=False)`` and ``respond(...,
+compiled=False)`` force numpy, the reference. The paper's exact linear step (no limits) is not
+compiled: nothing tunes on it.
 
-Pure: arrays in, arrays out (numba's cache of the compiled loop aside).
+Pure: arrays in, arrays out (numba's cache of the compiled loops aside).
 """
 
 from __future__ import annotations
@@ -32,6 +36,7 @@ if TYPE_CHECKING:        # plant imports this module (its model on arrays steps 
     from .plant import CommandDelay, RoverParams, RoverState
 
 _compiled: Callable[..., None] | None = None     # _loop, compiled (when numba is here)
+_respond_compiled: Callable[..., None] | None = None     # _respond_loop, likewise
 
 # The parameters the loop reads, in its argument order (RoverParams' fields and properties).
 PARAMS = ("d_cen", "w_c", "yaw_bandwidth", "max_speed", "max_yaw_rate", "max_accel", "decel",
@@ -59,9 +64,7 @@ class LaneStepper:
         chosen = loop or _compiled
         assert chosen is not None, "RoverModel builds a stepper only where numba compiled it"
         self._loop: Callable[..., None] = chosen
-        self._params = np.stack([np.broadcast_to(np.asarray(getattr(params, name),
-                                                            dtype=np.float64), (n,))
-                                 for name in PARAMS])
+        self._params = param_rows(params, n)
         self._switches = [switches[name] for name in SWITCHES]
         # an undelayed model's stand-ins for the ring buffers (never read)
         self._no_ring, self._no_lags = np.zeros((2, 1, 1)), np.zeros((2, 1), dtype=np.int64)
@@ -117,6 +120,26 @@ def _nan_max(a: float, b: float) -> float:
     if a != a or b != b:
         return math.nan
     return a if a > b else b
+
+
+def _clamp(speed_cmd: float, yaw_cmd: float, v: float, omega: float, max_speed: float,
+           max_yaw_rate: float, tsc: float, stc: float, min_radius: float, lat_accel: float,
+           coupled: bool, turn_coupled: bool, curvature: bool, lateral: bool
+           ) -> tuple[float, float]:
+    """``RoverModel.clamp_command``: the commands clamped to the ranges the state (v, omega)
+    leaves them."""
+    top = max_speed
+    if coupled:
+        top = top * (1.0 - tsc * _nan_min(abs(omega) / max_yaw_rate, 1.0))
+    top_w = max_yaw_rate
+    if turn_coupled:
+        top_w = top_w * (1.0 - stc * _nan_min(abs(v) / max_speed, 1.0))
+    if curvature:
+        top_w = _nan_min(top_w, abs(v) / (min_radius if min_radius > 0 else 1e-12))
+    if lateral:
+        top_w = _nan_min(top_w, lat_accel / _nan_max(abs(v), LAT_ACCEL_MIN_SPEED))
+    return (_nan_min(_nan_max(speed_cmd, -top), top),
+            _nan_min(_nan_max(yaw_cmd, -top_w), top_w))
 
 
 def _channel(x0: float, u: float, b: float, up: float, down: float, t: float,
@@ -194,18 +217,8 @@ def _loop(vector: bool, delayed: bool, trig: bool, coupled: bool, turn_coupled: 
             ring[1, k % size, i] = yaw_cmd
             speed_cmd = ring[0, (k - lags[0, i]) % size, i]
             yaw_cmd = ring[1, (k - lags[1, i]) % size, i]
-        top = max_speed                             # clamp_command
-        if coupled:
-            top = top * (1.0 - tsc * _nan_min(abs(w0) / max_yaw_rate, 1.0))
-        top_w = max_yaw_rate
-        if turn_coupled:
-            top_w = top_w * (1.0 - stc * _nan_min(abs(v0) / max_speed, 1.0))
-        if curvature:
-            top_w = _nan_min(top_w, abs(v0) / (min_radius if min_radius > 0 else 1e-12))
-        if lateral:
-            top_w = _nan_min(top_w, lat_accel / _nan_max(abs(v0), LAT_ACCEL_MIN_SPEED))
-        u = _nan_min(_nan_max(speed_cmd, -top), top)
-        w = _nan_min(_nan_max(yaw_cmd, -top_w), top_w)
+        u, w = _clamp(speed_cmd, yaw_cmd, v0, w0, max_speed, max_yaw_rate, tsc, stc, min_radius,
+                      lat_accel, coupled, turn_coupled, curvature, lateral)
         # _step_limited: the speed channel (and its overshoot)
         z_end = v_slow
         vx0 = v0
@@ -254,6 +267,64 @@ def _loop(vector: bool, delayed: bool, trig: bool, coupled: bool, turn_coupled: 
         out[8, i] = s2
 
 
+def _respond_loop(u_cmd: Any, w_cmd: Any, held: Any, lags: Any, p: Any, coupled: bool,
+                  turn_coupled: bool, curvature: bool, lateral: bool, over: bool, over_w: bool,
+                  v0: float, w0: float, dt: float, v_out: Any, w_out: Any
+                  ) -> None:   # pragma: no cover - compiled; as Python: test_plant_lanes
+    """``companion.sim.response.respond``'s step loop per model on floats: the delayed setpoint
+    in force (``u_cmd[held[k - lag]]``, zero before the first), ``clamp_command`` on the
+    channels' outputs, then ``lag_step`` for each channel. ``p`` rows: :data:`PARAMS`;
+    ``lags`` [channel, model]: delays in steps."""
+    steps, n = v_out.shape
+    for i in range(n):
+        whole_v, whole_w = math.exp(-p[1, i] * dt), math.exp(-p[2, i] * dt)
+        keep_v, keep_w = math.exp(-dt / p[15, i]), math.exp(-dt / p[17, i])
+        v = x = z = v0
+        w = xw = zw = w0
+        for k in range(steps):
+            v_out[k, i] = v
+            w_out[k, i] = w
+            ku, kw = k - lags[0, i], k - lags[1, i]
+            u, r = _clamp(u_cmd[held[ku]] if ku >= 0 else 0.0,
+                          w_cmd[held[kw]] if kw >= 0 else 0.0, v, w, p[3, i], p[4, i],
+                          p[9, i], p[10, i], p[12, i], p[13, i], coupled, turn_coupled,
+                          curvature, lateral)
+            x1 = _channel(x, u, p[1, i], p[5, i], p[6, i], dt, whole_v)[0]
+            if over:
+                v, z = _overshoot(x, x1, z, p[14, i], keep_v)
+            else:
+                v = x1
+            x = x1
+            xw1 = _channel(xw, r, p[2, i], p[7, i], p[8, i], dt, whole_w)[0]
+            if over_w:
+                w, zw = _overshoot(xw, xw1, zw, p[16, i], keep_w)
+            else:
+                w = xw1
+            xw = xw1
+
+
+def respond_series(params: RoverParams, n: int, switches: dict[str, bool],
+                   u_cmd: np.ndarray, w_cmd: np.ndarray, held: np.ndarray, lags: np.ndarray,
+                   v0: float, w0: float, dt: float, steps: int, over: bool, over_w: bool,
+                   loop: Callable[..., None] | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Speed and turn rate of ``n`` models on ``steps`` grid steps (respond's, compiled)."""
+    chosen = loop or _respond_compiled
+    assert chosen is not None, "respond compiles only where numba is installed"
+    v_out, w_out = np.empty((steps, n)), np.empty((steps, n))
+    chosen(np.ascontiguousarray(u_cmd, dtype=np.float64),
+           np.ascontiguousarray(w_cmd, dtype=np.float64),
+           np.ascontiguousarray(held, dtype=np.int64), np.ascontiguousarray(lags, dtype=np.int64),
+           param_rows(params, n), *(switches[name] for name in SWITCHES[:4]), over, over_w,
+           float(v0), float(w0), float(dt), v_out, w_out)
+    return v_out, w_out
+
+
+def param_rows(params: RoverParams, n: int) -> np.ndarray:
+    """:data:`PARAMS` of ``params`` as rows of ``n`` floats (what the compiled loops read)."""
+    return np.stack([np.broadcast_to(np.asarray(getattr(params, name), dtype=np.float64), (n,))
+                     for name in PARAMS])
+
+
 try:                                     # an optional accelerator: the numpy path is complete
     import numba
 except ImportError:                      # pragma: no cover - platforms without numba's wheels
@@ -268,7 +339,9 @@ else:
 
     # the helpers first: the loop calls them by their global names
     _nan_min, _nan_max = _jit(_nan_min), _jit(_nan_max)
+    _clamp = _jit(_clamp)
     _channel, _overshoot, _overshoot_integral = (
         _jit(_channel), _jit(_overshoot), _jit(_overshoot_integral))
     _decays = _jit(_decays)
     _compiled = _jit(_loop)
+    _respond_compiled = _jit(_respond_loop)

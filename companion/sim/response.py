@@ -13,19 +13,23 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike
 
+from . import plant_lanes
 from .plant import CommandDelay, RoverModel, RoverParams, lag_step
 
 
 def respond(params: RoverParams, t: ArrayLike, speed_cmd: ArrayLike,
             yaw_rate_cmd: ArrayLike, n: int, dt: float = 0.01,
-            v0: float = 0.0, omega0: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+            v0: float = 0.0, omega0: float = 0.0, compiled: bool = True
+            ) -> tuple[np.ndarray, np.ndarray]:
     """Speed and turn rate at the times ``t`` (s, increasing) for ``n`` models.
 
     ``speed_cmd[k]`` / ``yaw_rate_cmd[k]`` is the setpoint given at ``t[k]`` and held until
     ``t[k+1]``. The channels are stepped on a ``dt`` grid from ``t[0]``; each sample is read at
     the grid point at or just before its time, and a setpoint is in force from the grid point
     at or just after its time (both to within 1e-9 of a step: float rounding of the times).
-    Returns two arrays of shape ``(len(t), n)``.
+    Returns two arrays of shape ``(len(t), n)``. The step loop is compiled where numba is
+    installed (:func:`companion.sim.plant_lanes.respond_series`: the same arithmetic per model;
+    ``compiled=False`` steps numpy, the reference).
     """
     t = np.asarray(t, dtype=float)
     u_in = np.asarray(speed_cmd, dtype=float)
@@ -45,14 +49,20 @@ def respond(params: RoverParams, t: ArrayLike, speed_cmd: ArrayLike,
     # step later, as each sample is read at its own grid point below.
     held = np.searchsorted(t, grid + 1e-9 * dt, side="right") - 1
     sample_step = np.minimum(((t - t[0]) / dt + 1e-9).astype(int), steps - 1)
+    over = bool(np.any(np.asarray(p.speed_overshoot) > 0))
+    over_w = bool(np.any(np.asarray(p.yaw_overshoot) != 0))
+    if compiled and plant_lanes.available():
+        lags = np.stack([np.broadcast_to(np.rint(np.asarray(d, dtype=float) / dt).astype(int),
+                                         (n,)) for d in (p.speed_delay, p.yaw_delay)])
+        v_out, w_out = plant_lanes.respond_series(p, n, model.switches, u_in, w_in, held, lags,
+                                                  v0, omega0, dt, steps, over, over_w)
+        return v_out[sample_step], w_out[sample_step]
     v = np.full(n, float(v0))
     x = v                               # the speed channel's output (v without overshoot)
     z = v
-    over = bool(np.any(np.asarray(p.speed_overshoot) > 0))
     w = np.full(n, float(omega0))
     xw = w                              # the turn-rate channel's output (omega without overshoot)
     zw = w
-    over_w = bool(np.any(np.asarray(p.yaw_overshoot) != 0))
     v_out = np.empty((steps, n))
     w_out = np.empty((steps, n))
     for k in range(steps):
