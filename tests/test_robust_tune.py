@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import math
+import os
 from dataclasses import replace
 from pathlib import Path
 
@@ -119,6 +120,15 @@ def test_a_search_split_over_processes_finds_the_very_gains_of_one_process():
     split = tune(replace(cfg, workers=2))
     assert split.gains == one.gains and split.objective == one.objective
     assert split.nominal_steady_rms == one.nominal_steady_rms and split.evaluated == one.evaluated
+    # calibrate starts the processes ahead (robust.worker_pool: warmed during its refining
+    # flight) and hands them to the tune: the same gains again, and they are its processes
+    from companion.sim.robust import worker_pool
+    with worker_pool(2) as pool:
+        assert pool is not None
+        ahead = tune(replace(cfg, workers=2), pool=pool)
+        pids = {pool.submit(os.getpid).result() for _ in range(3)}
+    assert ahead.gains == one.gains and ahead.objective == one.objective
+    assert len(pids) == 1 and os.getpid() not in pids
 
 
 def test_companion_tune_vehicle_writes_gains_that_record_their_vehicle(tmp_path):

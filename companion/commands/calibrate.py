@@ -117,12 +117,12 @@ NOTHING_ROBUST = ("calibrate: the tuner found no gains that hold on every neighb
                   "autopilot's (a turn-rate or acceleration limit far below its parameter)")
 
 
-def _tune(vehicle: Path, rate: float, command: str, args, log):
+def _tune(vehicle: Path, rate: float, command: str, args, log, pool=None):
     from ..sim.vehicle_gains import NothingRobust
     from .flight import gains_for_vehicle
     try:
         return gains_for_vehicle(vehicle, rate, command, not args.quiet and not args.json, log,
-                                 population=args.population, rounds=args.rounds,
+                                 pool, population=args.population, rounds=args.rounds,
                                  workers=tune_workers())
     except NothingRobust:
         raise UserError(NOTHING_ROBUST.format(vehicle=vehicle)) from None
@@ -298,22 +298,26 @@ def run(args) -> int:
     command = "companion " + shlex.join(sys.argv[1:]) if sys.argv[1:2] == ["calibrate"] \
         else f"companion calibrate --connect {args.connect} --out {args.out}"
     refined = {"refined": False, "why": "--no-refine" if not args.refine else "--no-log"}
-    if args.refine and args.log:
-        t0, c0 = time.monotonic(), time.process_time()
-        quick = _quick_gains(vehicle, rate, command, log)
-        timings["refine_tune"] = time.monotonic() - t0
-        cpu["refine_tune"] = time.process_time() - c0
-        log(f"refining: {REFINE_S:g} s of the paper's ellipse at {REFINE_F_R:g} Hz")
-        try:
-            refined = _refine(options, args, vehicle, report, log, quick, timings, cpu)
-        finally:
-            quick.unlink(missing_ok=True)
-        log("refined: " + ("one model fitted to both flights" if refined["refined"]
-                           else f"kept the manoeuvre's model ({refined['why']})"))
-    t0, c0, w0 = time.monotonic(), time.process_time(), _children_cpu()
-    gains = _tune(vehicle, rate, command, args, log)
-    timings["tune"] = time.monotonic() - t0
-    cpu["tune"] = time.process_time() - c0
+    from ..sim.robust import worker_pool
+    # the final tune's other processes start now and load what they need (2-3 s each) while
+    # the refining tune and flight go on: they wait idle until the tune
+    with worker_pool(tune_workers()) as pool:
+        if args.refine and args.log:
+            t0, c0 = time.monotonic(), time.process_time()
+            quick = _quick_gains(vehicle, rate, command, log)
+            timings["refine_tune"] = time.monotonic() - t0
+            cpu["refine_tune"] = time.process_time() - c0
+            log(f"refining: {REFINE_S:g} s of the paper's ellipse at {REFINE_F_R:g} Hz")
+            try:
+                refined = _refine(options, args, vehicle, report, log, quick, timings, cpu)
+            finally:
+                quick.unlink(missing_ok=True)
+            log("refined: " + ("one model fitted to both flights" if refined["refined"]
+                               else f"kept the manoeuvre's model ({refined['why']})"))
+        t0, c0, w0 = time.monotonic(), time.process_time(), _children_cpu()
+        gains = _tune(vehicle, rate, command, args, log, pool)
+        timings["tune"] = time.monotonic() - t0
+        cpu["tune"] = time.process_time() - c0
     cpu["tune_workers"] = _children_cpu() - w0     # the other cores' share (tune_workers())
     timings["total"] = time.monotonic() - t_start
     cpu["total"] = time.process_time() - cpu_start

@@ -73,13 +73,16 @@ def tune_search(path, **search) -> dict[str, Any]:
     return {**tune_settings(vehicle_file.load(path).params), **search}
 
 
-def gains_for_vehicle(path, rate: float, command: str, show_bar: bool, log: Log, **search):
+def gains_for_vehicle(path, rate: float, command: str, show_bar: bool, log: Log, pool=None,
+                      **search):
     """The gains tuned for a vehicle file (found beside it, else tuned now and stored there,
-    with a progress bar): for run, demo, simulate and calibrate."""
+    with a progress bar; ``pool``: robust.worker_pool's): for run, demo, simulate and
+    calibrate."""
     from ..progress import progress_bar
     from ..sim.vehicle_gains import gains_for
     with progress_bar(f"tuning for {Path(path).name}", show_bar) as progress:
-        return gains_for(path, rate, command, progress, log, **tune_search(path, **search))
+        return gains_for(path, rate, command, progress, log, pool,
+                         **tune_search(path, **search))
 
 
 def known_vehicle(path: str | None, mission: Any, gains: Any, command: str, show_bar: bool,

@@ -36,6 +36,7 @@ import functools
 import itertools
 import math
 import multiprocessing
+import signal
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from concurrent.futures import Executor, ProcessPoolExecutor
 from dataclasses import dataclass, field, replace
@@ -50,7 +51,7 @@ from ..core.signals import Num, Reference
 from ..core.trajectory import Ellipse, Trajectory
 from .batch import SimConfig, simulate
 from .gains import TunedGains
-from .plant import RoverParams
+from .plant import RoverModel, RoverParams, RoverState
 from .tuning import Candidates, perturb, random_candidates
 
 PAPER_F_R = (0.02, 0.04, 0.08, 0.12)
@@ -503,6 +504,20 @@ class RobustResult:
     rejected: dict[str, int] = field(default_factory=dict)
 
 
+def _worker_start() -> None:
+    """Each spawned process first: Ctrl-C is the parent's to act on (it stops the search and
+    shuts the pool down), not a traceback from every worker."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
+def _warm() -> None:
+    """A worker's first task when the pool is started ahead (:func:`worker_pool`): unpickling
+    it imported this module, and one step loads the compiled plant (numba's cache)."""
+    model = RoverModel(RoverParams.stock_rover(), 2)
+    model.step(RoverState(np.zeros(2), np.zeros(2), np.zeros(2), np.zeros(2), np.zeros(2)),
+               0.0, 0.0, 0.02)
+
+
 @contextlib.contextmanager
 def _workers(count: int) -> Iterator[Executor | None]:
     """``count - 1`` spawned processes for :func:`evaluate` (None for one: this process
@@ -510,7 +525,21 @@ def _workers(count: int) -> Iterator[Executor | None]:
     if count <= 1:
         yield None
         return
-    with ProcessPoolExecutor(count - 1, mp_context=multiprocessing.get_context("spawn")) as pool:
+    with ProcessPoolExecutor(count - 1, mp_context=multiprocessing.get_context("spawn"),
+                             initializer=_worker_start) as pool:
+        yield pool
+
+
+@contextlib.contextmanager
+def worker_pool(count: int) -> Iterator[Executor | None]:
+    """:func:`tune`'s processes started now and warmed (Python, numpy, this module and the
+    compiled plant loaded: about 2-3 s each on a slow day) while the caller does other work, for
+    ``tune(cfg, pool=...)`` with ``cfg.workers == count`` (calibrate: during its refining tune
+    and flight). Idle, a worker only waits."""
+    with _workers(count) as pool:
+        if pool is not None:
+            for _ in range(count - 1):
+                pool.submit(_warm)
         yield pool
 
 
@@ -541,8 +570,10 @@ def _search(cfg: RobustConfig, vehicles: Sequence[RoverParams], population: Cand
     return best, evaluated
 
 
-def tune(cfg: RobustConfig, progress: Callable[[float], None] | None = None) -> RobustResult:
-    """Search the gains for ``cfg.vehicle`` and its ensemble; ``progress(fraction)``."""
+def tune(cfg: RobustConfig, progress: Callable[[float], None] | None = None,
+         pool: Executor | None = None) -> RobustResult:
+    """Search the gains for ``cfg.vehicle`` and its ensemble; ``progress(fraction)``. ``pool``:
+    :func:`worker_pool`'s processes (``cfg.workers - 1`` of them), else spawned here."""
     rng = np.random.default_rng(cfg.seed)
     period = 1.0 / cfg.rate_hz
     vehicles = ensemble(cfg.vehicle, cfg.neighbours, cfg.spread, period, cfg.seed)
@@ -550,7 +581,7 @@ def tune(cfg: RobustConfig, progress: Callable[[float], None] | None = None) -> 
     population = Candidates.concat([start, _random(rng, max(1, cfg.population - len(start)))])
     rejected = {"limit cycle": 0, "diverged": 0}
     total = cfg.rounds + 1
-    with _workers(cfg.workers) as pool:
+    with (contextlib.nullcontext(pool) if pool is not None else _workers(cfg.workers)) as pool:
         best, evaluated = _search(cfg, vehicles, population, rng, rejected, total, progress,
                                   pool)
     winner = best.take(np.array([0]))

@@ -123,9 +123,10 @@ def path_beside(vehicle_path: str | Path, rate: float) -> Path:
 
 def gains_for(vehicle_path: str | Path, rate: float, command: str,
               progress: Callable[[float], None] | None = None,
-              log: Callable[[str], None] = lambda text: None, **search: Any) -> TunedGains:
+              log: Callable[[str], None] = lambda text: None, pool: Any = None,
+              **search: Any) -> TunedGains:
     """The vehicle's gains at ``rate``: found beside it, else tuned now (``search``: the
-    tuner's population, rounds, ...) and stored there."""
+    tuner's population, rounds, ...; ``pool``: robust.worker_pool's) and stored there."""
     found = find_beside(vehicle_path, rate)
     if found is not None:
         log(f"gains tuned for {vehicle_path}: {found.source}")
@@ -133,7 +134,7 @@ def gains_for(vehicle_path: str | Path, rate: float, command: str,
     log(f"no gains tuned for {vehicle_path} at {rate:g} Hz yet: tuning them now (about a minute)")
     cfg = config_for(vehicle_path, rate, **search)
     try:
-        result = tune(cfg, progress)
+        result = tune(cfg, progress, pool)
     except RuntimeError as exc:
         raise NothingRobust(f"{vehicle_path}: {exc}") from None
     tuned = record(result, cfg, vehicle_path, command)
