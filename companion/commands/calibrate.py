@@ -16,7 +16,8 @@
    skips this step; it needs the flight logs);
 3. tunes gains for the model kept, on it and its neighbours (``companion tune --vehicle``,
    128 x 4 unless ``--population`` / ``--rounds`` say otherwise, each round's candidates split
-   over the machine's cores: the same gains as in one process): ``DIR/gains.toml``, recorded
+   over the machine's cores, the other processes started and warmed during step 2: the same
+   gains as in one process): ``DIR/gains.toml``, recorded
    with the vehicle file's SHA-256;
 4. prints the ``companion run --vehicle DIR/vehicle.toml`` command that flies with them.
 """
