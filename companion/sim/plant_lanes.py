@@ -267,6 +267,16 @@ def _loop(vector: bool, delayed: bool, trig: bool, coupled: bool, turn_coupled: 
         out[8, i] = s2
 
 
+def _lag_step(x: float, z: float, u: float, b: float, up: float, down: float, dt: float,
+              whole: float, g: float, keep: float, over: bool) -> tuple[float, float, float]:
+    """``plant.lag_step``: (what is measured, the channel's output x, the overshoot's z)."""
+    x1 = _channel(x, u, b, up, down, dt, whole)[0]
+    if not over:
+        return x1, x1, z
+    y, z1 = _overshoot(x, x1, z, g, keep)
+    return y, x1, z1
+
+
 def _respond_loop(u_cmd: Any, w_cmd: Any, held: Any, lags: Any, p: Any, coupled: bool,
                   turn_coupled: bool, curvature: bool, lateral: bool, over: bool, over_w: bool,
                   v0: float, w0: float, dt: float, v_out: Any, w_out: Any
@@ -289,18 +299,10 @@ def _respond_loop(u_cmd: Any, w_cmd: Any, held: Any, lags: Any, p: Any, coupled:
                           w_cmd[held[kw]] if kw >= 0 else 0.0, v, w, p[3, i], p[4, i],
                           p[9, i], p[10, i], p[12, i], p[13, i], coupled, turn_coupled,
                           curvature, lateral)
-            x1 = _channel(x, u, p[1, i], p[5, i], p[6, i], dt, whole_v)[0]
-            if over:
-                v, z = _overshoot(x, x1, z, p[14, i], keep_v)
-            else:
-                v = x1
-            x = x1
-            xw1 = _channel(xw, r, p[2, i], p[7, i], p[8, i], dt, whole_w)[0]
-            if over_w:
-                w, zw = _overshoot(xw, xw1, zw, p[16, i], keep_w)
-            else:
-                w = xw1
-            xw = xw1
+            v, x, z = _lag_step(x, z, u, p[1, i], p[5, i], p[6, i], dt, whole_v, p[14, i],
+                                keep_v, over)
+            w, xw, zw = _lag_step(xw, zw, r, p[2, i], p[7, i], p[8, i], dt, whole_w, p[16, i],
+                                  keep_w, over_w)
 
 
 def respond_series(params: RoverParams, n: int, switches: dict[str, bool],
@@ -343,5 +345,6 @@ else:
     _channel, _overshoot, _overshoot_integral = (
         _jit(_channel), _jit(_overshoot), _jit(_overshoot_integral))
     _decays = _jit(_decays)
+    _lag_step = _jit(_lag_step)
     _compiled = _jit(_loop)
     _respond_compiled = _jit(_respond_loop)
