@@ -75,7 +75,9 @@ def request(pilot: Pilot, msg_id: int) -> None:
 
 
 def test_ekf_origin_and_prearm_come_after_the_ekf_delay():
-    with PlantProcess("--speedup", "4", "--ekf-delay", "2") as plant, \
+    # 8 vehicle seconds at speedup 2: 4 s of wall time for the checks before the EKF is ready
+    # (2 s at speedup 4, 0.5 s of wall, failed once on a loaded machine, 2026-12-05)
+    with PlantProcess("--speedup", "2", "--ekf-delay", "8") as plant, \
             Pilot(plant.port) as pilot:
         pilot.wait("HEARTBEAT")
         assert pilot.command(512, 49) == 0                          # accepted, nothing sent
@@ -89,7 +91,7 @@ def test_ekf_origin_and_prearm_come_after_the_ekf_delay():
         pilot.collect(("STATUSTEXT",), 0.2)
         assert any(t.startswith("PreArm:") for t in pilot.texts)
         assert pilot.arm() == 1                                     # no arming before the EKF
-        pilot.wait("ATTITUDE", 5.0, lambda m: m.time_boot_ms >= 2000)
+        pilot.wait("ATTITUDE", 15.0, lambda m: m.time_boot_ms >= 8000)
         request(pilot, 49)
         origin = pilot.wait("GPS_GLOBAL_ORIGIN")
         assert (origin.latitude, origin.longitude) == (e7(CMAC[0]), e7(CMAC[1]))
