@@ -212,11 +212,11 @@ class RoverModel:
         self._trig_yaw: Num = None                           # no heading is None: no hit yet
         self._trig_cs: tuple[Num, Num] = (1.0, 0.0)
         self._decay_h: float | None = None
-        # many vehicles, rate-limited: one compiled pass over them per step (numpy: compiled=False)
         # which parts of the step any vehicle needs (plant_lanes.SWITCHES)
         self.switches = {"coupled": self._coupled, "turn_coupled": self._turn_coupled,
                          "curvature": self._curvature, "lateral": self._lateral,
                          "overshoot": self._overshoot, "yaw_overshoot": self._yaw_overshoot}
+        # many vehicles, rate-limited: one compiled pass over them per step (numpy: compiled=False)
         self._lanes = (plant_lanes.LaneStepper(params, n, self.switches, self.delay)
                        if n is not None and compiled and not self._paper
                        and plant_lanes.available() else None)

@@ -38,7 +38,8 @@ def respond(params: RoverParams, t: ArrayLike, speed_cmd: ArrayLike,
         raise ValueError("t, speed_cmd and yaw_rate_cmd must be 1-D and of one length >= 2")
     if np.any(np.diff(t) < 0):
         raise ValueError("t must not decrease")
-    model = RoverModel(params.with_(speed_delay=0.0, yaw_delay=0.0), n)   # clamp + coupling
+    # the clamps and couplings (the channels are stepped here, not by the model's own step)
+    model = RoverModel(params.with_(speed_delay=0.0, yaw_delay=0.0), n, compiled=False)
     p = params
     delay = CommandDelay(p.speed_delay, p.yaw_delay, n) if p.has_delay else None
     m = model._m
