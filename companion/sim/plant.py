@@ -73,13 +73,15 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, replace
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from ..core import ops as _ops
 from ..core.signals import Measurement, Num
-from . import plant_lanes
+
+if TYPE_CHECKING:
+    from .plant_lanes import LaneStepper
 
 # m/s: ArduPilot takes the lateral-acceleration limit at no less than this speed
 # (AR_AttitudeControl.cpp, AR_ATTCONTROL_STEER_SPEED_MIN), so a rover starting off may turn.
@@ -217,9 +219,11 @@ class RoverModel:
                          "curvature": self._curvature, "lateral": self._lateral,
                          "overshoot": self._overshoot, "yaw_overshoot": self._yaw_overshoot}
         # many vehicles, rate-limited: one compiled pass over them per step (numpy: compiled=False)
-        self._lanes = (plant_lanes.LaneStepper(params, n, self.switches, self.delay)
-                       if n is not None and compiled and not self._paper
-                       and plant_lanes.available() else None)
+        self._lanes: LaneStepper | None = None
+        if n is not None and compiled and not self._paper:
+            from . import plant_lanes  # here: it reads this module's constants and types
+            if plant_lanes.available():
+                self._lanes = plant_lanes.LaneStepper(params, n, self.switches, self.delay)
 
     def _trig(self, yaw: Num) -> tuple[Num, Num]:
         """cos and sin of a heading; the last step's end heading is remembered, so the next step and
@@ -473,6 +477,13 @@ def _channel(m: _ops.Ops, x0: Num, u: Num, b: Num, up: Num, down: Num, h: float,
     return out[0], out[2], out[1], out[3]
 
 
+def delay_steps(speed_delay: Num, yaw_delay: Num, h: float, n: int | None) -> np.ndarray:
+    """[channel (speed, turn rate), vehicle]: each pure delay in whole steps of ``h``,
+    ``round(delay / h)`` (int64; one column for one vehicle)."""
+    return np.stack([np.broadcast_to(np.rint(np.asarray(d, dtype=float) / h).astype(np.int64),
+                                     (1 if n is None else n,)) for d in (speed_delay, yaw_delay)])
+
+
 class CommandDelay:
     """Commands in flight through a pure delay (per channel, per vehicle), on a fixed step.
 
@@ -487,14 +498,12 @@ class CommandDelay:
     def _setup(self, h: float) -> None:
         self.h = h
         shape = () if self.n is None else (self.n,)
-        self._lag = [np.broadcast_to(np.rint(np.asarray(d, dtype=float) / h).astype(int), shape)
-                     for d in (self.speed_delay, self.yaw_delay)]
+        self._lags = delay_steps(self.speed_delay, self.yaw_delay, h, self.n)
+        self._lag = [lag.reshape(shape) for lag in self._lags]
         self._size = int(max(lag.max(initial=0) for lag in self._lag)) + 1
         # both channels' rings in one array (the compiled plant takes it whole), one view each
         self._ring = np.zeros((2, self._size) + shape)
         self._buf = [self._ring[0], self._ring[1]]
-        self._lags = np.stack([np.broadcast_to(lag, shape).astype(np.int64).reshape(-1)
-                               for lag in self._lag])
         self._cols = None if self.n is None else np.arange(self.n)
         self._flat = [buf.reshape(-1) for buf in self._buf]
         # one delay for every vehicle (the usual case) reads a whole row, no gather

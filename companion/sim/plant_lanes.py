@@ -31,8 +31,9 @@ import numpy as np
 
 from ..core.ops import TAU
 from ..core.signals import Num
+from .plant import LAT_ACCEL_MIN_SPEED
 
-if TYPE_CHECKING:        # plant imports this module (its model on arrays steps here)
+if TYPE_CHECKING:
     from .plant import CommandDelay, RoverParams, RoverState
 
 _compiled: Callable[..., None] | None = None     # _loop, compiled (when numba is here)
@@ -45,7 +46,6 @@ PARAMS = ("d_cen", "w_c", "yaw_bandwidth", "max_speed", "max_yaw_rate", "max_acc
           "speed_overshoot_s", "yaw_overshoot", "yaw_overshoot_s")
 # RoverModel's switches, in the loop's order: each on when any vehicle needs it (as in numpy)
 SWITCHES = ("coupled", "turn_coupled", "curvature", "lateral", "overshoot", "yaw_overshoot")
-LAT_ACCEL_MIN_SPEED = 1.0    # plant.LAT_ACCEL_MIN_SPEED (a literal: the loop is compiled)
 
 
 def available() -> bool:
@@ -307,7 +307,7 @@ def _respond_loop(u_cmd: Any, w_cmd: Any, held: Any, lags: Any, p: Any, coupled:
 
 def respond_series(params: RoverParams, n: int, switches: dict[str, bool],
                    u_cmd: np.ndarray, w_cmd: np.ndarray, held: np.ndarray, lags: np.ndarray,
-                   v0: float, w0: float, dt: float, steps: int, over: bool, over_w: bool,
+                   v0: float, w0: float, dt: float, steps: int,
                    loop: Callable[..., None] | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Speed and turn rate of ``n`` models on ``steps`` grid steps (respond's, compiled)."""
     chosen = loop or _respond_compiled
@@ -316,8 +316,7 @@ def respond_series(params: RoverParams, n: int, switches: dict[str, bool],
     chosen(np.ascontiguousarray(u_cmd, dtype=np.float64),
            np.ascontiguousarray(w_cmd, dtype=np.float64),
            np.ascontiguousarray(held, dtype=np.int64), np.ascontiguousarray(lags, dtype=np.int64),
-           param_rows(params, n), *(switches[name] for name in SWITCHES[:4]), over, over_w,
-           float(v0), float(w0), float(dt), v_out, w_out)
+           param_rows(params, n), *(switches[name] for name in SWITCHES), float(v0), float(w0), float(dt), v_out, w_out)
     return v_out, w_out
 
 

@@ -14,7 +14,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from . import plant_lanes
-from .plant import CommandDelay, RoverModel, RoverParams, lag_step
+from .plant import CommandDelay, RoverModel, RoverParams, delay_steps, lag_step
 
 
 def respond(params: RoverParams, t: ArrayLike, speed_cmd: ArrayLike,
@@ -50,13 +50,11 @@ def respond(params: RoverParams, t: ArrayLike, speed_cmd: ArrayLike,
     # step later, as each sample is read at its own grid point below.
     held = np.searchsorted(t, grid + 1e-9 * dt, side="right") - 1
     sample_step = np.minimum(((t - t[0]) / dt + 1e-9).astype(int), steps - 1)
-    over = bool(np.any(np.asarray(p.speed_overshoot) > 0))
-    over_w = bool(np.any(np.asarray(p.yaw_overshoot) != 0))
+    over, over_w = model.switches["overshoot"], model.switches["yaw_overshoot"]
     if compiled and plant_lanes.available():
-        lags = np.stack([np.broadcast_to(np.rint(np.asarray(d, dtype=float) / dt).astype(int),
-                                         (n,)) for d in (p.speed_delay, p.yaw_delay)])
+        lags = delay_steps(p.speed_delay, p.yaw_delay, dt, n)
         v_out, w_out = plant_lanes.respond_series(p, n, model.switches, u_in, w_in, held, lags,
-                                                  v0, omega0, dt, steps, over, over_w)
+                                                  v0, omega0, dt, steps)
         return v_out[sample_step], w_out[sample_step]
     v = np.full(n, float(v0))
     x = v                               # the speed channel's output (v without overshoot)
