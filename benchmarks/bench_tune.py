@@ -30,7 +30,7 @@ import numpy as np  # noqa: E402
 from companion.commands.calibrate import FINAL_SEARCH, tune_workers  # noqa: E402
 from companion.commands.flight import tune_search  # noqa: E402
 from companion.sim import plant_lanes, robust, vehicle_gains  # noqa: E402
-from companion.sim.plant import RoverModel, RoverState  # noqa: E402
+from companion.sim.plant import RoverState  # noqa: E402
 
 ROOT = Path(__file__).resolve().parent.parent
 VEHICLES = [ROOT / "companion/sim/vehicles/ardupilot_skid.toml",
@@ -54,7 +54,7 @@ def step_ns(cfg: robust.RobustConfig, n: int, steps: int = 1000) -> float:
     vehicles = robust.ensemble(cfg.vehicle, cfg.neighbours, cfg.spread, 1 / cfg.rate_hz, cfg.seed)
     params = robust._stack_params(vehicles, 1, -(-n // len(vehicles)))
     n = len(np.atleast_1d(params.w_c))
-    model = RoverModel(params, n)
+    model = plant_lanes.batch_model(params, n)
     zero = np.zeros(n)
     s = RoverState(zero, zero, zero, zero, zero)
     phase = np.random.default_rng(0).uniform(0, 10, n)

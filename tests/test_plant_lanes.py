@@ -1,8 +1,8 @@
 """The compiled plant step (companion.sim.plant_lanes) is RoverModel's numpy step, to rounding.
 
 Batch simulation (the robust tuner, calibrate's tunes) steps thousands of vehicles at once;
-numba compiles one pass over them where it is installed, and ``RoverModel(compiled=False)``
-runs the numpy step, the reference (and what runs without numba). Each case drives vehicles
+numba compiles one pass over them where it is installed (``plant_lanes.LaneModel``), and
+``RoverModel`` runs the numpy step, the reference (and what runs without numba). Each case drives vehicles
 with different parameters through every piece the step has: PX4's course loop, per-vehicle
 delays, rate limits (and none), both couplings, a turning radius, the lateral-acceleration
 limit, the speed overshoot (one that never comes back too) and the turn rate's two time scales.
@@ -58,9 +58,7 @@ def _fly(case: str, compiled: bool, steps: int = 1500, swap_at: int = 700,
     rng = np.random.default_rng({"skid": 1, "car": 2, "px4": 3}[case])
     params = _params(case, rng)
     phase = rng.uniform(0, 20, N)
-    model = RoverModel(params, N, compiled=compiled)
-    if loop is not None:
-        model._lanes._loop = loop
+    model = plant_lanes.LaneModel(params, N, loop) if compiled else RoverModel(params, N)
     zero = np.zeros(N)
     s = RoverState(zero, zero, zero, zero, zero)          # v_slow, w_slow plain 0.0
     trace = []
@@ -95,7 +93,7 @@ def test_compiled_step_is_the_numpy_step(case):
 def test_compiled_step_keeps_the_measured_heading_trig():
     """The step hands RoverModel the new heading's cosine and sine (measure reuses them)."""
     rng = np.random.default_rng(5)
-    model = RoverModel(_params("skid", rng), N)
+    model = plant_lanes.LaneModel(_params("skid", rng), N)
     zero = np.zeros(N)
     s = model.step(RoverState(zero, zero, zero, zero, zero), np.ones(N), np.full(N, 0.8), 0.02)
     for _ in range(50):
@@ -119,10 +117,9 @@ def test_the_loop_as_python_is_the_numpy_step(case):
 
 def test_the_paper_plant_and_one_vehicle_keep_numpy_and_floats():
     """Nothing tunes on the paper's exact linear step, and one vehicle runs on floats."""
-    assert RoverModel(RoverParams.paper(), 8)._lanes is None
-    assert RoverModel(RoverParams.stock_rover(), None)._lanes is None
-    assert RoverModel(RoverParams.stock_rover(), 8, compiled=False)._lanes is None
-    one = RoverModel(RoverParams.stock_rover())
+    assert type(plant_lanes.batch_model(RoverParams.paper(), 8)) is RoverModel
+    assert type(plant_lanes.batch_model(RoverParams.stock_rover(), None)) is RoverModel
+    one = plant_lanes.batch_model(RoverParams.stock_rover(), None)
     s = one.step(RoverState(), 1.0, 0.5, 0.02)
     assert isinstance(s.x, float) and math.isfinite(s.x)
 
@@ -133,7 +130,7 @@ def test_numba_compiles_the_step_where_it_has_wheels():
     """pyproject installs numba on these machines; without it a robust tune is about 1.4x
     slower (benchmarks/bench_tune.py)."""
     assert plant_lanes.available()
-    assert RoverModel(RoverParams.stock_rover(), 8)._lanes is not None
+    assert isinstance(plant_lanes.batch_model(RoverParams.stock_rover(), 8), plant_lanes.LaneModel)
 
 
 def _respond_case(case: str):

@@ -31,7 +31,8 @@ import numpy as np
 from ..core.signals import Measurement, Num, Reference
 from ..core.tracker import Tracker
 from ..core.trajectory import Trajectory
-from .plant import RoverModel, RoverParams, RoverState
+from .plant import RoverParams, RoverState
+from .plant_lanes import batch_model
 
 
 @dataclass(frozen=True)
@@ -110,7 +111,7 @@ def simulate(trackers: Tracker | Sequence[tuple[Tracker, slice]], params: RoverP
         list(trackers) if isinstance(trackers, Sequence) else [(trackers, None)])
     for tracker, _ in groups:
         tracker.reset()
-    model = RoverModel(params, n)
+    model = batch_model(params, n)
     zero = 0.0 if n is None else np.zeros(n)
     x0, y0, yaw0 = config.start
     state = RoverState(x0 + zero, y0 + zero, yaw0 + zero, zero, zero)

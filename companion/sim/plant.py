@@ -73,15 +73,12 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, replace
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 
 from ..core import ops as _ops
 from ..core.signals import Measurement, Num
-
-if TYPE_CHECKING:
-    from .plant_lanes import LaneStepper
 
 # m/s: ArduPilot takes the lateral-acceleration limit at no less than this speed
 # (AR_AttitudeControl.cpp, AR_ATTCONTROL_STEER_SPEED_MIN), so a rover starting off may turn.
@@ -198,8 +195,7 @@ class RoverModel:
     """Eqs. (1)-(2) plus the inner loops. ``step`` returns a new state; the one thing the model
     itself holds is the commands still in flight through a pure delay (:class:`CommandDelay`)."""
 
-    def __init__(self, params: RoverParams = RoverParams(), n: int | None = None,
-                 compiled: bool = True):
+    def __init__(self, params: RoverParams = RoverParams(), n: int | None = None):
         self.params = params
         self.n = n
         self._m = _ops.for_size(n)
@@ -218,12 +214,6 @@ class RoverModel:
         self.switches = {"coupled": self._coupled, "turn_coupled": self._turn_coupled,
                          "curvature": self._curvature, "lateral": self._lateral,
                          "overshoot": self._overshoot, "yaw_overshoot": self._yaw_overshoot}
-        # many vehicles, rate-limited: one compiled pass over them per step (numpy: compiled=False)
-        self._lanes: LaneStepper | None = None
-        if n is not None and compiled and not self._paper:
-            from . import plant_lanes  # here: it reads this module's constants and types
-            if plant_lanes.available():
-                self._lanes = plant_lanes.LaneStepper(params, n, self.switches, self.delay)
 
     def _trig(self, yaw: Num) -> tuple[Num, Num]:
         """cos and sin of a heading; the last step's end heading is remembered, so the next step and
@@ -286,30 +276,18 @@ class RoverModel:
         module docstring): speed |u_p|, turn rate from PX4's course loop on atan2(u_p), then
         each through its channel's delay, as :meth:`step` (what identification fits: the
         course loop's output on the heading of the moment, delayed)."""
-        if self._lanes is not None:
-            return self._lane_step(s, ux, uy, dt, vector=True)
         m = self._m
         course_err = m.wrap(m.atan2(uy, ux) - s.yaw)
         return self.step(s, m.hypot(ux, uy), self.params.course_gain * course_err, dt)
 
     def step(self, s: RoverState, speed_cmd: Num, yaw_rate_cmd: Num, dt: float) -> RoverState:
         """Advance ``dt`` seconds with the commands (v_ref, omega_ref) held (after the delay)."""
-        if self._lanes is not None:
-            return self._lane_step(s, speed_cmd, yaw_rate_cmd, dt, vector=False)
         if self.delay is not None:
             speed_cmd, yaw_rate_cmd = self.delay.push(speed_cmd, yaw_rate_cmd, dt)
         u, w = self.clamp_command(speed_cmd, yaw_rate_cmd, s.omega, s.v)
         if self._paper:
             return self._step_exact(s, u, w, dt)
         return self._step_limited(s, u, w, dt)
-
-    def _lane_step(self, s: RoverState, a: Num, b: Num, dt: float, vector: bool) -> RoverState:
-        """:meth:`step` / :meth:`step_vector` by :mod:`companion.sim.plant_lanes`'s loop."""
-        assert self._lanes is not None
-        out = self._lanes.step(s, a, b, dt, vector)
-        state = RoverState(out[0], out[1], out[2], out[3], out[4], out[5], out[6])
-        self._trig_yaw, self._trig_cs = state.yaw, (out[7], out[8])    # as _trig remembers
-        return state
 
     def _step_limited(self, s: RoverState, u: Num, w: Num, h: float) -> RoverState:
         """Rate-limited channels, exact per channel (:func:`_channel`), Simpson for x and y;

@@ -5,7 +5,9 @@ on arrays by one step: PX4's course loop (``step_vector``), the commands' pure d
 (:class:`companion.sim.plant.CommandDelay`'s ring buffers), ``clamp_command``, the
 rate-limited channels with their overshoots (``_channel``, ``overshoot_step``,
 ``overshoot_integral``) and Simpson's rule for x and y (``_simpson``): the same operations in
-the same order, per vehicle on floats. :func:`respond_series` is
+the same order, per vehicle on floats; :class:`LaneModel` is a ``RoverModel`` whose steps go
+there, and :func:`batch_model` the model batch simulation builds (a ``LaneModel`` where numba
+compiled the loop, else the numpy ``RoverModel``). :func:`respond_series` is
 :func:`companion.sim.response.respond`'s loop (the two channels alone over a whole setpoint
 series, what a fit's RMS and its plots run) the same way.
 
@@ -14,8 +16,8 @@ is: on the robust tuner's batches (1,344 vehicles: 64 candidates on 7 neighbours
 references, 2026-12-05) the plant was 3.1 of an evaluation's 5.7 s; respond on one model is
 all overhead (an 85 s manoeuvre's RMS 1.6 s, compiled 2 ms). Compiled by numba (when it is
 installed) a step is one pass over the vehicles. Both compute the same numbers (to rounding:
-``tests/test_plant_lanes.py``); ``RoverModel(..., compiled=False)`` and ``respond(...,
-compiled=False)`` force numpy, the reference. The paper's exact linear step (no limits) is not
+``tests/test_plant_lanes.py``); ``RoverModel`` itself and ``respond(..., compiled=False)``
+are numpy, the reference, and know nothing of this module. The paper's exact linear step (no limits) is not
 compiled: nothing tunes on it.
 
 Pure: arrays in, arrays out (numba's cache of the compiled loops aside).
@@ -25,16 +27,13 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 
 from ..core.ops import TAU
 from ..core.signals import Num
-from .plant import LAT_ACCEL_MIN_SPEED
-
-if TYPE_CHECKING:
-    from .plant import CommandDelay, RoverParams, RoverState
+from .plant import LAT_ACCEL_MIN_SPEED, CommandDelay, RoverModel, RoverParams, RoverState
 
 _compiled: Callable[..., None] | None = None     # _loop, compiled (when numba is here)
 _respond_compiled: Callable[..., None] | None = None     # _respond_loop, likewise
@@ -53,16 +52,45 @@ def available() -> bool:
     return _compiled is not None
 
 
+def batch_model(params: RoverParams, n: int | None) -> RoverModel:
+    """The model batch simulation steps: compiled on many rate-limited vehicles where numba is
+    here, the numpy reference otherwise (one vehicle, the paper's exact step, no numba)."""
+    if n is None or params.is_paper or not available():
+        return RoverModel(params, n)
+    return LaneModel(params, n)
+
+
+class LaneModel(RoverModel):
+    """:class:`RoverModel` on ``n`` vehicles whose :meth:`step` and :meth:`step_vector` are one
+    compiled pass over them (:class:`LaneStepper`); everything else is RoverModel's own."""
+
+    def __init__(self, params: RoverParams, n: int, loop: Callable[..., None] | None = None):
+        super().__init__(params, n)
+        self.lanes = LaneStepper(params, n, self.switches, self.delay, loop)
+
+    def step_vector(self, s: RoverState, ux: Num, uy: Num, dt: float) -> RoverState:
+        return self._lane_step(s, ux, uy, dt, vector=True)
+
+    def step(self, s: RoverState, speed_cmd: Num, yaw_rate_cmd: Num, dt: float) -> RoverState:
+        return self._lane_step(s, speed_cmd, yaw_rate_cmd, dt, vector=False)
+
+    def _lane_step(self, s: RoverState, a: Num, b: Num, dt: float, vector: bool) -> RoverState:
+        out = self.lanes.step(s, a, b, dt, vector)
+        state = RoverState(out[0], out[1], out[2], out[3], out[4], out[5], out[6])
+        self._trig_yaw, self._trig_cs = state.yaw, (out[7], out[8])    # as RoverModel._trig
+        return state
+
+
 class LaneStepper:
-    """The vehicles of one model on arrays, stepped by the compiled loop (``RoverModel.step``
-    and ``step_vector`` hand their arrays here and build the new state from the rows)."""
+    """The vehicles of one model on arrays, stepped by the compiled loop (:class:`LaneModel`'s
+    steps hand their arrays here and build the new state from the rows)."""
 
     def __init__(self, params: RoverParams, n: int, switches: dict[str, bool],
                  delay: CommandDelay | None, loop: Callable[..., None] | None = None):
         self.n = n
         self.delay = delay
         chosen = loop or _compiled
-        assert chosen is not None, "RoverModel builds a stepper only where numba compiled it"
+        assert chosen is not None, "a stepper is built only where numba compiled the loop"
         self._loop: Callable[..., None] = chosen
         self._params = param_rows(params, n)
         self._switches = [switches[name] for name in SWITCHES]

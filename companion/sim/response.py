@@ -39,7 +39,7 @@ def respond(params: RoverParams, t: ArrayLike, speed_cmd: ArrayLike,
     if np.any(np.diff(t) < 0):
         raise ValueError("t must not decrease")
     # the clamps and couplings (the channels are stepped here, not by the model's own step)
-    model = RoverModel(params.with_(speed_delay=0.0, yaw_delay=0.0), n, compiled=False)
+    model = RoverModel(params.with_(speed_delay=0.0, yaw_delay=0.0), n)
     p = params
     delay = CommandDelay(p.speed_delay, p.yaw_delay, n) if p.has_delay else None
     m = model._m

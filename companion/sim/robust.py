@@ -51,7 +51,8 @@ from ..core.signals import Num, Reference
 from ..core.trajectory import Ellipse, Trajectory
 from .batch import SimConfig, simulate
 from .gains import TunedGains
-from .plant import RoverModel, RoverParams, RoverState
+from .plant import RoverParams, RoverState
+from .plant_lanes import batch_model
 from .tuning import Candidates, perturb, random_candidates
 
 PAPER_F_R = (0.02, 0.04, 0.08, 0.12)
@@ -513,7 +514,7 @@ def _worker_start() -> None:
 def _warm() -> None:
     """A worker's first task when the pool is started ahead (:func:`worker_pool`): unpickling
     it imported this module, and one step loads the compiled plant (numba's cache)."""
-    model = RoverModel(RoverParams.stock_rover(), 2)
+    model = batch_model(RoverParams.stock_rover(), 2)
     model.step(RoverState(np.zeros(2), np.zeros(2), np.zeros(2), np.zeros(2), np.zeros(2)),
                0.0, 0.0, 0.02)
 
