@@ -1,7 +1,9 @@
-"""The live loop's state is declared in one place: ``Runner.__init__`` makes every attribute, in
-a few named pieces (companion/live/loop_state.py: Heard, MissionClock, Engagement, ModeRequest,
-Stopping, Timers, Counters), and every piece of state is read somewhere (no write-only flag).
-Read with ``ast``: a method that invents an attribute, or a field nobody reads, fails here."""
+"""The live loop's state is declared in one place: ``LoopCore.__init__`` (companion/live/runner/
+core.py) makes every attribute, in a few named pieces (companion/live/loop_state.py: Heard,
+MissionClock, Engagement, ModeRequest, Stopping, Timers, Counters), the parts built on it
+(ending, engaging, failsafes, requests, loop) make none, and every piece of state is read
+somewhere (no write-only flag). Read with ``ast``: a method in any part that invents an
+attribute, or a field nobody reads, fails here."""
 
 from __future__ import annotations
 
@@ -11,14 +13,17 @@ from pathlib import Path
 
 from companion.live import loop_state, runner
 
-SOURCE = Path(runner.__file__).read_text()
-TREE = ast.parse(SOURCE)
+PARTS = sorted(Path(runner.__file__).parent.glob("*.py"))
+SOURCE = "\n".join(path.read_text() for path in PARTS)
+TREES = {path.name: ast.parse(path.read_text()) for path in PARTS}
 PIECES = (loop_state.Heard, loop_state.MissionClock, loop_state.Engagement, loop_state.ModeRequest,
           loop_state.Stopping, loop_state.Timers, loop_state.Counters)
 
 
-def _runner_class() -> ast.ClassDef:
-    return next(n for n in TREE.body if isinstance(n, ast.ClassDef) and n.name == "Runner")
+def _methods() -> list[tuple[str, ast.FunctionDef]]:
+    """(file, method) of every method of every class in the runner's modules."""
+    return [(name, m) for name, tree in TREES.items() for cls in tree.body
+            if isinstance(cls, ast.ClassDef) for m in cls.body if isinstance(m, ast.FunctionDef)]
 
 
 def _self_targets(fn: ast.FunctionDef) -> list[tuple[int, str]]:
@@ -39,20 +44,29 @@ def _self_targets(fn: ast.FunctionDef) -> list[tuple[int, str]]:
 
 
 def test_every_runner_attribute_is_made_in_init():
-    cls = _runner_class()
-    methods = [n for n in cls.body if isinstance(n, ast.FunctionDef)]
-    init = next(m for m in methods if m.name == "__init__")
-    made = {name for _, name in _self_targets(init)}
-    own = {m.name for m in methods}
-    late = [f"runner.py:{line}: {m.name} sets self.{name}, which __init__ does not make"
-            for m in methods if m.name != "__init__"
+    methods = _methods()
+    inits = [(file, m) for file, m in methods if m.name == "__init__"]
+    assert [file for file, _ in inits] == ["core.py"], f"__init__ in {inits}: only LoopCore's"
+    made = {name for _, name in _self_targets(inits[0][1])}
+    own = {m.name for _, m in methods}
+    late = [f"{file}:{line}: {m.name} sets self.{name}, which __init__ does not make"
+            for file, m in methods if m.name != "__init__"
             for line, name in _self_targets(m) if name not in made and name not in own]
     assert not late, "\n".join(late)
-    assert len(made) <= 25, f"Runner.__init__ makes {len(made)} attributes: group them"
+    assert len(made) <= 25, f"LoopCore.__init__ makes {len(made)} attributes: group them"
+
+
+def test_each_method_has_one_home():
+    """A method defined in two parts would shadow one by the other, silently, by the MRO."""
+    homes: dict[str, list[str]] = {}
+    for file, m in _methods():
+        homes.setdefault(m.name, []).append(file)
+    twice = {name: files for name, files in homes.items() if len(files) > 1}
+    assert not twice, twice
 
 
 def test_every_piece_of_state_is_read():
-    reads = {n.attr for n in ast.walk(TREE)
+    reads = {n.attr for tree in TREES.values() for n in ast.walk(tree)
              if isinstance(n, ast.Attribute) and isinstance(n.ctx, ast.Load)}
     unread = [f"{piece.__name__}.{f.name}" for piece in PIECES
               for f in dataclasses.fields(piece) if f.name not in reads]

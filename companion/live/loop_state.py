@@ -1,6 +1,6 @@
 """The live loop's state: its states, and the records it keeps in the pieces that change together.
 
-:class:`companion.live.runner.Runner` makes one of each record and owns them; nothing else
+:class:`companion.live.runner.core.LoopCore` makes one of each record and owns them; nothing else
 writes them. Plain data, no I/O.
 """
 
@@ -125,7 +125,7 @@ class Counters:
     failsafes: int = 0
     sink_errors: int = 0
     tracker_resets: int = 0
-    stalls: int = 0                       # the companion's own stalls (runner.STALL)
+    stalls: int = 0                       # the companion's own stalls (runner.loop.STALL)
     refusals_logged: dict[str, int] = field(default_factory=dict)   # as last logged
 
 

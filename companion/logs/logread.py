@@ -259,7 +259,7 @@ def _attach_reference(flight: Flight, mission: Any, cmds: dict, ms: np.ndarray,
     """The reference the companion tracked, from its setpoints: its mission clock replayed.
 
     The tracked samples are those answered by a moving setpoint; the first anchors the
-    trajectory (mission time 0). As in :class:`companion.live.runner.MissionClock`, mission time
+    trajectory (mission time 0). As in :class:`companion.live.loop_state.MissionClock`, mission time
     runs with vehicle time within a segment and stands still between segments: a new one begins
     after a failsafe, a pause or a re-engagement (a stop setpoint answered a sample in between)
     or a gap of more than :func:`companion.live.config.segment_gap` between tracked samples.

@@ -1,0 +1,130 @@
+"""Ending a run: the rover stopped (zero setpoint, then HOLD), or left alone when a pilot has it.
+
+A pilot's takeover ends the loop at once, without another message to the vehicle; whether it
+was a pilot or a reboot (the autopilot comes back in its boot mode, disarmed, just as a pilot's
+switch looks) is judged after the loop, from the vehicle's clock. The HOLD the companion asked
+for is waited for, answering telemetry with zero setpoints meanwhile.
+"""
+
+from __future__ import annotations
+
+import time
+
+from ...errors import ExitCode
+from .. import events as ev
+from ..loop_state import Outcome, State
+from ..telemetry import clock_went_back
+from .core import LoopCore
+
+REBOOTED = ("vehicle_restarted: time_boot_ms went back (the autopilot rebooted); not resuming a "
+            "mission on a rebooted vehicle")
+# Before a mode change is called a pilot's, the vehicle's clock is read (a rebooted autopilot
+# comes back in its boot mode, disarmed, and after a reboot streams nothing it was asked for):
+# from its stream for CLOCK_LISTEN wall s, then, if it had fallen silent before the mode
+# change (a reboot's gap; never a vehicle a pilot took while it streamed), asked for
+# SYSTEM_TIME; CLOCK_WAIT in all.
+CLOCK_KINDS = ("SYSTEM_TIME", "ATTITUDE", "LOCAL_POSITION_NED")
+CLOCK_LISTEN = 0.5
+CLOCK_WAIT = 3.0
+
+
+class Ending(LoopCore):
+    """Stopping the rover and ending the loop; a pilot's takeover told from a reboot."""
+
+    def _finish(self, reason: str, code: ExitCode, time_boot_ms: int = 0, hold: bool = True,
+                stop: bool = True) -> None:
+        """Stop the rover (zero setpoint, then HOLD) and end the loop."""
+        if stop:
+            self.link.send_stop(time_boot_ms)
+        if hold:
+            stopping = self.stopping   # a HOLD confirmed in failsafe stands; an older one not
+            stopping.hold_confirmed = stopping.hold_confirmed and self.state is State.FAILSAFE
+            self._request_mode(self.hold_mode, time.perf_counter())
+        self.state = State.DONE
+        self.outcome = Outcome(reason, code, False, self.counters.failsafes)
+        self.stopping.wants_hold = hold
+        self.log(f"stopped: {reason}")
+
+    def _override(self, why: str) -> None:
+        if self.telemetry.backwards_streak:
+            # Its clock went back too: not a pilot but a reboot (back in its boot mode).
+            self._finish(REBOOTED, ExitCode.VEHICLE_RESTARTED)
+            return
+        # The pilot has the vehicle: not one more setpoint (not even a zero one), no mode
+        # request. Setpoints outside GUIDED / OFFBOARD are ignored anyway, but a companion
+        # that keeps talking to a vehicle someone else drives is one bug away from fighting.
+        # The loop ends here; a rebooted autopilot looks the same (its boot mode, disarmed)
+        # until its clock is read, after the loop (_judge_override).
+        self.stopping.unjudged = why
+        self.stopping.ask_clock = (time.perf_counter() - self.heard.sample_wall
+                                   > self.config.stale_timeout)
+        self.stopping.wants_hold = False
+        self.state = State.DONE
+        self.outcome = Outcome(f"pilot_override: {why}", ExitCode.PILOT_OVERRIDE, False,
+                               self.counters.failsafes)
+
+    def _judge_override(self, why: str) -> None:
+        """A pilot, or a reboot? The vehicle's clock decides; then end with that reason."""
+        self.stopping.unjudged = None
+        last_ms = self.telemetry.last_ms
+        clock_ms = self._read_vehicle_clock(ask=self.stopping.ask_clock)
+        if clock_ms is not None and clock_went_back(last_ms, clock_ms):
+            self.log(f"the vehicle's clock reads {clock_ms / 1e3:.3f} s, its last sample said "
+                     f"{(last_ms or 0) / 1e3:.3f} s: it rebooted (what looked like a pilot: {why})")
+            self._finish(REBOOTED, ExitCode.VEHICLE_RESTARTED)
+            return
+        self.log(f"pilot took over ({why}): no more setpoints")
+        self._emit(ev.PILOT_OVERRIDE, why)
+        self._finish(f"pilot_override: {why}", ExitCode.PILOT_OVERRIDE, hold=False, stop=False)
+
+    def _read_vehicle_clock(self, ask: bool) -> int | None:
+        """The vehicle's time_boot_ms from the first of its messages that carries one, read
+        for CLOCK_LISTEN s, then (``ask``) asked for (SYSTEM_TIME), up to CLOCK_WAIT s; None
+        if none came."""
+        link, clock = self.link, time.perf_counter
+        start = clock()
+        ask_at = start + CLOCK_LISTEN
+        while (now := clock()) < start + CLOCK_WAIT:
+            msg = link.recv()
+            if msg is None:
+                if ask and now >= ask_at:
+                    link.request_message(2)          # MAVLINK_MSG_ID_SYSTEM_TIME
+                    ask_at = now + 0.5
+                link.wait(min(0.05, max(0.0, start + CLOCK_WAIT - now)))
+            elif msg.get_type() in CLOCK_KINDS and link.is_vehicle(msg):
+                return int(msg.time_boot_ms)
+        return None
+
+    def _wait_for_hold(self) -> None:
+        """Until HOLD shows (ACK or heartbeat), answer telemetry with zero setpoints."""
+        if not self.stopping.wants_hold:
+            return
+        link, clock = self.link, time.perf_counter
+        deadline = clock() + self.config.hold_timeout
+        retry = clock() + 0.5
+        while not self.stopping.hold_confirmed and (now := clock()) < deadline:
+            msg = link.recv()
+            if msg is None:
+                if now >= retry:
+                    link.send_stop()
+                    self._request_mode(self.hold_mode, now)
+                    retry = now + 0.5
+                link.wait(min(0.05, deadline - now))
+                continue
+            kind = msg.get_type()
+            if kind == "ATTITUDE":
+                self.telemetry.attitude(msg)
+            if not link.is_vehicle(msg):
+                continue
+            if kind == "LOCAL_POSITION_NED":
+                sample = self.telemetry.position(msg)   # bad ones get no answer, even now
+                if sample is not None:
+                    link.send_stop(sample.time_boot_ms)
+            elif (kind == "HEARTBEAT" and link.is_vehicle_heartbeat(msg)
+                  and link.mode == self.hold_mode):
+                self.stopping.hold_confirmed = True
+            elif kind == "COMMAND_ACK":
+                self._on_ack(msg)
+        if not self.stopping.hold_confirmed:
+            self.log(f"{self.hold_mode} not confirmed by the vehicle within "
+                     f"{self.config.hold_timeout:g} s")
