@@ -199,6 +199,9 @@ def test_a_position_that_never_comes_ends_the_run_with_exit_6_and_says_what_to_d
     assert "--estimate-wait" in r["reason"]
     assert not [c for c in fake.commands if c.command == 400 and c.param1 == 1]   # never armed
     assert all(is_zero(sp) for sp in fake.setpoints)
+    # never asked anything, so not stopped with a HOLD either: the vehicle is left as it was
+    assert not [c for c in fake.commands if c.command == 176], comp.stderr
+    assert "left as it was" in comp.stderr
 
 
 def test_our_setpoints_lost_one_way_pause_until_the_vehicle_hears_us_again(tmp_path):

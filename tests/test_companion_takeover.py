@@ -119,6 +119,34 @@ def test_a_mode_chosen_by_someone_else_before_the_companion_engaged_is_not_taken
     assert not [sp for sp in fake.setpoints if sp.time_boot_ms > t_mode], comp.stderr
 
 
+@pytest.mark.parametrize("flags", [("--start-on-guided",), ("--arm", "--estimate-wait", "60")])
+def test_a_stop_before_the_companion_asked_anything_leaves_the_vehicle_as_it_was(tmp_path, flags):
+    """Ctrl-C / SIGTERM while the companion waits for the pilot to select GUIDED
+    (--start-on-guided), or for a healthy estimate before its first mode request: the vehicle
+    is in the pilot's MANUAL and was never asked anything. Stopping sends no HOLD (which would
+    stop the rover under the pilot), no arming: the run ends, exit 0, saying it left the vehicle
+    as it was."""
+    mission = ellipse_mission(tmp_path / "m.toml", 5.0)
+    booting = 0x0          # EKF_STATUS_REPORT flags with no position: the estimate never healthy
+
+    def script(k, ms):
+        return {"ekf": booting} if "--estimate-wait" in flags and k % 8 == 0 else None
+
+    port = free_udp_port()
+    with Companion(port, *flags, "--no-zenoh", "--json", "--no-log", "--mission",
+                   str(mission)) as comp, FakeVehicle(port, script=script) as fake:
+        comp.wait_for_stderr("waiting for the pilot" if "--start-on-guided" in flags
+                             else "waiting for a healthy position estimate", 30.0)
+        comp.proc.send_signal(signal.SIGTERM)
+        code = comp.wait(20.0)
+        r = comp.result()
+    assert code == 0, comp.stderr
+    assert not [c.command for c in fake.commands if c.command in (176, 400)], comp.stderr
+    assert fake.mode == 0 and not fake.armed            # MANUAL, as the pilot left it
+    assert all(is_zero(sp) for sp in fake.setpoints)
+    assert "nothing had been asked of the vehicle: left as it was, in MANUAL" in comp.stderr
+
+
 def test_an_autopilot_leaving_its_boot_mode_is_nobodys_choice(tmp_path):
     """ArduPilot reports INITIALISING while it starts, then its INITIAL_MODE on its own: a
     companion started with it engages as usual once the vehicle has settled."""

@@ -33,7 +33,12 @@ class Ending(LoopCore):
 
     def _finish(self, reason: str, code: ExitCode, time_boot_ms: int = 0, hold: bool = True,
                 stop: bool = True) -> None:
-        """Stop the rover (zero setpoint, then HOLD) and end the loop."""
+        """Stop the rover (zero setpoint, then HOLD) and end the loop; a vehicle nothing was
+        asked of yet is left as it is (:meth:`_untouched`)."""
+        left = ""
+        if (stop or hold) and self._untouched():
+            stop = hold = False
+            left = f" (nothing had been asked of the vehicle: left as it was, in {self.link.mode})"
         if stop:
             self.link.send_stop(time_boot_ms)
         if hold:
@@ -43,7 +48,17 @@ class Ending(LoopCore):
         self.state = State.DONE
         self.outcome = Outcome(reason, code, False, self.counters.failsafes)
         self.stopping.wants_hold = hold
-        self.log(f"stopped: {reason}")
+        self.log(f"stopped: {reason}{left}")
+
+    def _untouched(self) -> bool:
+        """Nothing has been asked of the vehicle yet: no mode, no arming (setting up, or the
+        first engagement before its first mode request: waiting for a healthy estimate, or with
+        --start-on-guided / --handover for the pilot or AUTO). A stop then (Ctrl-C, ``abort``,
+        the estimate never healthy) sends nothing: the vehicle may be a pilot's to drive, and
+        a HOLD would stop it under them. Zero setpoints sent meanwhile went to a vehicle outside
+        GUIDED / OFFBOARD, which ignores them."""
+        return self.state is State.WAITING or (self.engagement.first(self.state)
+                                               and self.mode_request.name is None)
 
     def _override(self, why: str) -> None:
         if self.telemetry.backwards_streak:
