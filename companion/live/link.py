@@ -137,6 +137,11 @@ class Link:
         return self._vehicle
 
     @property
+    def found(self) -> VehicleInfo | None:
+        """The vehicle, or None while :meth:`wait_vehicle` has not found one yet."""
+        return self._vehicle
+
+    @property
     def signing_rejected(self) -> int:
         """Incoming frames refused for their signature (0 without signing)."""
         return signing.rejected(self.master) if self.config.signing_key is not None else 0

@@ -28,6 +28,7 @@ from .config import LinkConfig, OriginConfig, RunnerConfig
 from .events import ControlChannel, Sink
 from .policy import GainOptions, KnownVehicle
 from .runner import Runner, stop_cause
+from .setup_answers import SetupAnswers
 from .stats import RunResult
 
 
@@ -107,66 +108,88 @@ def fly(s: RunSettings, sinks: Sequence[Sink] = (), control: ControlChannel | No
     rate, limits = asked.rate, asked.limits
     link = Link(s.link)
     link.log = log
+    switch = switch or StopSwitch()
+    stop = (lambda: switch.reason is not None)
+
+    def setup_status() -> dict[str, Any]:
+        """What a ``status`` request gets while the setup runs (the loop's keys)."""
+        found = link.found
+        track = s.runner.track_mode or (found.profile.track_mode if found else None)
+        return {"mission": s.mission.name, "track_mode": track, "mission_time": 0.0,
+                "duration": s.mission.duration, "mode": link.mode if found else None,
+                "armed": link.armed, "cycles": 0, "telemetry_received": 0,
+                "telemetry_rejected": {}, "failsafes": 0,
+                "signing_rejected": link.signing_rejected}
+
+    def abort() -> None:
+        switch.reason = switch.reason or "aborted"
+
     try:
-        stop = (lambda: False) if switch is None else (lambda: switch.reason is not None)
-        vehicle = link.wait_vehicle(stop)
-        log(f"{vehicle.autopilot} vehicle, system {vehicle.sysid} component {vehicle.compid}, "
-            f"mode {link.mode}, {'armed' if link.armed else 'disarmed'}")
-        for name in (vehicle.profile.track_mode, vehicle.profile.hold_mode):
-            if name not in link.mode_names():
-                raise UserError(f"the vehicle reports no {name} mode (MAV_TYPE {vehicle.mav_type})")
-        mission, origin = s.mission, None
-        if mission.geodetic:
-            # Placed by latitude / longitude: around the vehicle's own EKF origin, which its
-            # LOCAL_POSITION_NED is relative to (not the plan's home, nor a guess).
-            mission, origin = origin_mod.place(mission, link, s.origin.expected,
-                                               s.origin.timeout, log, stop)
-        accepted, notes = link.negotiate_rate(rate)
-        for note in notes:
-            log(note)
-        log(f"telemetry at {accepted:g} Hz" if accepted else "telemetry rate not confirmed")
-        watch_estimate(link, vehicle.profile.estimate, log)
-        known, preset = s.vehicle, None
-        if make_tracker is None and policy.wants_preset(mission, s.gains, s.vehicle):
-            # no vehicle file, no gains: the bundled vehicle it is, or a warning (presets.py)
-            from .params import read_values
-            from .presets import recognise
-            found = recognise(link, accepted or rate,
-                              f"companion calibrate --connect {s.link.url} --out DIR --arm",
-                              read_values)
-            log(found.note)
-            known, preset = found.vehicle, found.preset
-            if preset is not None:
-                limits = policy.choose_limits(mission, s.gains, known)
+        # the control channel is answered meanwhile: status, abort; the loop takes it after
+        with SetupAnswers(control, setup_status, abort) as answers:
+            answers.step = "waiting for the vehicle's heartbeat"
+            vehicle = link.wait_vehicle(stop)
+            log(f"{vehicle.autopilot} vehicle, system {vehicle.sysid} component {vehicle.compid}, "
+                f"mode {link.mode}, {'armed' if link.armed else 'disarmed'}")
+            for name in (vehicle.profile.track_mode, vehicle.profile.hold_mode):
+                if name not in link.mode_names():
+                    raise UserError(f"the vehicle reports no {name} mode "
+                                    f"(MAV_TYPE {vehicle.mav_type})")
+            mission, origin = s.mission, None
+            if mission.geodetic:
+                # Placed by latitude / longitude: around the vehicle's own EKF origin, which its
+                # LOCAL_POSITION_NED is relative to (not the plan's home, nor a guess).
+                answers.step = "reading the vehicle's EKF origin"
+                mission, origin = origin_mod.place(mission, link, s.origin.expected,
+                                                   s.origin.timeout, log, stop)
+            answers.step = "negotiating the telemetry rate"
+            accepted, notes = link.negotiate_rate(rate)
+            for note in notes:
+                log(note)
+            log(f"telemetry at {accepted:g} Hz" if accepted else "telemetry rate not confirmed")
+            watch_estimate(link, vehicle.profile.estimate, log)
+            known, preset = s.vehicle, None
+            if make_tracker is None and policy.wants_preset(mission, s.gains, s.vehicle):
+                # no vehicle file, no gains: the bundled vehicle it is, or a warning (presets.py)
+                answers.step = "reading the parameters a bundled vehicle is known by"
+                from .params import read_values
+                from .presets import recognise
+                found = recognise(link, accepted or rate,
+                                  f"companion calibrate --connect {s.link.url} --out DIR --arm",
+                                  read_values)
+                log(found.note)
+                known, preset = found.vehicle, found.preset
+                if preset is not None:
+                    limits = policy.choose_limits(mission, s.gains, known)
+                else:
+                    vehicle_warning = found.note
+            answers.step = "building the controller"
+            limits_text = (f"limits: speed {limits.max_speed:g} m/s, "
+                           f"yaw rate {limits.max_yaw_rate:g} rad/s")
+            choice = policy.choose_gains(mission, s.gains, known, accepted or rate)
+            if make_tracker is None:
+                tracker, gains, gains_source = policy.build_tracker(s.controller, choice, limits,
+                                                                    s.gains.controller_gains)
+                log(f"controller {tracker.name}; gains: {gains_source}; {limits_text}")
             else:
-                vehicle_warning = found.note
-        limits_text = (f"limits: speed {limits.max_speed:g} m/s, "
-                       f"yaw rate {limits.max_yaw_rate:g} rad/s")
-        choice = policy.choose_gains(mission, s.gains, known, accepted or rate)
-        if make_tracker is None:
-            tracker, gains, gains_source = policy.build_tracker(s.controller, choice, limits,
-                                                                s.gains.controller_gains)
-            log(f"controller {tracker.name}; gains: {gains_source}; {limits_text}")
-        else:
-            gains, gains_source = policy.gains_dict(choice.filter, choice.pzc), choice.source
-            log(f"gains: {gains_source}; {limits_text}")
-            tracker = make_tracker(link, limits)
-        config = replace(s.runner, period=1.0 / accepted if accepted else None)
-        reporter, commands = gcs.attach(link) if s.gcs_report else (None, None)
-        sinks = [*sinks, reporter] if reporter is not None else sinks
-        latlon = origin.latlon if origin is not None else None
-        handover = (None if s.handover is None
-                    else handover_mod.attach(s.handover, link, latlon, log))
-        runner = Runner(link, tracker, mission, config, limits, sinks, control, log,
-                        origin=latlon, gcs=commands, handover=handover)
-        if reporter is not None:
-            reporter.watch(runner.status)
-        # Sinks that write files (the flight-log CSV) flush when the loop is about to sleep.
-        link.on_idle.extend(idle for sink in sinks if (idle := getattr(sink, "idle", None)))
-        if switch is not None:
-            switch.runner = runner
-            if switch.reason is not None:
-                runner.request_stop(switch.reason)
+                gains, gains_source = policy.gains_dict(choice.filter, choice.pzc), choice.source
+                log(f"gains: {gains_source}; {limits_text}")
+                tracker = make_tracker(link, limits)
+            config = replace(s.runner, period=1.0 / accepted if accepted else None)
+            reporter, commands = gcs.attach(link) if s.gcs_report else (None, None)
+            sinks = [*sinks, reporter] if reporter is not None else sinks
+            latlon = origin.latlon if origin is not None else None
+            handover = (None if s.handover is None
+                        else handover_mod.attach(s.handover, link, latlon, log))
+            runner = Runner(link, tracker, mission, config, limits, sinks, control, log,
+                            origin=latlon, gcs=commands, handover=handover)
+            if reporter is not None:
+                reporter.watch(runner.status)
+            # Sinks that write files (the flight-log CSV) flush when the loop is about to sleep.
+            link.on_idle.extend(idle for sink in sinks if (idle := getattr(sink, "idle", None)))
+        switch.runner = runner
+        if switch.reason is not None:        # a signal or an abort during the setup
+            runner.request_stop(switch.reason)
         if s.realtime:
             take_realtime(log)
         outcome = runner.run()
