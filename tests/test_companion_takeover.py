@@ -140,7 +140,7 @@ def test_a_stop_before_the_companion_asked_anything_leaves_the_vehicle_as_it_was
         comp.proc.send_signal(signal.SIGTERM)
         code = comp.wait(20.0)
         r = comp.result()
-    assert code == 0, comp.stderr
+    assert code == 0 and (r["reason"], r["stop_cause"]) == ("SIGTERM", "ok"), (r, comp.stderr)
     assert not [c.command for c in fake.commands if c.command in (176, 400)], comp.stderr
     assert fake.mode == 0 and not fake.armed            # MANUAL, as the pilot left it
     assert all(is_zero(sp) for sp in fake.setpoints)
