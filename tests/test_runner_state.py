@@ -91,3 +91,20 @@ def test_a_fresh_runner_has_all_its_state(monkeypatch):
     assert (r.mission_time, r.failsafes, r.sink_errors, r.tracker_resets) == (0.0, 0, 0, 0)
     for piece in PIECES:
         assert sum(isinstance(v, piece) for v in vars(r).values()) == 1, piece.__name__
+
+
+# The live modules beneath the loop (its package docstring); session, policy, the ground
+# station's and the setup's modules build on the loop, never the other way.
+BENEATH = {"link", "telemetry", "health", "loop_state", "stats", "events", "config", "handover"}
+
+
+def test_the_loop_imports_only_what_lies_beneath_it():
+    from test_layers import imports
+    bad = []
+    for path in PARTS:
+        for line, module in imports(path, "companion.live.runner"):
+            parts = module.split(".")
+            if parts[:2] == ["companion", "live"] and len(parts) > 2 and parts[2] != "runner" \
+                    and parts[2] not in BENEATH:
+                bad.append(f"{path.name}:{line}: {module}")
+    assert not bad, bad

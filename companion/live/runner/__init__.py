@@ -1,5 +1,5 @@
 """The live control loop, one role a module: state (core), ending, engaging, failsafes, requests, the loop.
-May import: what ``companion.live`` may (``core``, ``mission``, ``errors``) and its sibling modules (link, telemetry, health, loop_state, stats, events, config, handover).
+May import: ``core``, ``errors``, ``mission`` (load-mission) and the ``live`` modules beneath the loop (link, telemetry, health, loop_state, stats, events, config, handover); never ``session``.
 """
 
 from ..config import RunnerConfig
