@@ -28,7 +28,8 @@ from .config import LinkConfig, OriginConfig, RunnerConfig
 from .events import ControlChannel, Sink
 from .policy import GainOptions, KnownVehicle
 from .runner import Runner, stop_cause
-from .setup_answers import SetupAnswers
+from .runner.core import status_fields
+from .setup_answers import SETTING_UP, SetupAnswers
 from .stats import RunResult
 
 
@@ -115,11 +116,7 @@ def fly(s: RunSettings, sinks: Sequence[Sink] = (), control: ControlChannel | No
         """What a ``status`` request gets while the setup runs (the loop's keys)."""
         found = link.found
         track = s.runner.track_mode or (found.profile.track_mode if found else None)
-        return {"mission": s.mission.name, "track_mode": track, "mission_time": 0.0,
-                "duration": s.mission.duration, "mode": link.mode if found else None,
-                "armed": link.armed, "cycles": 0, "telemetry_received": 0,
-                "telemetry_rejected": {}, "failsafes": 0,
-                "signing_rejected": link.signing_rejected}
+        return status_fields(SETTING_UP, s.mission, track, link.mode if found else None, link)
 
     def abort() -> None:
         switch.reason = switch.reason or "aborted"

@@ -6,8 +6,8 @@ by: a session's setup takes seconds (more on a loaded board), and a ground stati
 gone. :class:`SetupAnswers` polls the :class:`companion.live.events.ControlChannel` in a thread
 for exactly that span and hands it to the loop after (one consumer at a time):
 
-- ``status``: ``{"state": "setting_up", "step": ...}`` with the status fields the setup knows
-  (the loop's :meth:`companion.live.runner.core.LoopCore.status` has the same keys);
+- ``status``: what ``status()`` gives (the session's: ``runner.core.status_fields`` with
+  ``"state": "setting_up"``, the loop's keys) and ``"step"``, what the setup is doing;
 - ``abort``: the session ends before anything is asked of the vehicle (``on_abort``);
 - every other verb is refused, naming the step: the loop takes them once it runs.
 """
@@ -59,8 +59,7 @@ class SetupAnswers:
     def answer(self, request: ControlRequest) -> None:
         verb, step = request.verb, self.step
         if verb == "status":
-            request.reply(True, json.dumps({**self._status(), "state": SETTING_UP,
-                                            "step": step}))
+            request.reply(True, json.dumps({**self._status(), "step": step}))
         elif verb == "abort":
             self._on_abort()
             request.reply(True, f"stopping the setup ({step}): nothing is asked of the vehicle")

@@ -113,13 +113,9 @@ class LoopCore:
 
     def status(self) -> dict[str, Any]:
         t = self.telemetry
-        return {"state": self.state.value, "mission": self.mission.name,
-                "track_mode": self.track_mode,
-                "mission_time": self.clock.time, "duration": self.mission.duration,
-                "mode": self.link.mode, "armed": self.link.armed, "cycles": self.stats.cycles,
-                "telemetry_received": t.received, "telemetry_rejected": dict(t.rejected),
-                "failsafes": self.counters.failsafes,
-                "signing_rejected": getattr(self.link, "signing_rejected", 0)}
+        return status_fields(self.state.value, self.mission, self.track_mode, self.link.mode,
+                             self.link, self.clock.time, self.stats.cycles, t.received,
+                             dict(t.rejected), self.counters.failsafes)
 
     # --- what the parts share ------------------------------------------------------------
     def _start_problem(self, mission: Any, x: float, y: float, yaw: float) -> str | None:
@@ -178,6 +174,18 @@ class LoopCore:
             self.counters.sink_errors += 1
             if self.counters.sink_errors == 1:
                 self.log(f"a sink failed ({type(exc).__name__}: {exc}); carrying on")
+
+
+def status_fields(state: str, mission: Any, track_mode: str | None, mode: str | None, link: Any,
+                  mission_time: float = 0.0, cycles: int = 0, received: int = 0,
+                  rejected: dict[str, int] | None = None, failsafes: int = 0) -> dict[str, Any]:
+    """A ``status`` request's answer: the loop's (:meth:`LoopCore.status`) and, with the
+    loop's counts at zero, the setup's (:mod:`companion.live.setup_answers`)."""
+    return {"state": state, "mission": mission.name, "track_mode": track_mode,
+            "mission_time": mission_time, "duration": mission.duration, "mode": mode,
+            "armed": link.armed, "cycles": cycles, "telemetry_received": received,
+            "telemetry_rejected": rejected or {}, "failsafes": failsafes,
+            "signing_rejected": getattr(link, "signing_rejected", 0)}
 
 
 def stop_cause(code: int) -> str:
