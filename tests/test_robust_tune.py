@@ -274,7 +274,7 @@ def test_gains_files_keep_every_law_parameter(tmp_path):
                    heading_rate_ff=True, accel_ff=0.34, lead_tau=0.2, lead_max_gain=3.0,
                    speed_law="paper", accel_ff_turn=0.005, brake_accel=0.21, brake_yaw_accel=0.98,
                    min_progress=0.3, course_tau=2.0, brake_integrate=4.0,
-                   approach_cone=0.5)
+                   approach_cone=0.5, predict_s=0.5)
     defaults = PZCGains(0.7, 0.6)
     changed = [f.name for f in fields(PZCGains) if getattr(pzc, f.name) != getattr(defaults, f.name)]
     assert len(changed) == len(fields(PZCGains)) - 2          # all but k_dc, lambda_c
@@ -351,6 +351,12 @@ def test_a_cars_tune_leaves_out_references_it_cannot_accelerate_along(tmp_path):
     for slow in (RoverParams(max_yaw_rate=2.09, max_accel=0.52, max_decel=2.1),
                  RoverParams(max_yaw_rate=2.09, max_accel=2.1, max_decel=0.52)):
         assert labels(RobustConfig(vehicle=slow, accel_room=1.0)) == four[:2]
+    # a car's room (its profile's 1.25): SITL's car identified at 0.797 m/s^2 deceleration
+    # keeps the 0.08 Hz ellipse (0.80 asked), the 0.12 Hz one (1.80) stays out
+    from companion.profiles import ackermann
+    room = dict(ackermann.PROFILE.tune_on_turn_rate)["accel_room"]
+    sitl_car = RoverParams(max_yaw_rate=2.2, max_accel=0.984, max_decel=0.797)
+    assert labels(RobustConfig(vehicle=sitl_car, accel_room=room)) == four[:3]
     # a vehicle file of a car asks it; a skid-steer one does not
     car = tmp_path / "car.toml"
     vehicle_file.save(vehicle_file.VehicleFile(ROVER.with_(min_turn_radius=0.9), name="car"), car)
@@ -387,9 +393,11 @@ def test_the_tuners_settings_come_from_the_profiles_that_fly_the_vehicle(tmp_pat
     skid = ROVER
     car = ROVER.with_(min_turn_radius=0.9)
     px4_car = ROVER.with_(course_gain=3.9, min_turn_radius=0.56)
-    assert tune_settings(skid) == {"course_tau": 2.0} == dict(ardupilot.PROFILE.tune)
-    assert tune_settings(car) == {"course_tau": 2.0, "min_progress": 0.3, "speed_law": "paper",
-                                  "accel_room": 1.0}
+    assert tune_settings(skid) == {"course_tau": 2.0, "predict_min_delay": 0.25} == dict(
+        ardupilot.PROFILE.tune)
+    assert tune_settings(car) == {"course_tau": 2.0, "predict_min_delay": 0.25,
+                                  "min_progress": 0.3, "speed_law": "paper", "accel_room": 1.25,
+                                  "rms_floor": 0.02}
     assert tune_settings(car) == {**ardupilot.PROFILE.tune, **dict(ackermann.PROFILE.tune_on_turn_rate)}
     assert tune_settings(px4_car) == dict(px4.PROFILE.tune)
     assert tune_settings(px4_car)["spread"] == {"delay_samples": 2, "over_drive": 0.4}
@@ -419,3 +427,41 @@ def test_companion_tune_records_a_px4_vehicles_own_neighbours(tmp_path):
         assert ("approach_cone = 0.52359" in header) == (path == px4), header
         assert gains_mod.load(out).pzc.approach_cone == pytest.approx(
             math.radians(30.0) if path == px4 else 0.0)
+
+
+def test_a_late_speed_loop_is_predicted_and_a_prompt_one_left_as_it_was():
+    # The ArduPilot profile's predict_min_delay (0.25 s), through the command's own path
+    # (commands.flight.tune_search -> vehicle_gains.config_for): on SITL's car (speed delay
+    # 0.5 s) the search may predict up to that delay; on the bundled skid rover (0.145 s), or
+    # where the profile says nothing (PX4), no candidate predicts.
+    from companion.commands.flight import tune_search
+    from companion.sim.robust import PREDICT_SEED, _tracker, candidate_gains, seeds
+    from companion.sim.vehicle_gains import config_for
+    root = Path(__file__).resolve().parents[1]
+    car_file = root / "benchmarks/vehicles/ardupilot_car_sitl.toml"
+    skid_file = root / "companion/sim/vehicles/ardupilot_skid.toml"
+    car = config_for(car_file, 40.0, **tune_search(car_file))
+    skid = config_for(skid_file, 40.0, **tune_search(skid_file))
+    assert car.predict_delay == pytest.approx(0.5)
+    assert skid.predict_delay == 0.0
+    assert replace(car, predict_min_delay=None).predict_delay == 0.0      # PX4's: no setting
+    # a candidate's share of the delay becomes its gains' predict_s, off where its flag is off
+    s = seeds(car.vehicle)
+    s.params["predict_k"] = np.full(len(s), PREDICT_SEED)
+    s.flags["use_predict"] = (np.arange(len(s)) % 2).astype(float)
+    got = [candidate_gains(s, i, predict_delay=0.5)[1].predict_s for i in range(2)]
+    assert got == [0.0, pytest.approx(0.25)]
+    tracker = _tracker(s, 1, car.limits, predict_delay=0.5)
+    assert list(tracker.predict.horizon[:2]) == [0.0, pytest.approx(0.25)]
+
+
+def test_the_rms_floor_is_what_each_references_log_counts_from():
+    # objective = mean over references of log(steady RMS + rms_floor) + the approach and chatter
+    # terms, which the floor leaves alone: two floors differ by exactly the log terms
+    cfg = RobustConfig(vehicle=ROVER, limits=Limits(4.0, 2.0944), neighbours=0, duration=20.0)
+    cands = _candidates(HAND)
+    fine, coarse = (evaluate(cands, replace(cfg, rms_floor=f), [ROVER]) for f in (0.005, 0.02))
+    rms = fine.steady_rms[0, 0]
+    assert np.array_equal(rms, coarse.steady_rms[0, 0])
+    expected = np.log(rms + 0.02).mean() - np.log(rms + 0.005).mean()
+    assert coarse.objective[0] - fine.objective[0] == pytest.approx(expected, rel=1e-9)

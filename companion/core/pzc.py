@@ -43,7 +43,10 @@ Extensions beyond the paper, each off by default (the paper's law exactly) and c
 * ``lead_tau``, ``lead_max_gain``: the actuator lead of :mod:`companion.core.lead`;
 * ``course_tau`` (s): the law steers the course over ground, phi-hat + beta-hat, beta-hat the
   angle from the heading to the filtered pose's displacement, summed with forgetting time
-  ``course_tau`` (:mod:`companion.core.course`).
+  ``course_tau`` (:mod:`companion.core.course`);
+* ``predict_s`` = d (s), for a speed loop with a pure delay d: the speed comes from the law run
+  on the pose the speed commands of the last d seconds lead to against the reference d ahead,
+  the turn rate from the law run on the present (:mod:`companion.core.predict`).
 
 Limits: speed and yaw rate are clamped; while either output is clamped its integrator is held
 (conditional integration), so nothing winds up in saturation.
@@ -61,7 +64,8 @@ from . import ops as _ops
 from .course import CourseCorrection
 from .filter import FilterGains, PoseFilter
 from .lead import ActuatorLead
-from .limits import SPEED_LAWS, Limits, clamp, keep_if, speed_from_up
+from .limits import SPEED_LAWS, Limits, clamp, keep_if, speed_from_up, yaw_rate_limit
+from .predict import DelayPrediction
 from .signals import Command, Estimate, Measurement, Num, Reference
 
 
@@ -94,12 +98,13 @@ class PZCGains:
     course_tau: Num = 0.0
     brake_integrate: Num = 1.0
     approach_cone: Num = 0.0
+    predict_s: Num = 0.0
 
     def __post_init__(self) -> None:
         if self.speed_law not in SPEED_LAWS:
             raise ValueError(f"speed_law must be one of {SPEED_LAWS}, not {self.speed_law!r}")
         for name in ("accel_ff_turn", "brake_accel", "brake_yaw_accel", "min_progress",
-                     "course_tau", "approach_cone"):
+                     "course_tau", "approach_cone", "predict_s"):
             value = getattr(self, name)
             if value is not None and _any_negative(value):
                 raise ValueError(f"{name} must be >= 0, not {value!r}")
@@ -306,6 +311,9 @@ class PZCTracker:
         self.law = PZCLaw(gains, limits, n)
         self.course = CourseCorrection(gains.course_tau, n)
         self.lead = ActuatorLead(gains.lead_tau, gains.lead_max_gain, limits, n)
+        self.predict = DelayPrediction(gains.predict_s, n)
+        # the speed's law, d ahead (its own integrators); None without a delay to predict
+        self.law_ahead = PZCLaw(gains, limits, n) if self.predict.active else None
         self.estimate: Estimate | None = None
 
     def reset(self) -> None:
@@ -314,12 +322,27 @@ class PZCTracker:
         self.law.reset()
         self.course.reset()
         self.lead.reset()
+        self.predict.reset()
+        if self.law_ahead is not None:
+            self.law_ahead.reset()
         self.estimate = None
 
     def step(self, t: float, meas: Measurement, ref: Reference) -> Command:
         self.estimate = self.filter.step(t, meas)
         steered = self.course.step(t, self.estimate)
-        return self.lead.step(t, self.law.step(t, steered, ref))
+        cmd = self.law.step(t, steered, ref)
+        if self.law_ahead is not None:
+            # The speed lands d late, the turn rate at once: each from the law that sees the
+            # time it acts at (one law on the predicted pose steered the heading d early and
+            # cut the corners: SITL car, 0.08 Hz, 0.269 m against 0.193 m without).
+            ahead, ref_ahead = self.predict.step(t, steered, ref)
+            fore = self.law_ahead.step(t, ahead, ref_ahead)
+            m = self.law._m
+            top = yaw_rate_limit(m, self.law.limits, fore.speed)
+            cmd = Command(fore.speed, m.clip(cmd.yaw_rate, -top, top), fore.ux, fore.uy)
+        cmd = self.lead.step(t, cmd)
+        self.predict.sent(t, cmd)
+        return cmd
 
 
 def with_paper_speed_law(gains: PZCGains) -> PZCGains:

@@ -24,7 +24,9 @@ what turns a rate limit into a relay. On top of it, this search chooses the law'
 rate-limited, delayed inner loops (:mod:`companion.core.pzc`): a separate preview time for the
 turning part of the acceleration feed-forward (``accel_ff_turn``) and braking-curve P terms with
 integrator hold (``brake_accel``, ``brake_yaw_accel``), each behind a flag, the braking
-accelerations as factors of the identified vehicle's decelerations (:data:`EXTRA_RANGES`). The
+accelerations as factors of the identified vehicle's decelerations (:data:`EXTRA_RANGES`), and
+on a late speed loop (``predict_min_delay``, the autopilot profile's) the speed's delay
+prediction (``predict_s``, a share of the identified delay: :data:`PREDICT_RANGE`). The
 seeds include the speed channel's delay + lag as the speed preview, so the search starts where
 the physics says the preview belongs.
 """
@@ -68,6 +70,13 @@ EXTRA_RANGES = {
     "brake_yaw_accel_k": (0.1, 4.0),
 }
 EXTRA_FLAGS = ("split_accel_ff", "use_brake", "use_brake_yaw")
+# On a late speed loop (RobustConfig.predict_delay > 0) two more dimensions: whether the speed
+# is predicted (core.predict) and how far ahead, as a share of the identified delay. Seeded at
+# half of it: on SITL's car (0.47 s) the whole delay tracked the 0.08 Hz ellipse best and the
+# slow ones worst (model: 0.03 / 0.09 m at 0.04 / 0.08 Hz, 0.04 m at 0.02 Hz; flown 0.036 /
+# 0.109), half of it 0.019 / 0.112 m and 0.009 m at 0.02 Hz (2026-12-05).
+PREDICT_RANGE = (0.1, 1.0)
+PREDICT_SEED = 0.5
 # Braking scale when the vehicle has no identified limit (an infinite decel).
 DEFAULT_BRAKE_SCALE = (5.0, 10.0)            # m/s^2, rad/s^2
 
@@ -116,6 +125,9 @@ class RobustConfig:
     rounds: int = 6
     elite: int = 12
     chatter_weight: float = 0.05       # objective per (m/s + rad/s) per s of setpoint variation
+    # m added to each reference's steady RMS before its log: differences well below it count
+    # for little (a reference held to a few mm does not outweigh centimetres on a faster one)
+    rms_floor: float = 0.005
     plant_dt: float = 0.02             # s: one exact step per ArduPilot tick (within 3 % of 1 ms)
     seed: int = 1
     min_progress: float = 0.0          # the law's progress floor for every candidate (PX4, a car)
@@ -125,6 +137,10 @@ class RobustConfig:
     # 1: the integrators hold at the knee; PX4's over-driving speed loop: more)
     brake_integrate: float = 1.0
     approach_cone: float = 0.0         # rad, every candidate's approach cone (core.pzc; 0: none)
+    # s: on a vehicle whose identified speed delay is at least this, the search chooses whether
+    # and how far ahead each candidate predicts its speed (core.predict, PZCGains.predict_s:
+    # PREDICT_RANGE); None: none does (the autopilot's profile says)
+    predict_min_delay: float | None = None
     # None: the references are not checked against the vehicle's acceleration; a number: those
     # whose peak acceleration along the path exceeds that share of it are left out (a car's)
     accel_room: float | None = None
@@ -141,6 +157,15 @@ class RobustConfig:
         return {"min_progress": self.min_progress, "speed_law": self.speed_law,
                 "course_tau": self.course_tau, "brake_integrate": self.brake_integrate,
                 "approach_cone": self.approach_cone}
+
+    @property
+    def predict_delay(self) -> float:
+        """The speed delay the candidates may predict a share of (PREDICT_RANGE): the
+        identified one where it reaches ``predict_min_delay``, else 0 (none predicts)."""
+        delay = float(np.max(self.vehicle.speed_delay))
+        if self.predict_min_delay is None or not delay >= self.predict_min_delay:
+            return 0.0
+        return delay
 
     def reference_list(self) -> tuple[tuple[str, Trajectory], ...]:
         """The references given, else the paper's ellipses this vehicle can turn through with
@@ -301,9 +326,11 @@ class Evaluation:
     rejected: np.ndarray               # per candidate: why ("" if kept)
 
 
-def _extension_values(cands: Candidates, scales: tuple[float, float]) -> dict[str, np.ndarray]:
-    """accel_ff_turn (s; NaN: not split), brake_accel, brake_yaw_accel (0: off) per candidate,
-    from the extra parameters and flags (absent: every extension off, the old search)."""
+def _extension_values(cands: Candidates, scales: tuple[float, float],
+                      predict_delay: float = 0.0) -> dict[str, np.ndarray]:
+    """accel_ff_turn (s; NaN: not split), brake_accel, brake_yaw_accel, predict_s (0: off) per
+    candidate, from the extra parameters and flags (absent: every extension off, the old
+    search); ``predict_delay``: what the share predict_k is of."""
     n = len(cands)
     p, f = cands.params, cands.flags
     off = np.zeros(n)
@@ -315,19 +342,21 @@ def _extension_values(cands: Candidates, scales: tuple[float, float]) -> dict[st
                                 p.get("brake_accel_k", off) * scales[0], 0.0),
         "brake_yaw_accel": np.where(f.get("use_brake_yaw", off) > 0.5,
                                     p.get("brake_yaw_accel_k", off) * scales[1], 0.0),
+        "predict_s": np.where(f.get("use_predict", off) > 0.5,
+                              p.get("predict_k", off) * predict_delay, 0.0),
     }
 
 
 def _tracker(cands: Candidates, repeat: int, limits: Limits,
              scales: tuple[float, float] = DEFAULT_BRAKE_SCALE,
-             law: Mapping[str, Any] | None = None) -> PZCTracker:
+             law: Mapping[str, Any] | None = None, predict_delay: float = 0.0) -> PZCTracker:
     """The candidates as one tracker of ``len(cands) * repeat`` vehicles, each candidate's
     gains ``repeat`` times, with the ``law`` settings they share (RobustConfig.law_settings)."""
     p, f = cands.params, cands.flags
     rep = lambda a: np.repeat(a, repeat)  # noqa: E731
     separate = f["separate_yaw"] > 0.5
     accel_ff = np.where(f["use_accel_ff"] > 0.5, p["accel_ff"], 0.0)
-    ext = _extension_values(cands, scales)
+    ext = _extension_values(cands, scales, predict_delay)
     turn = ext["accel_ff_turn"]
     any_split = bool(np.any(np.isfinite(turn)))
     return PZCTracker(
@@ -343,19 +372,23 @@ def _tracker(cands: Candidates, repeat: int, limits: Limits,
                  brake_accel=rep(ext["brake_accel"]) if np.any(ext["brake_accel"] > 0) else 0.0,
                  brake_yaw_accel=(rep(ext["brake_yaw_accel"])
                                   if np.any(ext["brake_yaw_accel"] > 0) else 0.0),
+                 predict_s=rep(ext["predict_s"]) if np.any(ext["predict_s"] > 0) else 0.0,
                  **(law or {})),
         limits, n=len(cands) * repeat)
 
 
 def candidate_gains(cands: Candidates, i: int,
-                    scales: tuple[float, float] = DEFAULT_BRAKE_SCALE) -> tuple[FilterGains, PZCGains]:
+                    scales: tuple[float, float] = DEFAULT_BRAKE_SCALE,
+                    predict_delay: float = 0.0) -> tuple[FilterGains, PZCGains]:
     """Candidate ``i`` as gains (what a gains file stores): :meth:`Candidates.gains` plus the
-    extensions of this search, in absolute units (the braking factors times ``scales``)."""
+    extensions of this search, in absolute units (the braking factors times ``scales``, the
+    prediction's share times ``predict_delay``)."""
     fg, pg = cands.gains(i)
-    ext = {k: float(v[i]) for k, v in _extension_values(cands, scales).items()}
+    ext = {k: float(v[i]) for k, v in _extension_values(cands, scales, predict_delay).items()}
     return fg, replace(pg, accel_ff_turn=None if math.isnan(ext["accel_ff_turn"])
                        else ext["accel_ff_turn"],
-                       brake_accel=ext["brake_accel"], brake_yaw_accel=ext["brake_yaw_accel"])
+                       brake_accel=ext["brake_accel"], brake_yaw_accel=ext["brake_yaw_accel"],
+                       predict_s=ext["predict_s"])
 
 
 def _simulate_part(cands: Candidates, cfg: RobustConfig, vehicles: Sequence[RoverParams],
@@ -376,7 +409,7 @@ def _simulate_part(cands: Candidates, cfg: RobustConfig, vehicles: Sequence[Rove
                     noise_slice=(total * n_v * n_r, first * n_v * n_r))
     with np.errstate(all="ignore"):
         result = simulate(_tracker(cands, n_v * n_r, cfg.limits, brake_scales(cfg.vehicle),
-                                   cfg.law_settings()), params,
+                                   cfg.law_settings(), cfg.predict_delay), params,
                           _reference(refs, n_c, n_v), n, sim, progress)
     shape = (n_c, n_v, n_r)
     return (np.asarray(result.steady_rms).reshape(shape),
@@ -409,7 +442,7 @@ def evaluate(cands: Candidates, cfg: RobustConfig, vehicles: Sequence[RoverParam
     finite = np.isfinite(rms) & np.isfinite(cost) & (rms < 1e3)
     rms_mean = np.where(finite, rms, np.inf).mean(axis=1)            # [cand, ref]
     cost_mean = np.where(finite, cost, np.inf).mean(axis=1)
-    objective = (np.log(rms_mean + 0.005).mean(axis=1) + 0.25 * np.log(cost_mean).mean(axis=1)
+    objective = (np.log(rms_mean + cfg.rms_floor).mean(axis=1) + 0.25 * np.log(cost_mean).mean(axis=1)
                  + cfg.chatter_weight * np.where(finite, chatter, np.inf).mean(axis=(1, 2)))
     rejected = np.full(n_c, "", dtype=object)
     cycling = (at_limit > LIMIT_CYCLE_SHARE).any(axis=(1, 2))
@@ -469,26 +502,47 @@ def _no_lead(c: Candidates) -> Candidates:
     return c
 
 
-def _random(rng: np.random.Generator, n: int) -> Candidates:
-    """:func:`companion.sim.tuning.random_candidates` plus this search's own dimensions."""
+def _random(rng: np.random.Generator, n: int, predict: bool = False) -> Candidates:
+    """:func:`companion.sim.tuning.random_candidates` plus this search's own dimensions (with
+    ``predict``, the speed prediction's too, drawn last: the others' draws stay as they were)."""
     c = random_candidates(rng, n)
     for k, (lo, hi) in EXTRA_RANGES.items():
         c.params[k] = np.exp(rng.uniform(math.log(lo), math.log(hi), n))
     for k in EXTRA_FLAGS:
         c.flags[k] = rng.integers(0, 2, n).astype(float)
+    if predict:
+        lo, hi = PREDICT_RANGE
+        c.params["predict_k"] = np.exp(rng.uniform(math.log(lo), math.log(hi), n))
+        c.flags["use_predict"] = rng.integers(0, 2, n).astype(float)
     return _no_lead(c)
 
 
-def _perturb(rng: np.random.Generator, parents: Candidates, n: int, sigma: float) -> Candidates:
+def _perturb(rng: np.random.Generator, parents: Candidates, n: int, sigma: float,
+             predict: bool = False) -> Candidates:
     """:func:`companion.sim.tuning.perturb` (which carries the extra dimensions along with each
-    child's parent) plus the same log-normal steps and flag flips on the extra dimensions."""
+    child's parent) plus the same log-normal steps and flag flips on the extra dimensions (with
+    ``predict``, the speed prediction's too)."""
     child = perturb(rng, parents, n, sigma)
-    for k, (lo, hi) in EXTRA_RANGES.items():
+    ranges = {**EXTRA_RANGES, **({"predict_k": PREDICT_RANGE} if predict else {})}
+    flags = EXTRA_FLAGS + (("use_predict",) if predict else ())
+    for k, (lo, hi) in ranges.items():
         child.params[k] = np.clip(child.params[k] * np.exp(sigma * rng.standard_normal(n)), lo, hi)
-    for k in EXTRA_FLAGS:
+    for k in flags:
         flip = rng.random(n) < 0.1
         child.flags[k] = np.where(flip, 1.0 - child.flags[k], child.flags[k])
     return _no_lead(child)
+
+
+def _predict_seeds(start: Candidates) -> Candidates:
+    """The seeds without the prediction, then the firmer ones (every extension on) again with
+    it at PREDICT_SEED of the delay."""
+    n = len(start)
+    start.params["predict_k"] = np.full(n, PREDICT_SEED)
+    start.flags["use_predict"] = np.zeros(n)
+    firm = np.flatnonzero(start.flags["use_brake"] > 0.5)
+    again = start.take(firm)
+    again.flags["use_predict"] = np.ones(len(firm))
+    return Candidates.concat([start, again])
 
 
 @dataclass
@@ -566,7 +620,8 @@ def _search(cfg: RobustConfig, vehicles: Sequence[RoverParams], population: Cand
         merged_obj = ev.objective if best is None else np.concatenate([best_obj, ev.objective])
         order = np.argsort(merged_obj)[:cfg.elite]
         best, best_obj = merged.take(order), merged_obj[order]
-        population = _perturb(rng, best, cfg.population, 0.5 * 0.6 ** r)
+        population = _perturb(rng, best, cfg.population, 0.5 * 0.6 ** r,
+                              cfg.predict_delay > 0)
     assert best is not None   # cfg.rounds >= 1 (the command refuses fewer)
     return best, evaluated
 
@@ -578,8 +633,10 @@ def tune(cfg: RobustConfig, progress: Callable[[float], None] | None = None,
     rng = np.random.default_rng(cfg.seed)
     period = 1.0 / cfg.rate_hz
     vehicles = ensemble(cfg.vehicle, cfg.neighbours, cfg.spread, period, cfg.seed)
-    start = seeds(cfg.vehicle)
-    population = Candidates.concat([start, _random(rng, max(1, cfg.population - len(start)))])
+    predict = cfg.predict_delay > 0
+    start = _predict_seeds(seeds(cfg.vehicle)) if predict else seeds(cfg.vehicle)
+    population = Candidates.concat([start, _random(rng, max(1, cfg.population - len(start)),
+                                                   predict)])
     rejected = {"limit cycle": 0, "diverged": 0}
     total = cfg.rounds + 1
     with (contextlib.nullcontext(pool) if pool is not None else _workers(cfg.workers)) as pool:
@@ -588,7 +645,7 @@ def tune(cfg: RobustConfig, progress: Callable[[float], None] | None = None,
     winner = best.take(np.array([0]))
     ev = evaluate(winner, cfg, vehicles,
                   None if progress is None else (lambda f: progress((cfg.rounds + f) / total)))
-    fg, pg = candidate_gains(winner, 0, brake_scales(cfg.vehicle))
+    fg, pg = candidate_gains(winner, 0, brake_scales(cfg.vehicle), cfg.predict_delay)
     pg = replace(pg, **cfg.law_settings())
     labels = [label for label, _ in cfg.reference_list()]
     if not math.isfinite(float(ev.objective[0])):
