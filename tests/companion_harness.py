@@ -138,6 +138,17 @@ class Companion:
                                      f":\n{self.said()}")
             time.sleep(0.02)
 
+    def wait_bound(self, port: int, timeout: float = 60.0) -> None:
+        """Wait until the run has bound its ``udpin`` port (read from /proc/net/udp, so the
+        check never takes the port from it). A plant started after this boots into a companion
+        already listening, however long the companion took to import on a loaded machine."""
+        local = f":{port:04X}"   # local_address, the second column: 0100007F:PORT in hex
+
+        def bound() -> bool:
+            with open("/proc/net/udp") as table:
+                return any(line.split()[1].endswith(local) for line in list(table)[1:])
+        self.wait_until(bound, timeout, f"udp port {port} bound")
+
     def wait(self, timeout: float) -> int:
         try:
             self.proc.wait(timeout)

@@ -26,18 +26,19 @@ def test_pilot_takeover_stops_the_companion_within_one_cycle(tmp_path, how):
     plant_args = (["--lockstep", "--takeover-at", str(TAKEOVER_S)] if how.startswith("lockstep")
                   else ["--speedup", "2"])
     with Proxy() as proxy, \
-            PlantProcess(*plant_args, "--d-cen", "0.3", port=proxy.plant_port) as plant, \
             Companion(proxy.companion_port, "--arm", "--no-zenoh", "--json", "--mission",
                       str(mission),
                       "--log-dir", str(tmp_path)) as comp:
-        if how.startswith("paced"):
-            comp.wait_until(lambda: sum(1 for s in proxy.companion_sent(
-                "SET_POSITION_TARGET_LOCAL_NED") if not is_zero(s.msg)) >= 100, 20.0,
-                "100 tracking setpoints")
-            plant.proc.send_signal(signal.SIGUSR1)
-        code = comp.wait(30.0)
-        r = comp.result()
-        time.sleep(0.3)
+        comp.wait_bound(proxy.companion_port)   # the plant's clock starts with a listener
+        with PlantProcess(*plant_args, "--d-cen", "0.3", port=proxy.plant_port) as plant:
+            if how.startswith("paced"):
+                comp.wait_until(lambda: sum(1 for s in proxy.companion_sent(
+                    "SET_POSITION_TARGET_LOCAL_NED") if not is_zero(s.msg)) >= 100, 20.0,
+                    "100 tracking setpoints")
+                plant.proc.send_signal(signal.SIGUSR1)
+            code = comp.wait(30.0)
+            r = comp.result()
+            time.sleep(0.3)
     assert code == 4, comp.stderr
     assert r["reason"] == "pilot_override: mode changed to HOLD by someone else"
     assert "pilot took over" in comp.stderr

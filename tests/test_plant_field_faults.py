@@ -18,12 +18,16 @@ FAULT_AT, FAULT_FOR = 6.0, 3.0          # vehicle s (the plant boots at 0, track
 
 def _fly(tmp_path, fault: str, *flags: str):
     mission = ellipse_mission(tmp_path / "m.toml", 12.0, f_r=0.05)
+    # The companion first, the plant once it listens: the plant's clock (and so the fault)
+    # starts at its boot, and the companion must be tracking by FAULT_AT however long its
+    # start-up took on a loaded machine (a fault while it first engages is only waited out).
     with Proxy() as proxy, \
-            PlantProcess("--lockstep", fault, f"{FAULT_AT:g},{FAULT_FOR:g}",
-                         port=proxy.plant_port), \
             Companion(proxy.companion_port, "--arm", "--no-zenoh", "--json", "--no-log",
                       "--mission", str(mission), "--estimate-healthy-for", "1", *flags) as comp:
-        code = comp.wait(90.0)
+        comp.wait_bound(proxy.companion_port)
+        with PlantProcess("--lockstep", fault, f"{FAULT_AT:g},{FAULT_FOR:g}",
+                          port=proxy.plant_port):
+            code = comp.wait(90.0)
         r = comp.result()
         sent = [s.msg for s in proxy.companion_sent("SET_POSITION_TARGET_LOCAL_NED")]
         commands = [s.msg for s in proxy.companion_sent("COMMAND_LONG")]
