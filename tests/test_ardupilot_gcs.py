@@ -12,6 +12,7 @@ from __future__ import annotations
 import csv
 import json
 import math
+import signal
 import time
 
 import pytest
@@ -162,6 +163,49 @@ def test_handover_inside_auto_twice_on_ardupilot(ardupilot, tmp_path):
     assert all(s["ended"].startswith("handed back") for s in segs), segs
     assert r["reason"].startswith("mission_done: AUTO reached the last mission item"), r
     assert 2 in reached and len(items) - 1 in reached, reached
+
+
+@pytest.mark.sitl
+@pytest.mark.slow
+def test_a_stop_after_the_hand_back_leaves_auto_its_mission_on_ardupilot(ardupilot, tmp_path):
+    """SIGTERM with --handover once the first segment is handed back: the companion sends
+    nothing more (no HOLD), and ArduPilot's AUTO drives the waypoint after the segment."""
+    sitl = ardupilot(speedup=SPEEDUP)
+    with GroundStation(sitl.url(0)) as gcs:
+        fix = gcs.wait_for(lambda: [m for m in gcs.of("GPS_RAW_INT", (1, 1))
+                                    if m.fix_type >= 3], 60.0, "a 3-D GPS fix")
+        items = _handover_items((fix[-1].lat / 1e7, fix[-1].lon / 1e7))
+        gcs.upload(1, items)
+        sitl.wait_log("SERIAL1 on TCP port", 15.0)
+        with CompanionProcess(sitl.url(1), "--handover", "--mission", "vehicle", "--no-zenoh",
+                              "--json", "--no-log", "--w-c", "1.2", "--max-speed", "2",
+                              "--max-yaw-rate", "1.5") as comp:
+            gcs.wait_for(lambda: gcs.of("HEARTBEAT", (1, COMPANION)), 30.0, "the companion")
+            deadline = time.monotonic() + BOOT_WALL
+            while gcs.command((1, 1), 400, 1) != 0:          # the GCS arms (EKF permitting)
+                assert time.monotonic() < deadline, "never armed"
+                time.sleep(1.0)
+            while gcs.command((1, 1), 176, 1, 10) != 0:      # ... and starts AUTO
+                assert time.monotonic() < deadline, gcs.texts((1, 1))
+                time.sleep(1.0)
+            comp.wait_for_stderr("hand-over: handed back to AUTO at item 6", 180.0)
+            stopped = time.monotonic()
+            comp.proc.send_signal(signal.SIGTERM)
+            code = comp.wait(20.0)
+        # AUTO drove to the waypoint after the disable (item 7) by itself and went on to the
+        # next enable (8; this build says no "Reached waypoint" for item 7: its current item
+        # is what tells)
+        gcs.wait_for(lambda: any(m.seq == 8 for m in gcs.of("MISSION_CURRENT", (1, 1),
+                                                            stopped)),
+                     120.0, "AUTO done with item 7 after the stop")
+        modes = [m.custom_mode for m in gcs.of("HEARTBEAT", (1, 1), stopped)]
+    assert code == 0, comp.stderr
+    r = comp.result()
+    assert r["reason"] == "SIGTERM" and not r["hold_confirmed"], r
+    assert "AUTO drives its own mission items: left to it, in AUTO" in comp.stderr
+    assert modes and set(modes) == {10}, modes                    # AUTO all along
+    print(f"\nstopped after the hand-back: AUTO drove item 7 itself, {len(modes)} heartbeats "
+          "in AUTO")
 
 
 @pytest.mark.sitl

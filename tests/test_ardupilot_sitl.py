@@ -204,6 +204,44 @@ def test_pilot_switching_to_manual_ends_the_run_with_exit_4_and_no_more_setpoint
 
 @pytest.mark.sitl
 @pytest.mark.slow
+def test_a_stop_while_waiting_for_the_pilot_leaves_the_armed_rover_in_manual(ardupilot,
+                                                                            tmp_path):
+    """--start-on-guided: the pilot has armed the rover in MANUAL and drives it; the companion
+    waits for the pilot's GUIDED and is stopped (SIGTERM) before that. It has asked nothing of
+    the vehicle, so it sends nothing on the way out: no HOLD (which would stop the rover under
+    the pilot), no disarm. The vehicle stays armed in MANUAL, as the pilot left it."""
+    sitl = ardupilot(speedup=SPEEDUP)
+    mission = circle_mission(tmp_path / "circle.toml", duration=60.0)
+    with CompanionProcess(sitl.url(0), "--mission", str(mission), "--start-on-guided",
+                          "--no-zenoh", "--json", "--log-dir", str(tmp_path / "logs")) as comp, \
+            GroundStation(sitl) as gs:
+        comp.wait_for_stderr("waiting for the pilot", BOOT_WALL)
+        assert gs.set_mode(MANUAL) == 0
+        deadline = time.monotonic() + BOOT_WALL            # the pilot arms once prearm passes
+        while gs.command(400, 1) != 0:
+            assert time.monotonic() < deadline, "SITL would not arm in MANUAL"
+            time.sleep(1.0)
+        gs.wait_for("HEARTBEAT", lambda m: m.custom_mode == MANUAL and m.base_mode & 128, 10.0)
+        t_term = time.monotonic()
+        comp.proc.send_signal(signal.SIGTERM)
+        code = comp.wait(15.0)
+        r = comp.result()
+        time.sleep(2.0)                                    # ten vehicle seconds of heartbeats
+        beats = [(m.custom_mode, bool(m.base_mode & 128)) for m in gs.messages("HEARTBEAT",
+                                                                               t_term)]
+    assert code == 0 and (r["reason"], r["stop_cause"]) == ("SIGTERM", "ok"), (r, comp.stderr)
+    frames, _ = read_tlog(Path(r["tlog"]))
+    asked = [(m.command, m.param1, m.param2) for _, m in sent_by_companion(frames)
+             if m.get_type() == "COMMAND_LONG" and m.command in (176, 400)]
+    assert asked == [], asked                              # no mode request, no (dis)arming
+    assert len(beats) >= 5 and set(beats) == {(MANUAL, True)}, beats
+    assert "nothing had been asked of the vehicle: left as it was, in MANUAL" in comp.stderr
+    print(f"\nSIGTERM while waiting for the pilot: companion exit {code}, nothing sent; the "
+          f"rover stayed armed in MANUAL ({len(beats)} heartbeats after)")
+
+
+@pytest.mark.sitl
+@pytest.mark.slow
 def test_rate_50_falls_back_to_40_on_a_stock_rover_and_is_accepted_at_a_100_hz_loop(ardupilot,
                                                                                     tmp_path):
     """ArduPilot refuses message rates above 0.8 x SCHED_LOOP_RATE (50 Hz on Rover): --rate 50

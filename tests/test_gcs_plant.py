@@ -7,12 +7,17 @@ waits for the GCS to engage."""
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import json
 import math
+import signal
 import subprocess
 import sys
 import time
+from collections.abc import Iterator
+
+import pytest
 
 from companion.mav import mission_transfer as mt
 from companion.mission import geo
@@ -199,21 +204,34 @@ def handover_items(twice: bool) -> list:
     return out
 
 
-def test_handover_inside_auto_twice(tmp_path):
-    """AUTO drives to the first waypoint, the companion tracks each enable..disable segment
-    from the rover's pose, hands back, AUTO goes on and reaches the last waypoint."""
+@contextlib.contextmanager
+def plant_with_mission(items: list) -> Iterator[tuple[PlantProcess, GroundStation]]:
+    """The plant at 2 x with a ground station on its second link, which has uploaded
+    ``items`` (the vehicle's mission) once the plant is heard."""
     gcs_port = free_udp_port()
-    items = handover_items(twice=True)
     with PlantProcess("--speedup", "2", "--gcs", f"udpout:127.0.0.1:{gcs_port}") as plant, \
             GroundStation(f"udpin:127.0.0.1:{gcs_port}") as gcs:
         gcs.wait_for(lambda: gcs.of("HEARTBEAT", (1, 1)), 10.0, "the plant's heartbeat")
         gcs.upload(1, items)
+        yield plant, gcs
+
+
+def gcs_arms_and_starts_auto(gcs: GroundStation) -> None:
+    """Once the companion is heard: the GCS arms the plant and selects AUTO."""
+    gcs.wait_for(lambda: gcs.of("HEARTBEAT", (1, COMPANION)), 20.0, "the companion")
+    time.sleep(1.0)
+    assert gcs.command((1, 1), 400, 1) == 0
+    assert gcs.command((1, 1), 176, 1, 10) == 0          # AUTO, by the GCS
+
+
+def test_handover_inside_auto_twice(tmp_path):
+    """AUTO drives to the first waypoint, the companion tracks each enable..disable segment
+    from the rover's pose, hands back, AUTO goes on and reaches the last waypoint."""
+    items = handover_items(twice=True)
+    with plant_with_mission(items) as (plant, gcs):
         with Companion(plant.port, "--handover", "--mission", "vehicle", "--no-zenoh", "--json", "--log-dir",
                        str(tmp_path)) as comp:
-            gcs.wait_for(lambda: gcs.of("HEARTBEAT", (1, COMPANION)), 20.0, "the companion")
-            time.sleep(1.0)
-            assert gcs.command((1, 1), 400, 1) == 0
-            assert gcs.command((1, 1), 176, 1, 10) == 0          # AUTO, by the GCS
+            gcs_arms_and_starts_auto(gcs)
             code = comp.wait(120.0)
         time.sleep(0.3)
         reached = [m.seq for m in gcs.of("MISSION_ITEM_REACHED", (1, 1))]
@@ -230,3 +248,41 @@ def test_handover_inside_auto_twice(tmp_path):
     assert sum(t.startswith("PZC: tracking: hand-over") for t in texts) == 2, texts
     assert sum(t.startswith("PZC: hand-back") for t in texts) == 2, texts
     print(f"\nhand-overs on the plant: {segs}")
+
+
+@pytest.mark.parametrize("when", ["after the hand-back", "in the segment"])
+def test_a_stop_leaves_auto_its_own_mission_and_holds_a_segment(tmp_path, when):
+    """SIGTERM with --handover: while AUTO drives its own items the autopilot's mission is not
+    the companion's to stop (AUTO goes on to its last item); while the companion tracks a
+    segment it stops the rover (HOLD), as any run does."""
+    items = handover_items(twice=False)
+    with plant_with_mission(items) as (plant, gcs):
+        with Companion(plant.port, "--handover", "--mission", "vehicle", "--no-zenoh", "--json",
+                       "--no-log") as comp:
+            gcs_arms_and_starts_auto(gcs)
+            if when == "in the segment":
+                comp.wait_for_stderr("hand-over: tracking", 60.0)
+                time.sleep(1.0)
+            else:
+                comp.wait_for_stderr("hand-over: handed back", 60.0)
+            stopped = time.monotonic()
+            comp.proc.send_signal(signal.SIGTERM)
+            code = comp.wait(20.0)
+        modes = lambda: [m.custom_mode for m in gcs.of("HEARTBEAT", (1, 1), stopped)]  # noqa: E731
+        if when == "in the segment":
+            gcs.wait_for(lambda: 4 in modes(), 10.0, "HOLD after the stop")
+        else:
+            last = len(items) - 1
+            gcs.wait_for(lambda: any(m.seq == last for m in gcs.of("MISSION_ITEM_REACHED",
+                                                                   (1, 1), stopped)),
+                         60.0, "AUTO reaching its last item after the stop")
+            assert set(modes()) == {10}, modes()                  # AUTO all along
+    assert code == 0, comp.stderr
+    r = comp.result()
+    assert r["reason"] == "SIGTERM", r
+    if when == "in the segment":
+        assert r["hold_confirmed"] is True, r
+        assert "left to it" not in comp.stderr
+    else:
+        assert "AUTO drives its own mission items: left to it, in AUTO" in comp.stderr
+        assert not r["hold_confirmed"], r

@@ -32,13 +32,18 @@ class Ending(LoopCore):
     """Stopping the rover and ending the loop; a pilot's takeover told from a reboot."""
 
     def _finish(self, reason: str, code: ExitCode, time_boot_ms: int = 0, hold: bool = True,
-                stop: bool = True) -> None:
+                stop: bool = True, asked: bool = False) -> None:
         """Stop the rover (zero setpoint, then HOLD) and end the loop; a vehicle nothing was
-        asked of yet is left as it is (:meth:`_untouched`)."""
+        asked of yet is left as it is (:meth:`_untouched`), and so is one AUTO drives between
+        hand-overs when the operator stops the run (``asked``: a signal, ``abort``)."""
         left = ""
         if (stop or hold) and self._untouched():
             stop = hold = False
             left = f" (nothing had been asked of the vehicle: left as it was, in {self.link.mode})"
+        elif (stop or hold) and asked and self._auto_drives():
+            stop = hold = False
+            left = (f" (AUTO drives its own mission items: left to it, in {self.link.mode}; "
+                    "the segments still ahead will not be tracked)")
         if stop:
             self.link.send_stop(time_boot_ms)
         if hold:
@@ -59,6 +64,14 @@ class Ending(LoopCore):
         GUIDED / OFFBOARD, which ignores them."""
         return self.state is State.WAITING or (self.engagement.first(self.state)
                                                and self.mode_request.name is None)
+
+    def _auto_drives(self) -> bool:
+        """--handover, between segments: AUTO flies its own items and the companion sends no
+        setpoint. Stopping the companion then is no reason to stop the autopilot's mission (a
+        HOLD would). That includes a segment's hand-back (its path done, a zero setpoint sent,
+        AUTO told to go on); a segment being tracked is the companion's to stop."""
+        handover = self.ground.handover
+        return handover is not None and handover.quiet and self.state is State.READY
 
     def _override(self, why: str) -> None:
         if self.telemetry.backwards_streak:

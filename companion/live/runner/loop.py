@@ -129,7 +129,7 @@ class Runner(Failsafes, Requests):
         estimate_kind = self.profile.estimate.message
         while self.state is not State.DONE:
             if self.stopping.requested is not None:
-                self._finish(self.stopping.requested, ExitCode.OK)
+                self._finish(self.stopping.requested, ExitCode.OK, asked=True)
                 break
             if self.control is not None:
                 for request in self.control.poll():

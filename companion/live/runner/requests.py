@@ -56,8 +56,9 @@ class Requests(Ending):
             else:
                 req.reply(False, f"cannot resume while {state.value}")
         elif verb == "abort":
-            self._finish("aborted", ExitCode.OK)
-            req.reply(True, "stopping the rover")
+            self._finish("aborted", ExitCode.OK, asked=True)
+            req.reply(True, "stopping the rover" if self.stopping.wants_hold
+                      else "stopped; the vehicle left as it was")
         elif verb == "load-mission":
             self._load_mission(req)
         else:
