@@ -31,7 +31,7 @@ from companion.profiles.priors import defaults
 from companion.sim.plant import RoverModel, RoverParams, RoverState
 from companion.sim.response import respond
 from companion.sim.vehicle_file import VehicleFile, load, save
-from companion_harness import ROOT, companion_cli, ellipse_mission, mavlink2
+from companion_harness import ROOT, Companion, companion_cli, ellipse_mission, mavlink2
 from safety_harness import read_tlog
 from sitl_common import CANDIDATE
 from sitl_plant.testing import Pilot, PlantProcess, free_udp_port
@@ -425,28 +425,36 @@ def test_live_identify_ends_when_the_manoeuvre_script_does(tmp_path):
     assert load(out).params.velocity_vector
 
 
+def _stop_identify_mid_manoeuvre(plant_port: int, args: list[str], stop) -> str:
+    """``companion identify`` on the plant with ``args``; 3 s into the manoeuvre ``stop(proc)``
+    asks it to stop. Its stderr, once it has ended with exit 0 and no traceback."""
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "companion", "identify", "--connect",
+         f"udpin:127.0.0.1:{plant_port}", "--arm", *args],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=ROOT)
+    try:
+        seen = ""
+        while "tracking 'identify excitation'" not in seen:
+            line = proc.stderr.readline()
+            assert line, f"identify ended before tracking:\n{seen}"
+            seen += line
+        time.sleep(3.0)
+        stop(proc)
+        _, err = proc.communicate(timeout=15.0)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.communicate()
+    assert proc.returncode == 0 and "Traceback" not in err, err
+    return err
+
+
 def test_sigterm_stops_the_manoeuvre_in_hold_and_fits_nothing(vehicle_file, tmp_path):
     out = tmp_path / "v.toml"
     with PlantProcess("--speedup", "2", "--vehicle", str(vehicle_file)) as plant:
-        proc = subprocess.Popen(
-            [sys.executable, "-m", "companion", "identify", "--connect",
-             f"udpin:127.0.0.1:{plant.port}", "--arm", "--out", str(out), "--no-zenoh",
-             "--log-dir", str(tmp_path / "logs")],
-            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=ROOT)
-        try:
-            seen = ""
-            while "tracking 'identify excitation'" not in seen:
-                line = proc.stderr.readline()
-                assert line, f"identify ended before tracking:\n{seen}"
-                seen += line
-            time.sleep(3.0)
-            proc.send_signal(signal.SIGTERM)
-            _, err = proc.communicate(timeout=15.0)
-        finally:
-            if proc.poll() is None:
-                proc.kill()
-                proc.communicate()
-        assert proc.returncode == 0 and "Traceback" not in err, err
+        err = _stop_identify_mid_manoeuvre(
+            plant.port, ["--out", str(out), "--no-zenoh", "--log-dir", str(tmp_path / "logs")],
+            lambda proc: proc.send_signal(signal.SIGTERM))
         assert "stopped by SIGTERM before the manoeuvre ended: not fitted" in err
         with Pilot(plant.port) as pilot:
             assert pilot.wait("HEARTBEAT", 5.0).custom_mode == 4          # HOLD
@@ -456,14 +464,46 @@ def test_sigterm_stops_the_manoeuvre_in_hold_and_fits_nothing(vehicle_file, tmp_
     assert not out.exists()
 
 
+def test_an_abort_from_the_control_channel_stops_the_manoeuvre_and_fits_nothing(vehicle_file,
+                                                                             tmp_path):
+    """``abort`` over Zenoh mid-manoeuvre is a stop asked for, as SIGTERM is: HOLD, exit 0,
+    said as an abort request, and half a manoeuvre is not fitted into a vehicle file."""
+    from companion.bus import control_request
+    from zenoh_harness import ISOLATED, endpoint, free_tcp_port, secret_file, session
+    out, port = tmp_path / "v.toml", free_tcp_port()
+    key = secret_file(tmp_path / "secret")
+    replies = []
+
+    def abort(proc) -> None:
+        replies.append(control_request(zs, "id1", "abort", secret="correct horse battery staple",
+                                       timeout=5.0))
+
+    with session(listen=[endpoint(port)]) as zs, \
+            PlantProcess("--speedup", "2", "--vehicle", str(vehicle_file)) as plant:
+        err = _stop_identify_mid_manoeuvre(
+            plant.port, ["--out", str(out), "--vehicle-id", "id1", "--control-secret", str(key),
+                         "--zenoh-connect", endpoint(port), *ISOLATED,
+                         "--log-dir", str(tmp_path / "logs")], abort)
+        assert replies[0]["ok"] and replies[0]["message"] == "stopping the rover", replies
+        assert "stopped by an abort request before the manoeuvre ended: not fitted" in err, err
+        with Pilot(plant.port) as pilot:
+            assert pilot.wait("HEARTBEAT", 5.0).custom_mode == 4          # HOLD
+    assert not out.exists()
+
+
 def test_a_pilot_takeover_ends_the_manoeuvre_and_what_was_flown_is_fitted(vehicle_file,
                                                                           tmp_path):
-    out = tmp_path / "v.toml"
-    with PlantProcess("--lockstep", "--vehicle", str(vehicle_file), "--takeover-at", "30") \
-            as plant:
-        p = companion("identify", "--connect", f"udpin:127.0.0.1:{plant.port}", "--arm",
-                      "--out", str(out), "--json", "--no-zenoh", "--no-log", timeout=240.0)
-    assert p.returncode == 4, p.stderr
+    out, port = tmp_path / "v.toml", free_udp_port()
+    # identify first, the plant once it listens: the takeover is at 30 s of the plant's clock,
+    # which starts at its boot, and the turn-rate part must be flown by then however long
+    # identify took to start on a loaded machine
+    with Companion(port, "--arm", "--out", str(out), "--json", "--no-zenoh", "--no-log",
+                   command="identify") as p:
+        p.wait_bound(port)
+        with PlantProcess("--lockstep", "--vehicle", str(vehicle_file), "--takeover-at", "30",
+                          port=port):
+            code = p.wait(240.0)
+    assert code == 4, p.stderr
     r = json.loads(p.stdout)
     assert r["flight"]["reason"].startswith("pilot_override")
     assert r["flight"]["tlog"] is None and r["log"].startswith("the manoeuvre flown")

@@ -261,6 +261,14 @@ def _mission(space: float):
                    source="companion identify", kind="excitation")
 
 
+def _stopped_by(signal_name: str | None, reason: str) -> str | None:
+    """Who cut the manoeuvre short on request: a signal (SIGTERM, SIGINT) or ``abort`` (from
+    the control channel, during the setup or the flight), said as such; None otherwise."""
+    if signal_name == "aborted" or (signal_name is None and reason == "aborted"):
+        return "an abort request"
+    return signal_name
+
+
 def _live(args) -> int:
     code, report, flight = fly_and_fit(live_options(args), fit_options(args), args.space)
     if report is not None:
@@ -317,8 +325,9 @@ def fly_and_fit(options, fit: FitOptions, space: float):
                 "max_distance_m": tracker.max_distance if tracker else 0.0,
                 "returns": tracker.returns if tracker else 0,
                 "tlog": None if scratch else paths.tlog, "csv": None if scratch else paths.csv}
-            if flight.interrupted is not None:
-                log(f"stopped by {flight.interrupted} before the manoeuvre ended: not fitted"
+            stopped_by = _stopped_by(flight.interrupted, result.reason)
+            if stopped_by is not None:
+                log(f"stopped by {stopped_by} before the manoeuvre ended: not fitted"
                     + ("" if scratch else f" (the log is {paths.tlog})"))
                 return result.exit_code, None, flight_summary
             flight.close_logs()          # the CSV complete before anything reads the logs
