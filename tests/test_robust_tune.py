@@ -274,7 +274,8 @@ def test_gains_files_keep_every_law_parameter(tmp_path):
                    heading_rate_ff=True, accel_ff=0.34, lead_tau=0.2, lead_max_gain=3.0,
                    speed_law="paper", accel_ff_turn=0.005, brake_accel=0.21, brake_yaw_accel=0.98,
                    min_progress=0.3, course_tau=2.0, brake_integrate=4.0,
-                   approach_cone=0.5, predict_s=0.5)
+                   approach_cone=0.5, predict_s=0.5, cancel_overshoot=0.47,
+                   cancel_overshoot_s=1.2)
     defaults = PZCGains(0.7, 0.6)
     changed = [f.name for f in fields(PZCGains) if getattr(pzc, f.name) != getattr(defaults, f.name)]
     assert len(changed) == len(fields(PZCGains)) - 2          # all but k_dc, lambda_c
@@ -393,9 +394,9 @@ def test_the_tuners_settings_come_from_the_profiles_that_fly_the_vehicle(tmp_pat
     skid = ROVER
     car = ROVER.with_(min_turn_radius=0.9)
     px4_car = ROVER.with_(course_gain=3.9, min_turn_radius=0.56)
-    assert tune_settings(skid) == {"course_tau": 2.0, "predict_min_delay": 0.25} == dict(
-        ardupilot.PROFILE.tune)
-    assert tune_settings(car) == {"course_tau": 2.0, "predict_min_delay": 0.25,
+    ardupilot_own = {"course_tau": 2.0, "predict_min_delay": 0.25, "cancel_min_overshoot": 0.1}
+    assert tune_settings(skid) == ardupilot_own == dict(ardupilot.PROFILE.tune)
+    assert tune_settings(car) == {**ardupilot_own,
                                   "min_progress": 0.3, "speed_law": "paper", "accel_room": 1.25,
                                   "rms_floor": 0.02}
     assert tune_settings(car) == {**ardupilot.PROFILE.tune, **dict(ackermann.PROFILE.tune_on_turn_rate)}
@@ -453,6 +454,31 @@ def test_a_late_speed_loop_is_predicted_and_a_prompt_one_left_as_it_was():
     assert got == [0.0, pytest.approx(0.25)]
     tracker = _tracker(s, 1, car.limits, predict_delay=0.5)
     assert list(tracker.predict.horizon[:2]) == [0.0, pytest.approx(0.25)]
+
+
+def test_an_overshooting_speed_loop_is_cancelled_and_a_plain_one_left_as_it_was():
+    # The ArduPilot profile's cancel_min_overshoot (0.1), through the command's own path: SITL's
+    # car (its speed overshoots 0.25, taken back over 1.9 s) has every candidate send its speed
+    # through the inverse, and the tuned gains carry it; the bundled skid rover (no overshoot)
+    # and a profile that says nothing (PX4) leave the law as it was.
+    from companion.commands.flight import tune_search
+    from companion.sim.robust import _tracker, seeds
+    from companion.sim.vehicle_gains import config_for
+    root = Path(__file__).resolve().parents[1]
+    car_file = root / "benchmarks/vehicles/ardupilot_car_sitl.toml"
+    skid_file = root / "companion/sim/vehicles/ardupilot_skid.toml"
+    car = config_for(car_file, 40.0, **tune_search(car_file))
+    skid = config_for(skid_file, 40.0, **tune_search(skid_file))
+    want = {"cancel_overshoot": pytest.approx(0.248743), "cancel_overshoot_s": pytest.approx(1.91763)}
+    assert car.overshoot_cancel() == want
+    assert {k: car.law_settings()[k] for k in want} == want
+    assert skid.overshoot_cancel() == {} and "cancel_overshoot" not in skid.law_settings()
+    assert replace(car, cancel_min_overshoot=None).overshoot_cancel() == {}      # PX4's
+    # a taken-back overshoot only: one that never is (PX4's over-drive neighbours) has no inverse
+    held = replace(car, vehicle=car.vehicle.with_(speed_overshoot_s=math.inf))
+    assert held.overshoot_cancel() == {}
+    tracker = _tracker(seeds(car.vehicle), 1, car.limits, law=car.law_settings())
+    assert tracker.cancel.active and float(tracker.cancel.share) == pytest.approx(0.248743)
 
 
 def test_the_rms_floor_is_what_each_references_log_counts_from():

@@ -46,7 +46,10 @@ Extensions beyond the paper, each off by default (the paper's law exactly) and c
   ``course_tau`` (:mod:`companion.core.course`);
 * ``predict_s`` = d (s), for a speed loop with a pure delay d: the speed comes from the law run
   on the pose the speed commands of the last d seconds lead to against the reference d ahead,
-  the turn rate from the law run on the present (:mod:`companion.core.predict`).
+  the turn rate from the law run on the present (:mod:`companion.core.predict`);
+* ``cancel_overshoot`` = g, ``cancel_overshoot_s`` = tau (s), for a speed loop that overshoots
+  (the vehicle model's ``speed_overshoot``): the speed sent through the exact inverse of that
+  overshoot, last (:mod:`companion.core.overshoot`).
 
 Limits: speed and yaw rate are clamped; while either output is clamped its integrator is held
 (conditional integration), so nothing winds up in saturation.
@@ -65,6 +68,7 @@ from .course import CourseCorrection
 from .filter import FilterGains, PoseFilter
 from .lead import ActuatorLead
 from .limits import SPEED_LAWS, Limits, clamp, keep_if, speed_from_up, yaw_rate_limit
+from .overshoot import OvershootCancel
 from .predict import DelayPrediction
 from .signals import Command, Estimate, Measurement, Num, Reference
 
@@ -99,12 +103,14 @@ class PZCGains:
     brake_integrate: Num = 1.0
     approach_cone: Num = 0.0
     predict_s: Num = 0.0
+    cancel_overshoot: Num = 0.0
+    cancel_overshoot_s: Num = 1.0
 
     def __post_init__(self) -> None:
         if self.speed_law not in SPEED_LAWS:
             raise ValueError(f"speed_law must be one of {SPEED_LAWS}, not {self.speed_law!r}")
         for name in ("accel_ff_turn", "brake_accel", "brake_yaw_accel", "min_progress",
-                     "course_tau", "approach_cone", "predict_s"):
+                     "course_tau", "approach_cone", "predict_s", "cancel_overshoot"):
             value = getattr(self, name)
             if value is not None and _any_negative(value):
                 raise ValueError(f"{name} must be >= 0, not {value!r}")
@@ -112,6 +118,8 @@ class PZCGains:
             raise ValueError(f"brake_integrate must be >= 1 (knees), not {self.brake_integrate!r}")
         if _any_negative(0.5 * math.pi - 1e-9 - self.approach_cone):
             raise ValueError(f"approach_cone must be below pi/2 rad, not {self.approach_cone!r}")
+        if _any_negative(self.cancel_overshoot_s):
+            raise ValueError(f"cancel_overshoot_s must be >= 0 s, not {self.cancel_overshoot_s!r}")
 
     @property
     def kp(self) -> Num:
@@ -314,6 +322,7 @@ class PZCTracker:
         self.predict = DelayPrediction(gains.predict_s, n)
         # the speed's law, d ahead (its own integrators); None without a delay to predict
         self.law_ahead = PZCLaw(gains, limits, n) if self.predict.active else None
+        self.cancel = OvershootCancel(gains.cancel_overshoot, gains.cancel_overshoot_s, limits, n)
         self.estimate: Estimate | None = None
 
     def reset(self) -> None:
@@ -325,6 +334,7 @@ class PZCTracker:
         self.predict.reset()
         if self.law_ahead is not None:
             self.law_ahead.reset()
+        self.cancel.reset()
         self.estimate = None
 
     def step(self, t: float, meas: Measurement, ref: Reference) -> Command:
@@ -341,8 +351,8 @@ class PZCTracker:
             top = yaw_rate_limit(m, self.law.limits, fore.speed)
             cmd = Command(fore.speed, m.clip(cmd.yaw_rate, -top, top), fore.ux, fore.uy)
         cmd = self.lead.step(t, cmd)
-        self.predict.sent(t, cmd)
-        return cmd
+        self.predict.sent(t, cmd)        # what the vehicle will drive: the overshoot's undone
+        return self.cancel.step(t, cmd)
 
 
 def with_paper_speed_law(gains: PZCGains) -> PZCGains:

@@ -26,7 +26,9 @@ turning part of the acceleration feed-forward (``accel_ff_turn``) and braking-cu
 integrator hold (``brake_accel``, ``brake_yaw_accel``), each behind a flag, the braking
 accelerations as factors of the identified vehicle's decelerations (:data:`EXTRA_RANGES`), and
 on a late speed loop (``predict_min_delay``, the autopilot profile's) the speed's delay
-prediction (``predict_s``, a share of the identified delay: :data:`PREDICT_RANGE`). The
+prediction (``predict_s``, a share of the identified delay: :data:`PREDICT_RANGE`); on a speed
+loop identified to overshoot (``cancel_min_overshoot``, the profile's) every candidate sends
+its speed through that overshoot's inverse (:meth:`RobustConfig.overshoot_cancel`). The
 seeds include the speed channel's delay + lag as the speed preview, so the search starts where
 the physics says the preview belongs.
 """
@@ -141,6 +143,9 @@ class RobustConfig:
     # and how far ahead each candidate predicts its speed (core.predict, PZCGains.predict_s:
     # PREDICT_RANGE); None: none does (the autopilot's profile says)
     predict_min_delay: float | None = None
+    # on a vehicle whose identified speed overshoot share is at least this, every candidate
+    # sends its speed through the overshoot's inverse (core.overshoot); None: none does
+    cancel_min_overshoot: float | None = None
     # None: the references are not checked against the vehicle's acceleration; a number: those
     # whose peak acceleration along the path exceeds that share of it are left out (a car's)
     accel_room: float | None = None
@@ -156,7 +161,18 @@ class RobustConfig:
         candidate with them and the tuned gains carry them."""
         return {"min_progress": self.min_progress, "speed_law": self.speed_law,
                 "course_tau": self.course_tau, "brake_integrate": self.brake_integrate,
-                "approach_cone": self.approach_cone}
+                "approach_cone": self.approach_cone, **self.overshoot_cancel()}
+
+    def overshoot_cancel(self) -> dict[str, float]:
+        """The law's overshoot cancellation for this vehicle (PZCGains.cancel_overshoot,
+        cancel_overshoot_s): the identified overshoot where it reaches
+        ``cancel_min_overshoot`` and is taken back (a finite time), else none ({})."""
+        share = float(np.mean(self.vehicle.speed_overshoot))
+        tau = float(np.mean(self.vehicle.speed_overshoot_s))
+        if (self.cancel_min_overshoot is None or not share >= self.cancel_min_overshoot
+                or not math.isfinite(tau)):
+            return {}
+        return {"cancel_overshoot": share, "cancel_overshoot_s": tau}
 
     @property
     def predict_delay(self) -> float:
