@@ -430,19 +430,26 @@ def test_companion_tune_records_a_px4_vehicles_own_neighbours(tmp_path):
             math.radians(30.0) if path == px4 else 0.0)
 
 
+def _car_and_skid() -> tuple[RobustConfig, RobustConfig]:
+    """The robust tuner's configurations, through the command's own path (commands.flight.
+    tune_search -> vehicle_gains.config_for), for SITL's car (benchmarks/vehicles) and the
+    bundled skid rover."""
+    from companion.commands.flight import tune_search
+    from companion.sim.vehicle_gains import config_for
+    root = Path(__file__).resolve().parents[1]
+    files = (root / "benchmarks/vehicles/ardupilot_car_sitl.toml",
+             root / "companion/sim/vehicles/ardupilot_skid.toml")
+    car, skid = (config_for(f, 40.0, **tune_search(f)) for f in files)
+    return car, skid
+
+
 def test_a_late_speed_loop_is_predicted_and_a_prompt_one_left_as_it_was():
     # The ArduPilot profile's predict_min_delay (0.25 s), through the command's own path
     # (commands.flight.tune_search -> vehicle_gains.config_for): on SITL's car (speed delay
     # 0.5 s) the search may predict up to that delay; on the bundled skid rover (0.145 s), or
     # where the profile says nothing (PX4), no candidate predicts.
-    from companion.commands.flight import tune_search
     from companion.sim.robust import PREDICT_SEED, _tracker, candidate_gains, seeds
-    from companion.sim.vehicle_gains import config_for
-    root = Path(__file__).resolve().parents[1]
-    car_file = root / "benchmarks/vehicles/ardupilot_car_sitl.toml"
-    skid_file = root / "companion/sim/vehicles/ardupilot_skid.toml"
-    car = config_for(car_file, 40.0, **tune_search(car_file))
-    skid = config_for(skid_file, 40.0, **tune_search(skid_file))
+    car, skid = _car_and_skid()
     assert car.predict_delay == pytest.approx(0.5)
     assert skid.predict_delay == 0.0
     assert replace(car, predict_min_delay=None).predict_delay == 0.0      # PX4's: no setting
@@ -461,14 +468,8 @@ def test_an_overshooting_speed_loop_is_cancelled_and_a_plain_one_left_as_it_was(
     # car (its speed overshoots 0.25, taken back over 1.9 s) has every candidate send its speed
     # through the inverse, and the tuned gains carry it; the bundled skid rover (no overshoot)
     # and a profile that says nothing (PX4) leave the law as it was.
-    from companion.commands.flight import tune_search
     from companion.sim.robust import _tracker, seeds
-    from companion.sim.vehicle_gains import config_for
-    root = Path(__file__).resolve().parents[1]
-    car_file = root / "benchmarks/vehicles/ardupilot_car_sitl.toml"
-    skid_file = root / "companion/sim/vehicles/ardupilot_skid.toml"
-    car = config_for(car_file, 40.0, **tune_search(car_file))
-    skid = config_for(skid_file, 40.0, **tune_search(skid_file))
+    car, skid = _car_and_skid()
     want = {"cancel_overshoot": pytest.approx(0.248743), "cancel_overshoot_s": pytest.approx(1.91763)}
     assert car.overshoot_cancel() == want
     assert {k: car.law_settings()[k] for k in want} == want
