@@ -22,7 +22,7 @@ setpoint) is left as the law made it. Works on floats (one vehicle) or arrays (b
 from __future__ import annotations
 
 from . import ops as _ops
-from .limits import Limits, yaw_rate_limit
+from .limits import Limits, clip_yaw_rate
 from .signals import Command, Num
 
 
@@ -55,8 +55,7 @@ class ActuatorLead:
         gain = m.where(self.tau > 0, gain, 1.0)
         speed = m.clip(self.speed_model + gain * (cmd.speed - self.speed_model),
                        -lim.max_speed, lim.max_speed)
-        top_rate = yaw_rate_limit(m, lim, speed)
-        rate = m.clip(self.rate_model + gain * (cmd.yaw_rate - self.rate_model),
-                      -top_rate, top_rate)
+        rate = clip_yaw_rate(m, lim, speed,
+                             self.rate_model + gain * (cmd.yaw_rate - self.rate_model))
         self.speed_sent, self.rate_sent = speed, rate
         return Command(speed, rate, cmd.ux, cmd.uy)

@@ -66,6 +66,13 @@ def yaw_rate_limit(m: Ops, lim: Limits, speed: Num) -> Num:
     return m.minimum(lim.max_yaw_rate, abs(speed) / lim.min_turn_radius)
 
 
+def clip_yaw_rate(m: Ops, lim: Limits, speed: Num, yaw_rate: Num) -> Num:
+    """``yaw_rate`` within :func:`yaw_rate_limit` at ``speed``: what a stage after the law
+    (lead, prediction, overshoot cancel) applies again once it has changed the speed sent."""
+    top = yaw_rate_limit(m, lim, speed)
+    return m.clip(yaw_rate, -top, top)
+
+
 def clamp(m: Ops, lim: Limits, speed: Num, yaw_rate: Num, ux: Num, uy: Num,
           norm_up: Num) -> tuple[Command, Num, Num]:
     """Clamp a raw command to the limits.

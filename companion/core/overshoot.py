@@ -24,7 +24,7 @@ arrays (batch), no clock.
 from __future__ import annotations
 
 from . import ops as _ops
-from .limits import Limits, yaw_rate_limit
+from .limits import Limits, clip_yaw_rate
 from .signals import Command, Num
 
 
@@ -49,6 +49,5 @@ class OvershootCancel:
             self.slow = self.sent + (self.slow - self.sent) * decay
         self.t = t
         speed = (cmd.speed + g * self.slow) / (1.0 + g)
-        top = yaw_rate_limit(m, self.limits, speed)
         self.sent = speed
-        return Command(speed, m.clip(cmd.yaw_rate, -top, top), cmd.ux, cmd.uy)
+        return Command(speed, clip_yaw_rate(m, self.limits, speed, cmd.yaw_rate), cmd.ux, cmd.uy)

@@ -67,7 +67,7 @@ from . import ops as _ops
 from .course import CourseCorrection
 from .filter import FilterGains, PoseFilter
 from .lead import ActuatorLead
-from .limits import SPEED_LAWS, Limits, clamp, keep_if, speed_from_up, yaw_rate_limit
+from .limits import SPEED_LAWS, Limits, clamp, clip_yaw_rate, keep_if, speed_from_up
 from .overshoot import OvershootCancel
 from .predict import DelayPrediction
 from .signals import Command, Estimate, Measurement, Num, Reference
@@ -315,6 +315,7 @@ class PZCTracker:
 
     def __init__(self, filter_gains: FilterGains = FilterGains(), gains: PZCGains = PZCGains(),
                  limits: Limits = Limits(), n: int | None = None):
+        self._m = _ops.for_size(n)
         self.filter = PoseFilter(filter_gains, n)
         self.law = PZCLaw(gains, limits, n)
         self.course = CourseCorrection(gains.course_tau, n)
@@ -347,9 +348,8 @@ class PZCTracker:
             # cut the corners: SITL car, 0.08 Hz, 0.269 m against 0.193 m without).
             ahead, ref_ahead = self.predict.step(t, steered, ref)
             fore = self.law_ahead.step(t, ahead, ref_ahead)
-            m = self.law._m
-            top = yaw_rate_limit(m, self.law.limits, fore.speed)
-            cmd = Command(fore.speed, m.clip(cmd.yaw_rate, -top, top), fore.ux, fore.uy)
+            rate = clip_yaw_rate(self._m, self.law.limits, fore.speed, cmd.yaw_rate)
+            cmd = Command(fore.speed, rate, fore.ux, fore.uy)
         cmd = self.lead.step(t, cmd)
         self.predict.sent(t, cmd)        # what the vehicle will drive: the overshoot's undone
         return self.cancel.step(t, cmd)
