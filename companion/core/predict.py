@@ -23,6 +23,8 @@ without its model of the lag: what the vehicle's lag leaves is the law's to corr
 
 from __future__ import annotations
 
+import numpy as np
+
 from . import ops as _ops
 from .signals import Command, Estimate, Num, Reference
 
@@ -33,6 +35,15 @@ class DelayPrediction:
         self._m = _ops.for_size(n)
         self.active = not _ops.is_plain_zero(horizon)
         self._longest = float(max(_flat(horizon))) if self.active else 0.0
+        # Lanes (batch) ordered by horizon, longest first: a command sent at t_k still acts in
+        # lane i while t_(k+1) > t - horizon_i, so the lanes it acts in are a prefix of this
+        # order and the sum below visits only those (37 % of command x lane pairs in a car's
+        # robust tune; a loop over every lane was 40 % of that tune, 2026-12-05).
+        lanes = self.active and n is not None and np.ndim(horizon) == 1
+        self._order = np.argsort(-np.asarray(horizon), kind="stable") if lanes else None
+        if self._order is not None:
+            self._sorted = np.asarray(horizon, dtype=float)[self._order]
+            self._neg_sorted = -self._sorted                    # ascending, for searchsorted
         self.reset()
 
     def reset(self) -> None:
@@ -47,24 +58,55 @@ class DelayPrediction:
         # Forget what has landed for every lane (sent more than the longest horizon ago).
         while len(self._sent) > 1 and self._sent[1][0] <= t - self._longest:
             self._sent.pop(0)
-        dx = dy = 0.0
-        ends = [tk for tk, _ in self._sent[1:]] + [t] if self._sent else []
-        for (tk, speed), end_k in zip(self._sent, ends, strict=True):
-            start = m.maximum(tk - t + h, 0.0)        # s after t when it starts to act ...
-            end = m.minimum(end_k - t + h, h)          # ... and when the next one takes over
-            dur = m.maximum(end - start, 0.0)
-            heading = est.yaw + self._rate * 0.5 * (start + end)
-            dx = dx + speed * dur * m.cos(heading)
-            dy = dy + speed * dur * m.sin(heading)
+        if self._order is not None and self._sent:
+            dx, dy = self._travel_lanes(t, est.yaw)
+        else:
+            dx = dy = 0.0
+            ends = [tk for tk, _ in self._sent[1:]] + [t] if self._sent else []
+            for (tk, speed), end_k in zip(self._sent, ends, strict=True):
+                start = m.maximum(tk - t + h, 0.0)    # s after t when it starts to act ...
+                end = m.minimum(end_k - t + h, h)      # ... and when the next one takes over
+                dur = m.maximum(end - start, 0.0)
+                heading = est.yaw + self._rate * 0.5 * (start + end)
+                dx = dx + speed * dur * m.cos(heading)
+                dy = dy + speed * dur * m.sin(heading)
         half = 0.5 * h * h
         ahead = Reference(ref.x + h * ref.vx + half * ref.ax, ref.y + h * ref.vy + half * ref.ay,
                           ref.vx + h * ref.ax, ref.vy + h * ref.ay, ref.ax, ref.ay)
         return Estimate(est.x + dx, est.y + dy, est.yaw, est.vx, est.vy, est.yaw_rate), ahead
 
+    def _travel_lanes(self, t: float, yaw: Num) -> tuple[Num, Num]:
+        """The same sum for lanes of their own horizons, each command over the lanes it still
+        acts in (a prefix of the horizon order; the others would add exact zeros), in the
+        order sent: the same numbers as the loop above, lane by lane."""
+        order, h = self._order, self._sorted
+        assert order is not None             # only lanes of their own horizons come here
+        yaw = np.broadcast_to(yaw, order.shape)[order]
+        rate = np.broadcast_to(self._rate, order.shape)[order]
+        dx, dy = np.zeros(order.size), np.zeros(order.size)
+        ends = [tk for tk, _ in self._sent[1:]] + [t]
+        for (tk, speed), end_k in zip(self._sent, ends, strict=True):
+            c = int(np.searchsorted(self._neg_sorted, end_k - t))    # lanes with h > t - end_k
+            if c == 0:
+                continue
+            hc = h[:c]
+            start = np.maximum(tk - t + hc, 0.0)
+            end = np.minimum(end_k - t + hc, hc)
+            dur = np.maximum(end - start, 0.0)
+            heading = yaw[:c] + rate[:c] * 0.5 * (start + end)
+            dx[:c] += speed[:c] * dur * np.cos(heading)
+            dy[:c] += speed[:c] * dur * np.sin(heading)
+        out_x, out_y = np.empty_like(dx), np.empty_like(dy)
+        out_x[order], out_y[order] = dx, dy
+        return out_x, out_y
+
     def sent(self, t: float, cmd: Command) -> None:
         """Record what left at ``t`` (after every clamp): it lands ``horizon`` later."""
         if self.active:
-            self._sent.append((t, cmd.speed))
+            speed = cmd.speed
+            if self._order is not None:      # kept in the horizon order (_travel_lanes)
+                speed = np.broadcast_to(speed, self._order.shape)[self._order]
+            self._sent.append((t, speed))
             self._rate = cmd.yaw_rate
 
 
