@@ -391,14 +391,18 @@ def test_the_tuners_settings_come_from_the_profiles_that_fly_the_vehicle(tmp_pat
     course correction in ArduPilot's (turn-rate setpoints), a car's in the Ackermann profile,
     which counts only on turn-rate setpoints (on velocity vectors PX4's course loop steers)."""
     from companion.profiles import ackermann, ardupilot, px4, tune_settings
+    from companion.profiles import skid as skid_steer
     skid = ROVER
     car = ROVER.with_(min_turn_radius=0.9)
     px4_car = ROVER.with_(course_gain=3.9, min_turn_radius=0.56)
-    ardupilot_own = {"course_tau": 2.0, "predict_min_delay": 0.25, "cancel_min_overshoot": 0.1}
-    assert tune_settings(skid) == ardupilot_own == dict(ardupilot.PROFILE.tune)
+    ardupilot_own = {"course_tau": 2.0, "predict_min_delay": 0.25, "cancel_min_overshoot": 0.1,
+                     "rms_floor": 0.02}
+    assert ardupilot_own == dict(ardupilot.PROFILE.tune)
+    assert tune_settings(skid) == {**ardupilot_own, "accel_room": 2.0}
+    assert tune_settings(skid) == {**ardupilot.PROFILE.tune,
+                                   **dict(skid_steer.PROFILE.tune_on_turn_rate)}
     assert tune_settings(car) == {**ardupilot_own,
-                                  "min_progress": 0.3, "speed_law": "paper", "accel_room": 1.25,
-                                  "rms_floor": 0.02}
+                                  "min_progress": 0.3, "speed_law": "paper", "accel_room": 1.25}
     assert tune_settings(car) == {**ardupilot.PROFILE.tune, **dict(ackermann.PROFILE.tune_on_turn_rate)}
     assert tune_settings(px4_car) == dict(px4.PROFILE.tune)
     assert tune_settings(px4_car)["spread"] == {"delay_samples": 2, "over_drive": 0.4}

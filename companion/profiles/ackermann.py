@@ -35,9 +35,5 @@ PROFILE = SteeringProfile(
     # reference_list). Not 1: SITL's car (ATC_ACCEL_MAX 1) is identified at 0.80-0.82 m/s^2
     # deceleration from session to session, and the 0.08 Hz ellipse asks 0.80, so its own
     # speed came and went from the tune by a fit's last digit (2026-12-05: 0.797, left out).
-    # Its slowest ellipses sit at 0.4-1.3 cm whatever the gains; with the objective's 5 mm
-    # floor the search traded centimetres at 0.08 Hz for millimetres at 0.02 Hz (SITL's car,
-    # 2026-12-05, the speed prediction on: 0.004 / 0.021 / 0.189 m at 0.02 / 0.04 / 0.08 Hz);
-    # a 2 cm floor keeps them in proportion.
-    tune_on_turn_rate=(("min_progress", 0.3), ("speed_law", "paper"), ("accel_room", 1.25),
-                       ("rms_floor", 0.02)))
+    # (Its objective's 2 cm floor is ArduPilot's: profiles.ardupilot.)
+    tune_on_turn_rate=(("min_progress", 0.3), ("speed_law", "paper"), ("accel_room", 1.25)))

@@ -316,5 +316,13 @@ PROFILE = AutopilotProfile(
     # out of every candidate's speed (core.overshoot): SITL's car 0.078 / 0.012 m at 0.08 /
     # 0.04 Hz with it, 0.118 / 0.022 without (2026-12-05). The stock skid rover identifies
     # 0.07 (tuned as before; cancelled, its model moved by millimetres either way).
-    tune={"course_tau": 2.0, "predict_min_delay": 0.25, "cancel_min_overshoot": 0.1},
+    # And each reference's steady RMS counts from a floor of 2 cm (RobustConfig.rms_floor;
+    # 5 mm elsewhere): the slow ellipses sit at a few mm whatever the gains, and with 5 mm the
+    # search traded centimetres at 0.08 Hz for millimetres at 0.02-0.04 Hz, on SITL's car
+    # (2026-12-05: 0.004 / 0.021 / 0.189 m at 0.02 / 0.04 / 0.08 Hz, the prediction on) and
+    # on a skid rover with ATC_ACCEL_MAX 0.5 (its vehicle file, 128 x 4: 0.003 / 0.250 m at
+    # 0.04 / 0.08 Hz, with 2 cm 0.009-0.015 / 0.076-0.108 m over six seeds). Stock rover-skid
+    # moves by millimetres (0.004 / 0.039 to 0.004 / 0.041 m).
+    tune={"course_tau": 2.0, "predict_min_delay": 0.25, "cancel_min_overshoot": 0.1,
+          "rms_floor": 0.02},
 )
