@@ -358,13 +358,19 @@ def test_a_cars_tune_leaves_out_references_it_cannot_accelerate_along(tmp_path):
     room = dict(ackermann.PROFILE.tune_on_turn_rate)["accel_room"]
     sitl_car = RoverParams(max_yaw_rate=2.2, max_accel=0.984, max_decel=0.797)
     assert labels(RobustConfig(vehicle=sitl_car, accel_room=room)) == four[:3]
-    # a vehicle file of a car asks it; a skid-steer one does not
+    # a vehicle file of a car asks 1.25 x, a skid-steer one twice its acceleration (its
+    # profile's room): a stock skid rover keeps all four, one with ATC_ACCEL_MAX 0.5 (SITL:
+    # 0.516 m/s^2) drops the 0.12 Hz ellipse (1.80 asked) and keeps the 0.08 Hz one (0.80)
     car = tmp_path / "car.toml"
     vehicle_file.save(vehicle_file.VehicleFile(ROVER.with_(min_turn_radius=0.9), name="car"), car)
     rover = tmp_path / "rover.toml"
     vehicle_file.save(vehicle_file.VehicleFile(ROVER, name="rover"), rover)
+    slow_rover = tmp_path / "slow.toml"
+    vehicle_file.save(vehicle_file.VehicleFile(ROVER.with_(max_accel=0.516, max_decel=1.99),
+                                               name="slow"), slow_rover)
     assert labels(config_for(car, 40.0, **tune_search(car))) == four[:3]
     assert labels(config_for(rover, 40.0, **tune_search(rover))) == four
+    assert labels(config_for(slow_rover, 40.0, **tune_search(slow_rover))) == four[:3]
 
 
 def test_a_px4_vehicles_neighbours_turn_up_to_two_samples_late(tmp_path):
