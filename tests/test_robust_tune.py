@@ -502,3 +502,31 @@ def test_the_rms_floor_is_what_each_references_log_counts_from():
     assert np.array_equal(rms, coarse.steady_rms[0, 0])
     expected = np.log(rms + 0.02).mean() - np.log(rms + 0.005).mean()
     assert coarse.objective[0] - fine.objective[0] == pytest.approx(expected, rel=1e-9)
+
+
+def test_the_winner_is_the_best_of_the_elite_that_holds_again_alone(monkeypatch):
+    # Each vehicle draws the noise of its batch, so a gain set at a limit cycle's edge can hold
+    # in its round and not alone (the mixed matrix rover, 2026-12-05): the next of the elite,
+    # in order, that holds on its own is taken; the round's rejects are not tried.
+    from companion.sim import robust
+    elite = robust.seeds(ROVER).take(np.arange(4))
+    elite.params["k_dc"] = np.array([1.0, 2.0, 3.0, 4.0])      # tells them apart
+    alone = {0: math.inf, 1: math.inf, 2: -1.5, 3: -1.7}
+    tried = []
+
+    def evaluate_alone(cands, cfg, vehicles, progress=None, *rest):
+        i = int(np.flatnonzero(elite.params["k_dc"] == cands.params["k_dc"][0])[0])
+        tried.append(i)
+        return robust.Evaluation(np.array([alone[i]]), *([None] * 4), np.array([""]))
+
+    monkeypatch.setattr(robust, "evaluate", evaluate_alone)
+    round_objective = np.array([-2.0, math.inf, -1.9, -1.8])   # 1 was rejected in its round
+    winner, ev = robust._confirmed(elite, round_objective, None, (), None)
+    assert tried == [0, 2] and float(ev.objective[0]) == -1.5
+    assert winner.params["k_dc"][0] == elite.params["k_dc"][2]
+    # none holds alone: the first one's failed evaluation, for tune() to refuse
+    alone[2] = alone[3] = math.inf
+    tried.clear()
+    winner, ev = robust._confirmed(elite, round_objective, None, (), None)
+    assert tried == [0, 2, 3] and not math.isfinite(float(ev.objective[0]))
+    assert winner.params["k_dc"][0] == elite.params["k_dc"][0]
