@@ -321,8 +321,9 @@ PROFILE = AutopilotProfile(
     # search traded centimetres at 0.08 Hz for millimetres at 0.02-0.04 Hz, on SITL's car
     # (2026-12-05: 0.004 / 0.021 / 0.189 m at 0.02 / 0.04 / 0.08 Hz, the prediction on) and
     # on a skid rover with ATC_ACCEL_MAX 0.5 (its vehicle file, 128 x 4: 0.003 / 0.250 m at
-    # 0.04 / 0.08 Hz, with 2 cm 0.009-0.015 / 0.076-0.108 m over six seeds). Stock rover-skid
-    # moves by millimetres (0.004 / 0.039 to 0.004 / 0.041 m).
+    # 0.04 / 0.08 Hz; with 2 cm 0.009-0.014 / 0.096-0.136 m over six seeds, and with the skid
+    # profile's reference room too 0.012-0.015 / 0.076-0.108). Stock rover-skid moves by
+    # millimetres (0.004 / 0.039 to 0.004 / 0.041 m).
     tune={"course_tau": 2.0, "predict_min_delay": 0.25, "cancel_min_overshoot": 0.1,
           "rms_floor": 0.02},
 )
