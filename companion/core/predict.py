@@ -64,10 +64,8 @@ class DelayPrediction:
             dx = dy = 0.0
             ends = [tk for tk, _ in self._sent[1:]] + [t] if self._sent else []
             for (tk, speed), end_k in zip(self._sent, ends, strict=True):
-                start = m.maximum(tk - t + h, 0.0)    # s after t when it starts to act ...
-                end = m.minimum(end_k - t + h, h)      # ... and when the next one takes over
-                dur = m.maximum(end - start, 0.0)
-                heading = est.yaw + self._rate * 0.5 * (start + end)
+                dur, mid = _acting(m, tk - t, end_k - t, h)
+                heading = est.yaw + self._rate * mid
                 dx = dx + speed * dur * m.cos(heading)
                 dy = dy + speed * dur * m.sin(heading)
         half = 0.5 * h * h
@@ -89,11 +87,8 @@ class DelayPrediction:
             c = int(np.searchsorted(self._neg_sorted, end_k - t))    # lanes with h > t - end_k
             if c == 0:
                 continue
-            hc = h[:c]
-            start = np.maximum(tk - t + hc, 0.0)
-            end = np.minimum(end_k - t + hc, hc)
-            dur = np.maximum(end - start, 0.0)
-            heading = yaw[:c] + rate[:c] * 0.5 * (start + end)
+            dur, mid = _acting(_ops.array, tk - t, end_k - t, h[:c])
+            heading = yaw[:c] + rate[:c] * mid
             dx[:c] += speed[:c] * dur * np.cos(heading)
             dy[:c] += speed[:c] * dur * np.sin(heading)
         out_x, out_y = np.empty_like(dx), np.empty_like(dy)
@@ -108,6 +103,14 @@ class DelayPrediction:
                 speed = np.broadcast_to(speed, self._order.shape)[self._order]
             self._sent.append((t, speed))
             self._rate = cmd.yaw_rate
+
+
+def _acting(m: _ops.Ops, sent: Num, next_sent: Num, h: Num) -> tuple[Num, Num]:
+    """How long a command sent ``sent`` s from now (<= 0), and replaced ``next_sent`` s from
+    now, acts within the next ``h`` s once it lands ``h`` late, and the middle of that time."""
+    start = m.maximum(sent + h, 0.0)          # s from now when it starts to act ...
+    end = m.minimum(next_sent + h, h)         # ... and when the next one takes over
+    return m.maximum(end - start, 0.0), 0.5 * (start + end)
 
 
 def _flat(value: Num) -> list[float]:
