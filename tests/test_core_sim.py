@@ -208,6 +208,35 @@ def test_the_heading_integrates_a_two_time_scale_turn_rate(share):
     assert (peak > 1.5 + 0.3) == (share > 0)
 
 
+def test_an_overshooting_turn_rate_is_capped_by_what_the_motors_give():
+    # A rate loop whose feed-forward over-drives (yaw_overshoot 0.8) overshoots a 1.2 rad/s
+    # target well past it at rest; at speed the mixer leaves a skid-steer rover less turn rate
+    # (speed_turn_coupling: 2.1 (1 - 0.5) = 1.05 at full speed), and the overshoot stops there.
+    # The heading is still the integral of the turn rate reported, 20 ms steps as 0.1 ms ones.
+    params = ARDUPILOT_LIKE.with_(yaw_overshoot=0.8, yaw_overshoot_s=0.6, turn_speed_coupling=0.0,
+                                  speed_turn_coupling=0.5, max_yaw_accel=math.inf)
+    peaks = {}
+    for speed in (0.0, 4.0):
+        coarse, fine = RoverModel(params), RoverModel(params)
+        a = b = RoverState(v=speed)
+        integral, peak = 0.0, 0.0
+        for k in range(150):                       # 3 s: a turn-rate step, then back to 0
+            w = 1.2 if k < 75 else 0.0
+            a = coarse.step(a, speed, w, 0.02)
+            for _ in range(200):
+                before = b.omega
+                b = fine.step(b, speed, w, 1e-4)
+                integral += 0.5 * (before + b.omega) * 1e-4
+            peak = max(peak, abs(a.omega))
+            top = coarse.tops(0.0, a.v)[1]
+            assert abs(a.omega) <= top + 1e-12
+        assert b.yaw == pytest.approx(integral, abs=2e-5)    # a kink where the cap starts
+        assert a.yaw == pytest.approx(b.yaw, abs=2e-3)
+        peaks[speed] = peak
+    assert peaks[0.0] > 1.2 + 0.5                  # at rest: the overshoot, whole
+    assert peaks[4.0] == pytest.approx(1.05)       # at speed: capped, held
+
+
 def test_d_cen_moves_the_tracked_point_sideways_when_turning():
     # eq. (1): pure rotation (v = 0) moves p by d_cen omega at right angles to the heading.
     model = RoverModel(RoverParams(d_cen=0.5, w_c=20.0))

@@ -34,13 +34,15 @@ def case(rng: np.random.Generator, n: int, steps: int, per_step_top: bool):
     return cmd, offset, top, params
 
 
+@pytest.mark.parametrize("capped", [False, True])
 @pytest.mark.parametrize("per_step_top", [False, True])
 @pytest.mark.parametrize("dt", [0.01, 0.02])
-def test_compiled_loop_is_the_numpy_step_loop(per_step_top, dt):
+def test_compiled_loop_is_the_numpy_step_loop(per_step_top, dt, capped):
     rng = np.random.default_rng(7)
     cmd, offset, top, params = case(rng, 64, 3000, per_step_top)
-    fast = ls.lag_series(cmd, offset, top, 3000, 0.4, dt=dt, **params)
-    ref = ls.lag_series(cmd, offset, top, 3000, 0.4, dt=dt, compiled=False, **params)
+    fast = ls.lag_series(cmd, offset, top, 3000, 0.4, dt=dt, capped=capped, **params)
+    ref = ls.lag_series(cmd, offset, top, 3000, 0.4, dt=dt, compiled=False, capped=capped,
+                        **params)
     assert fast.shape == ref.shape == (3000, 64)
     assert np.all(np.isfinite(ref))
     assert np.ptp(ref) > 1.0                  # the channels moved: ramps, clamps and lags
@@ -61,16 +63,38 @@ def test_scalar_parameters_and_no_overshoot_are_the_array_case():
     assert np.max(np.abs(np.diff(scalar, axis=0))) <= 1.0 * 0.02 * 2.0 + 1e-12
 
 
-def test_the_loop_as_python_is_the_numpy_step_loop():
+@pytest.mark.parametrize("capped", [False, True])
+def test_the_loop_as_python_is_the_numpy_step_loop(capped):
     """The per-model arithmetic itself (what numba compiles), run as plain Python."""
     rng = np.random.default_rng(11)
     cmd, offset, top, p = case(rng, 6, 400, True)
     b, up, down, g, tau = ls._params(6, p["bandwidth"], p["accel"], p["decel"], p["overshoot"],
                                      p["overshoot_s"])
     out = np.empty((400, 6))
-    ls._loop(cmd, offset.astype(np.int64), top, 0.2, b, up, down, g, tau, 0.02, True, out)
-    ref = ls.lag_series(cmd, offset, top, 400, 0.2, dt=0.02, compiled=False, **p)
+    ls._loop(cmd, offset.astype(np.int64), top, 0.2, b, up, down, g, tau, 0.02, True, capped,
+             out)
+    ref = ls.lag_series(cmd, offset, top, 400, 0.2, dt=0.02, compiled=False, capped=capped, **p)
     assert np.max(np.abs(out - ref)) < 1e-12
+
+
+def test_a_capped_overshoot_stays_within_the_clamp_and_the_lag_runs_on():
+    """The turn rate's channel (``capped``): a feed-forward that over-drives shows its
+    overshoot up to the clamp and no further (the motors give no more), where an uncapped one
+    goes past it; a channel without overshoot is the same either way."""
+    cmd = np.concatenate([np.zeros(10), np.full(300, 2.0), np.zeros(300)])
+    offset, top = np.zeros(3, dtype=np.int64), np.array([[2.2, 2.2, 2.2]])
+    kw = dict(bandwidth=10.0, accel=np.inf, decel=np.inf, dt=0.02,
+              overshoot=np.array([0.8, 0.8, 0.0]), overshoot_s=1.0)
+    free = ls.lag_series(cmd, offset, top, 600, 0.0, **kw)
+    capped = ls.lag_series(cmd, offset, top, 600, 0.0, capped=True, **kw)
+    assert free[:, 0].max() > 3.0                     # 2 rad/s asked, 1.8 x 2 at its peak
+    assert capped[:, 0].max() == pytest.approx(2.2)   # the cap, held a while
+    assert np.sum(capped[:, 0] == 2.2) > 10
+    # the lag and the slow state ran on uncapped: once the overshoot is back below the cap
+    # the two agree, and both settle on the command
+    assert np.array_equal(capped[250:, 0], free[250:, 0])
+    assert capped[305, 0] == pytest.approx(2.0, abs=0.01)
+    assert np.array_equal(capped[:, 2], free[:, 2])   # no overshoot: nothing capped
 
 
 @pytest.mark.skipif(platform.machine().lower() not in {"x86_64", "amd64", "aarch64", "arm64"},

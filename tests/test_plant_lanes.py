@@ -65,11 +65,13 @@ def _fly(case: str, compiled: bool, steps: int = 1500, swap_at: int = 700,
     for k in range(steps):
         if k == swap_at:    # a state the model did not make (copies): stepped as well
             s = RoverState(*(np.array(getattr(s, f), dtype=float) for f in
-                             ("x", "y", "yaw", "v", "omega", "v_slow", "w_slow")))
+                             ("x", "y", "yaw", "v", "omega", "v_slow", "w_slow")),
+                           w_lag=None if s.w_lag is None else np.array(s.w_lag, dtype=float))
         a, b = _commands(case, k, phase)
         s = model.step_vector(s, a, b, 0.02) if case == "px4" else model.step(s, a, b, 0.02)
+        lag = () if case != "car" else (s.w_lag,)   # the turn-rate lag's own output (capped)
         trace.append(np.stack([np.broadcast_to(v, (N,)) for v in
-                               (s.x, s.y, s.yaw, s.v, s.omega, s.v_slow, s.w_slow)]))
+                               (s.x, s.y, s.yaw, s.v, s.omega, s.v_slow, s.w_slow) + lag]))
     return trace
 
 
@@ -85,6 +87,8 @@ def test_compiled_step_is_the_numpy_step(case):
     assert np.all(np.isfinite(ref))
     # the vehicles moved, turned both ways and hit their limits on the way
     assert np.ptp(ref[:, 0]) > 5.0 and np.ptp(ref[:, 4]) > 1.0
+    if case == "car":       # and some overshooting turn rates met the motors' cap
+        assert np.any(np.abs(ref[:, 7] - ref[:, 4]) > 0.05)
     scale = 1.0 + np.abs(ref)
     assert np.max(np.abs(fast - ref) / scale) < 1e-10
 

@@ -67,7 +67,7 @@ def turn_rate(t: np.ndarray, yaw_rate_cmd: np.ndarray, n: int, dt: float, omega0
     at most ``|v| / R`` and with ``lat_accel`` a at most ``a / max(|v|, 1 m/s)``, as
     :meth:`companion.sim.plant.RoverModel.clamp_command`; with ``overshoot`` (the rate loop's
     two time scales, may be negative) the channel's output passes
-    :func:`companion.sim.plant.overshoot_step`, as respond's."""
+    :func:`companion.sim.plant.overshoot_step` and is capped at the clamp, as respond's."""
     g = Grid.of(t, dt)
     padded, offset = _delayed(np.asarray(yaw_rate_cmd, dtype=float)[g.held], delay, n, dt)
     coupled = bool(np.any(np.asarray(coupling) > 0))
@@ -91,7 +91,7 @@ def turn_rate(t: np.ndarray, yaw_rate_cmd: np.ndarray, n: int, dt: float, omega0
         if lateral:
             top = np.minimum(top, lat_accel / np.maximum(speed, LAT_ACCEL_MIN_SPEED))
     out = lag_series(padded, offset, top, g.steps, float(omega0), bandwidth, accel, decel, dt,
-                     overshoot, overshoot_s)
+                     overshoot, overshoot_s, capped=True)
     return out[g.sample_step], out
 
 

@@ -37,7 +37,7 @@ def _params(n: int, *values: Num) -> list[np.ndarray]:
 
 def lag_series(padded: np.ndarray, offset: np.ndarray, top: np.ndarray, steps: int, x0: float,
                bandwidth: Num, accel: Num, decel: Num, dt: float, overshoot: Num,
-               overshoot_s: Num, compiled: bool = True) -> np.ndarray:
+               overshoot_s: Num, compiled: bool = True, capped: bool = False) -> np.ndarray:
     """The channel's output on ``steps`` grid steps for ``n = len(offset)`` models: shape
     (steps, n), row k the output at the start of step k (row 0 is ``x0``).
 
@@ -46,7 +46,9 @@ def lag_series(padded: np.ndarray, offset: np.ndarray, top: np.ndarray, steps: i
     ``+-top[k, i]`` (``top`` of shape (steps or 1, n or 1): a clamp that moves with the other
     channel, or a fixed one). ``bandwidth`` (rad/s), ``accel`` / ``decel`` (rate limits while
     |x| grows / shrinks), ``overshoot`` and ``overshoot_s`` (g and tau of ``overshoot_step``):
-    numbers or arrays of length n. Every output at the start of each step, as respond records."""
+    numbers or arrays of length n. Every output at the start of each step, as respond records.
+    ``capped`` (the turn rate's channel): an overshooting output (g != 0) is capped at
+    ``+-top[k, i]`` as well (:func:`companion.sim.plant.turn_rate_cap`); x and z run on."""
     offset = np.ascontiguousarray(offset, dtype=np.int64)
     n = len(offset)
     top = np.ascontiguousarray(np.asarray(top, dtype=np.float64).reshape(
@@ -56,14 +58,16 @@ def lag_series(padded: np.ndarray, offset: np.ndarray, top: np.ndarray, steps: i
     padded = np.ascontiguousarray(padded, dtype=np.float64)
     if compiled and _compiled is not None:
         out = np.empty((steps, n))
-        _compiled(padded, offset, top, float(x0), b, up, down, g, tau, float(dt), over, out)
+        _compiled(padded, offset, top, float(x0), b, up, down, g, tau, float(dt), over, capped,
+                  out)
         return out
-    return _stepped(padded, offset, top, steps, float(x0), b, up, down, g, tau, float(dt), over)
+    return _stepped(padded, offset, top, steps, float(x0), b, up, down, g, tau, float(dt), over,
+                    capped)
 
 
 def _stepped(padded: np.ndarray, offset: np.ndarray, top: np.ndarray, steps: int, x0: float,
              b: np.ndarray, up: np.ndarray, down: np.ndarray, g: np.ndarray, tau: np.ndarray,
-             dt: float, over: bool) -> np.ndarray:
+             dt: float, over: bool, capped: bool) -> np.ndarray:
     """The reference: :func:`lag_step` on arrays of all ``n`` models, one grid step a call."""
     n = len(offset)
     m = ops.for_size(n)
@@ -75,12 +79,12 @@ def _stepped(padded: np.ndarray, offset: np.ndarray, top: np.ndarray, steps: int
         out[k] = y
         limit = top[k] if by_step else top[0]
         u = m.clip(padded[k + offset], -limit, limit)
-        y, x, z = lag_step(m, x, z, u, b, up, down, dt, g, tau, over)
+        y, x, z = lag_step(m, x, z, u, b, up, down, dt, g, tau, over, limit if capped else None)
     return out
 
 
 def _loop(padded: Any, offset: Any, top: Any, x0: float, b: Any, up: Any, down: Any, g: Any,
-          tau: Any, dt: float, over: bool, out: Any) -> None:   # pragma: no cover
+          tau: Any, dt: float, over: bool, capped: bool, out: Any) -> None:   # pragma: no cover
     """:func:`_stepped` per model on floats: ``_channel``'s exact step (x(h) only) and
     ``overshoot_step``, the same operations in the same order (compiled by numba; as Python,
     the reference for the compiled loop's tests)."""
@@ -113,6 +117,8 @@ def _loop(padded: Any, offset: Any, top: Any, x0: float, b: Any, up: Any, down: 
             if over:
                 z[i] = z[i] + (1.0 - keep[i]) * (0.5 * (x[i] + x1) - z[i])
                 y[i] = (1.0 + g[i]) * x1 - g[i] * z[i]
+                if capped and g[i] != 0.0:
+                    y[i] = min(max(y[i], -limit), limit)
             else:
                 y[i] = x1
             x[i] = x1

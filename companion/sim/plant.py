@@ -29,7 +29,10 @@ once through its feed-forward ``ATC_STR_RAT_FF`` (and P), and the integrator doe
 a slower time scale: the fast share 1 + g_w is above one when the feed-forward over-drives the
 steering (an overshoot the I term takes back) and below one when it under-drives (a late tail
 the I term pulls up). The heading integrates that turn rate exactly over a step
-(:func:`overshoot_integral`).
+(:func:`overshoot_integral`). The motors cap it: omega stays within the turn-rate clamp the
+state leaves (:meth:`RoverModel.tops`, the couplings and limits below), so a skid-steer rover
+at speed, whose mixer has less steering left, overshoots less than one at rest
+(:func:`turn_rate_cap`; x and z run on uncapped, x kept in the state as ``w_lag``).
 
 ``d_cen`` is the paper's distance between the centre of mass (the tracked point p) and the wheel
 axle; ``w_c`` the paper's actuator bandwidth omega_c (k_c). The commands are clamped to the
@@ -180,7 +183,9 @@ def _any_nonzero(value: Num) -> bool:
 class RoverState:
     """Pose of the tracked point (x, y, yaw) and actuator outputs (speed v, yaw rate omega);
     ``v_slow`` is the speed overshoot's slow state z (unused without ``speed_overshoot``),
-    ``w_slow`` the turn rate's (unused without ``yaw_overshoot``)."""
+    ``w_slow`` the turn rate's (unused without ``yaw_overshoot``) and ``w_lag`` the turn-rate
+    lag's own output x (with ``yaw_overshoot``: the motors' cap keeps omega from telling it;
+    None: not capped yet, x = :func:`overshoot_target` of omega)."""
 
     x: Num = 0.0
     y: Num = 0.0
@@ -189,6 +194,7 @@ class RoverState:
     omega: Num = 0.0
     v_slow: Num = 0.0
     w_slow: Num = 0.0
+    w_lag: Num = None
 
 
 class RoverModel:
@@ -251,6 +257,13 @@ class RoverModel:
         and the turn-rate range the speed ``v`` leaves (both the state at the step's start, so
         neither clamp depends on the other's result: the motors share one range); the turning
         radius and the lateral-acceleration limit take turn rate away with speed as well."""
+        top, top_w = self.tops(omega, v)
+        m = self._m
+        return m.clip(speed, -top, top), m.clip(yaw_rate, -top_w, top_w)
+
+    def tops(self, omega: Num = 0.0, v: Num = 0.0) -> tuple[Num, Num]:
+        """(top speed, top turn rate) the state (``omega``, ``v``) leaves: what
+        :meth:`clamp_command` clamps to, and what caps an overshooting turn rate."""
         m, p = self._m, self.params
         top = p.max_speed
         if self._coupled:
@@ -269,7 +282,7 @@ class RoverModel:
                 top_w = np.minimum(top_w, abs(v) / np.where(np.asarray(r) > 0, r, 1e-12))
         if self._lateral:
             top_w = m.minimum(top_w, p.max_lat_accel / m.maximum(abs(v), LAT_ACCEL_MIN_SPEED))
-        return m.clip(speed, -top, top), m.clip(yaw_rate, -top_w, top_w)
+        return top, top_w
 
     def step_vector(self, s: RoverState, ux: Num, uy: Num, dt: float) -> RoverState:
         """Advance ``dt`` seconds with the velocity vector u_p held (PX4's interface, see the
@@ -284,15 +297,19 @@ class RoverModel:
         """Advance ``dt`` seconds with the commands (v_ref, omega_ref) held (after the delay)."""
         if self.delay is not None:
             speed_cmd, yaw_rate_cmd = self.delay.push(speed_cmd, yaw_rate_cmd, dt)
-        u, w = self.clamp_command(speed_cmd, yaw_rate_cmd, s.omega, s.v)
+        top, top_w = self.tops(s.omega, s.v)
+        m = self._m
+        u, w = m.clip(speed_cmd, -top, top), m.clip(yaw_rate_cmd, -top_w, top_w)
         if self._paper:
             return self._step_exact(s, u, w, dt)
-        return self._step_limited(s, u, w, dt)
+        return self._step_limited(s, u, w, dt, top_w)
 
-    def _step_limited(self, s: RoverState, u: Num, w: Num, h: float) -> RoverState:
+    def _step_limited(self, s: RoverState, u: Num, w: Num, h: float,
+                      top_w: Num = math.inf) -> RoverState:
         """Rate-limited channels, exact per channel (:func:`_channel`), Simpson for x and y;
         with an overshoot, the channel's output x passes :func:`overshoot_step` (and, for the
-        turn rate, the heading takes its integral, :func:`overshoot_integral`)."""
+        turn rate, the heading takes its integral, :func:`overshoot_integral`, and the motors
+        cap it at ``top_w``: :func:`turn_rate_cap`)."""
         m, p = self._m, self.params
         v0, z_end = s.v, s.v_slow
         if self._overshoot:
@@ -308,16 +325,18 @@ class RoverModel:
             return self._simpson(s, s.yaw + i_mid, s.yaw + i_end, v_mid, v_end, w_mid, w_end, h,
                                  z_end)
         g, tau = p.yaw_overshoot, p.yaw_overshoot_s
-        x0 = overshoot_target(s.omega, s.w_slow, g)
+        x0 = overshoot_target(s.omega, s.w_slow, g) if s.w_lag is None else s.w_lag
         x_mid, x_end, ix_mid, ix_end = _channel(m, x0, w, p.yaw_bandwidth, p.max_yaw_accel,
                                                 p.yaw_decel, h)
         (w_mid, _), (w_end, wz_end) = (overshoot_step(m, x0, x, s.w_slow, g, tau, t)
                                        for x, t in ((x_mid, 0.5 * h), (x_end, h)))
         i_mid = overshoot_integral(x0, x_mid, ix_mid, s.w_slow, g, tau, 0.5 * h, m)
         i_end = overshoot_integral(x0, x_end, ix_end, s.w_slow, g, tau, h, m)
+        w_mid, w_end, i_mid, i_end = turn_rate_cap(m, s.omega, w_mid, w_end, i_mid, i_end, g,
+                                                   top_w, h)
         out = self._simpson(s, s.yaw + i_mid, s.yaw + i_end, v_mid, v_end, w_mid, w_end, h,
                             z_end)
-        out.w_slow = wz_end
+        out.w_slow, out.w_lag = wz_end, x_end
         return out
 
     def _decays(self, h: float) -> tuple[Num, Num, Num, Num]:
@@ -373,6 +392,29 @@ class RoverModel:
         )
 
 
+def turn_rate_cap(m: _ops.Ops, w0: Num, w_mid: Num, w_end: Num, i_mid: Num, i_end: Num,
+                  g: Num, top: Num, h: float) -> tuple[Num, Num, Num, Num]:
+    """The overshooting turn rate (``yaw_overshoot`` g != 0) capped at ``top``, the turn-rate
+    range the state leaves (:meth:`RoverModel.tops`): the rate loop's feed-forward can drive
+    the motors past its target, not past what the motors give. A skid-steer rover at speed
+    has less steering left (the mixer shares one range), so the overshoot a fast rover would
+    have is cut where a slow one shows it whole (SITL ``rover-skid`` with ``ATC_STR_RAT_FF``
+    0.5: 3.8 rad/s at rest for a 2.5 rad/s target, 2.5-2.6 at 2-3 m/s). Returns (omega at
+    h/2, at h, the heading's change to each): where the cap cuts either, the heading takes
+    the quadratic through omega at 0, h/2 and h (Simpson's rule and its half-step form) in
+    place of the exact integral, which is of the uncapped rate. The lag behind (x, z) runs on
+    uncapped, as the fit's (:func:`companion.sim.lag_series.lag_series`, ``capped``)."""
+    on = g != 0
+    c_mid = m.where(on, m.clip(w_mid, -top, top), w_mid)
+    c_end = m.where(on, m.clip(w_end, -top, top), w_end)
+    cut = (c_mid != w_mid) | (c_end != w_end)
+    if not np.any(cut):             # the usual case: nothing capped, the exact integrals stand
+        return w_mid, w_end, i_mid, i_end
+    q_mid = h / 24.0 * (5.0 * w0 + 8.0 * c_mid - c_end)
+    q_end = h / 6.0 * (w0 + 4.0 * c_mid + c_end)
+    return c_mid, c_end, m.where(cut, q_mid, i_mid), m.where(cut, q_end, i_end)
+
+
 def overshoot_target(v: Num, z: Num, g: Num) -> Num:
     """The speed channel's inner output x behind a speed v with overshoot state z:
     v = (1 + g) x - g z."""
@@ -394,16 +436,19 @@ def overshoot_step(m: _ops.Ops, x0: Num, x1: Num, z0: Num, g: Num, tau: Num, t: 
 
 
 def lag_step(m: _ops.Ops, x: Num, z: Num, u: Num, b: Num, up: Num, down: Num, dt: float,
-             g: Num, tau: Num, over: bool) -> tuple[Num, Num, Num]:
+             g: Num, tau: Num, over: bool, cap: Num = None) -> tuple[Num, Num, Num]:
     """One grid step of a channel for the fit and :mod:`companion.sim.response`: the
     rate-limited lag's output x from ``x`` towards ``u`` (:func:`_channel`), then, ``over``,
-    its overshoot (:func:`overshoot_step`). Returns (what is measured, x, z)."""
+    its overshoot (:func:`overshoot_step`), capped at ``cap`` where g != 0 (the turn rate's:
+    :func:`turn_rate_cap`; None: no cap, the speed's). Returns (what is measured, x, z)."""
     # x(h) only: the fit's step loop spends most of its time here, and the integrals (unused
     # here) were a third of it (a stock manoeuvre's fit: 39.3 -> 26.0 s, the same parameters)
     _, x1, _, _ = _channel(m, x, u, b, up, down, dt, both=False, integrals=False)
     if not over:
         return x1, x1, z
     y, z1 = overshoot_step(m, x, x1, z, g, tau, dt)
+    if cap is not None:
+        y = m.where(g != 0, m.clip(y, -cap, cap), y)
     return y, x1, z1
 
 

@@ -76,8 +76,8 @@ class LaneModel(RoverModel):
 
     def _lane_step(self, s: RoverState, a: Num, b: Num, dt: float, vector: bool) -> RoverState:
         out = self.lanes.step(s, a, b, dt, vector)
-        state = RoverState(out[0], out[1], out[2], out[3], out[4], out[5], out[6])
-        self._trig_yaw, self._trig_cs = state.yaw, (out[7], out[8])    # as RoverModel._trig
+        state = RoverState(out[0], out[1], out[2], out[3], out[4], out[5], out[6], out[7])
+        self._trig_yaw, self._trig_cs = state.yaw, (out[8], out[9])    # as RoverModel._trig
         return state
 
 
@@ -101,7 +101,7 @@ class LaneStepper:
 
     def step(self, s: RoverState, a: Num, b: Num, h: float, vector: bool) -> np.ndarray:
         """(a, b): (speed, turn rate) or, ``vector``, PX4's (u_x, u_y). Rows of the result: x,
-        y, yaw, v, omega, v_slow, w_slow, and the cosine and sine of the new yaw."""
+        y, yaw, v, omega, v_slow, w_slow, w_lag, and the cosine and sine of the new yaw."""
         n, delay = self.n, self.delay
         if delay is not None:
             k = delay.advance(h)              # CommandDelay.push: the loop writes slot k
@@ -109,20 +109,23 @@ class LaneStepper:
         else:
             k, ring, lags = 0, self._no_ring, self._no_lags
         last = self._last
-        fields = (s.x, s.y, s.yaw, s.v, s.omega, s.v_slow, s.w_slow)
+        fields = (s.x, s.y, s.yaw, s.v, s.omega, s.v_slow, s.w_slow, s.w_lag)
         # the state this stepper returned last (the usual case) is its rows, cos and sin included
         state = last if last is not None and all(
             f is last[i] for i, f in enumerate(fields)) else None
         if state is None:
-            state = np.empty((9, n))
-            for i, f in enumerate(fields):
+            state = np.empty((10, n))
+            for i, f in enumerate(fields[:7]):
                 state[i] = f
+            # no lag output yet: the one the turn rate tells (plant.overshoot_target)
+            g = self._params[PARAMS.index("yaw_overshoot")]
+            state[7] = (state[4] + g * state[6]) / (1.0 + g) if s.w_lag is None else s.w_lag
         h = float(h)
         if self._decays is None or self._decays[0] != h:
             decays = np.empty((8, n))
             _decays(self._params, h, decays)
             self._decays = (h, decays)
-        out = np.empty((9, n))
+        out = np.empty((10, n))
         self._loop(vector, delay is not None, state is last, *self._switches, _lanes(a, n),
                    _lanes(b, n), state, self._params, self._decays[1], ring, lags, k, h, out)
         self._last = out
@@ -153,9 +156,9 @@ def _nan_max(a: float, b: float) -> float:
 def _clamp(speed_cmd: float, yaw_cmd: float, v: float, omega: float, max_speed: float,
            max_yaw_rate: float, tsc: float, stc: float, min_radius: float, lat_accel: float,
            coupled: bool, turn_coupled: bool, curvature: bool, lateral: bool
-           ) -> tuple[float, float]:
+           ) -> tuple[float, float, float]:
     """``RoverModel.clamp_command``: the commands clamped to the ranges the state (v, omega)
-    leaves them."""
+    leaves them, and the turn rate's range (``RoverModel.tops``: what caps an overshoot)."""
     top = max_speed
     if coupled:
         top = top * (1.0 - tsc * _nan_min(abs(omega) / max_yaw_rate, 1.0))
@@ -167,7 +170,7 @@ def _clamp(speed_cmd: float, yaw_cmd: float, v: float, omega: float, max_speed: 
     if lateral:
         top_w = _nan_min(top_w, lat_accel / _nan_max(abs(v), LAT_ACCEL_MIN_SPEED))
     return (_nan_min(_nan_max(speed_cmd, -top), top),
-            _nan_min(_nan_max(yaw_cmd, -top_w), top_w))
+            _nan_min(_nan_max(yaw_cmd, -top_w), top_w), top_w)
 
 
 def _channel(x0: float, u: float, b: float, up: float, down: float, t: float,
@@ -220,7 +223,7 @@ def _loop(vector: bool, delayed: bool, trig: bool, coupled: bool, turn_coupled: 
           h: float, out: Any) -> None:   # pragma: no cover - compiled; as Python: test_plant_lanes
     """One step of every vehicle i: ``RoverModel.step_vector`` / ``step`` then ``_step_limited``
     as numpy runs them, per vehicle on floats. ``state`` and ``out`` rows: x, y, yaw, v, omega,
-    v_slow, w_slow, cos(yaw), sin(yaw) (``trig``: the state's are there, else computed). ``p``
+    v_slow, w_slow, w_lag, cos(yaw), sin(yaw) (``trig``: the state's are there, else computed). ``p``
     rows: :data:`PARAMS`; ``decays``: :func:`_decays`'s for ``h``; ``ring`` and ``lags``:
     CommandDelay's (``delayed``)."""
     n = out.shape[1]
@@ -231,8 +234,9 @@ def _loop(vector: bool, delayed: bool, trig: bool, coupled: bool, turn_coupled: 
             p[0, i], p[1, i], p[2, i], p[3, i], p[4, i], p[5, i], p[6, i], p[7, i], p[8, i],
             p[9, i], p[10, i], p[11, i], p[12, i], p[13, i], p[14, i], p[15, i], p[16, i],
             p[17, i])
-        x, y, yaw0, v0, w0, v_slow, w_slow = (state[0, i], state[1, i], state[2, i],
-                                              state[3, i], state[4, i], state[5, i], state[6, i])
+        x, y, yaw0, v0, w0, v_slow, w_slow, w_lag = (
+            state[0, i], state[1, i], state[2, i], state[3, i], state[4, i], state[5, i],
+            state[6, i], state[7, i])
         if vector:                                  # PX4's course loop on u_p
             angle = math.atan2(b[i], a[i]) - yaw0
             course_err = angle - TAU * math.ceil((angle - math.pi) * (1.0 / TAU))
@@ -245,8 +249,8 @@ def _loop(vector: bool, delayed: bool, trig: bool, coupled: bool, turn_coupled: 
             ring[1, k % size, i] = yaw_cmd
             speed_cmd = ring[0, (k - lags[0, i]) % size, i]
             yaw_cmd = ring[1, (k - lags[1, i]) % size, i]
-        u, w = _clamp(speed_cmd, yaw_cmd, v0, w0, max_speed, max_yaw_rate, tsc, stc, min_radius,
-                      lat_accel, coupled, turn_coupled, curvature, lateral)
+        u, w, top_w = _clamp(speed_cmd, yaw_cmd, v0, w0, max_speed, max_yaw_rate, tsc, stc,
+                             min_radius, lat_accel, coupled, turn_coupled, curvature, lateral)
         # _step_limited: the speed channel (and its overshoot)
         z_end = v_slow
         vx0 = v0
@@ -258,12 +262,12 @@ def _loop(vector: bool, delayed: bool, trig: bool, coupled: bool, turn_coupled: 
             v_mid = _overshoot(vx0, v_mid, v_slow, g_v, decays[4, i])[0]
             v_end, z_end = _overshoot(vx0, v_end, v_slow, g_v, decays[5, i])
         # the turn-rate channel (and its two time scales) and the heading it integrates
-        wz_end = w_slow
+        wz_end, x_end = w_slow, w_lag
         if not yaw_overshoot:
             w_mid, i_mid = _channel(w0, w, w_c_yaw, yaw_accel, yaw_decel, 0.5 * h, decays[2, i])
             w_end, i_end = _channel(w0, w, w_c_yaw, yaw_accel, yaw_decel, h, decays[3, i])
         else:
-            x0 = (w0 + g_w * w_slow) / (1.0 + g_w)
+            x0 = w_lag
             x_mid, ix_mid = _channel(x0, w, w_c_yaw, yaw_accel, yaw_decel, 0.5 * h,
                                      decays[2, i])
             x_end, ix_end = _channel(x0, w, w_c_yaw, yaw_accel, yaw_decel, h, decays[3, i])
@@ -272,10 +276,17 @@ def _loop(vector: bool, delayed: bool, trig: bool, coupled: bool, turn_coupled: 
             i_mid = _overshoot_integral(x0, x_mid, ix_mid, w_slow, g_w, tau_w, 0.5 * h,
                                         decays[6, i])
             i_end = _overshoot_integral(x0, x_end, ix_end, w_slow, g_w, tau_w, h, decays[7, i])
+            if g_w != 0.0:                          # plant.turn_rate_cap
+                c_mid = _nan_min(_nan_max(w_mid, -top_w), top_w)
+                c_end = _nan_min(_nan_max(w_end, -top_w), top_w)
+                if c_mid != w_mid or c_end != w_end:
+                    i_mid = h / 24.0 * (5.0 * w0 + 8.0 * c_mid - c_end)
+                    i_end = h / 6.0 * (w0 + 4.0 * c_mid + c_end)
+                    w_mid, w_end = c_mid, c_end
         # _simpson: x and y from the heading, speed and turn rate at the start, middle and end
         yaw_mid, yaw_end = yaw0 + i_mid, yaw0 + i_end
         if trig:
-            c0, s0 = state[7, i], state[8, i]
+            c0, s0 = state[8, i], state[9, i]
         else:
             c0, s0 = math.cos(yaw0), math.sin(yaw0)
         c1, s1 = math.cos(yaw_mid), math.sin(yaw_mid)
@@ -291,17 +302,22 @@ def _loop(vector: bool, delayed: bool, trig: bool, coupled: bool, turn_coupled: 
         out[4, i] = w_end
         out[5, i] = z_end
         out[6, i] = wz_end
-        out[7, i] = c2
-        out[8, i] = s2
+        out[7, i] = x_end
+        out[8, i] = c2
+        out[9, i] = s2
 
 
 def _lag_step(x: float, z: float, u: float, b: float, up: float, down: float, dt: float,
-              whole: float, g: float, keep: float, over: bool) -> tuple[float, float, float]:
-    """``plant.lag_step``: (what is measured, the channel's output x, the overshoot's z)."""
+              whole: float, g: float, keep: float, over: bool, cap: float
+              ) -> tuple[float, float, float]:
+    """``plant.lag_step``: (what is measured, the channel's output x, the overshoot's z);
+    ``cap`` inf: none."""
     x1 = _channel(x, u, b, up, down, dt, whole)[0]
     if not over:
         return x1, x1, z
     y, z1 = _overshoot(x, x1, z, g, keep)
+    if g != 0.0:
+        y = _nan_min(_nan_max(y, -cap), cap)
     return y, x1, z1
 
 
@@ -323,14 +339,14 @@ def _respond_loop(u_cmd: Any, w_cmd: Any, held: Any, lags: Any, p: Any, coupled:
             v_out[k, i] = v
             w_out[k, i] = w
             ku, kw = k - lags[0, i], k - lags[1, i]
-            u, r = _clamp(u_cmd[held[ku]] if ku >= 0 else 0.0,
+            u, r, top_w = _clamp(u_cmd[held[ku]] if ku >= 0 else 0.0,
                           w_cmd[held[kw]] if kw >= 0 else 0.0, v, w, p[3, i], p[4, i],
                           p[9, i], p[10, i], p[12, i], p[13, i], coupled, turn_coupled,
                           curvature, lateral)
             v, x, z = _lag_step(x, z, u, p[1, i], p[5, i], p[6, i], dt, whole_v, p[14, i],
-                                keep_v, over)
+                                keep_v, over, math.inf)
             w, xw, zw = _lag_step(xw, zw, r, p[2, i], p[7, i], p[8, i], dt, whole_w, p[16, i],
-                                  keep_w, over_w)
+                                  keep_w, over_w, top_w)
 
 
 def respond_series(params: RoverParams, n: int, switches: dict[str, bool],

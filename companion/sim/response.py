@@ -69,9 +69,10 @@ def respond(params: RoverParams, t: ArrayLike, speed_cmd: ArrayLike,
         u_k, w_k = u_in[held[k]], w_in[held[k]]
         if delay is not None:
             u_k, w_k = delay.push(u_k + np.zeros(n), w_k + np.zeros(n), dt)
-        u_k, w_k = model.clamp_command(u_k, w_k, w, v)
+        top, top_w = model.tops(w, v)
+        u_k, w_k = m.clip(u_k, -top, top), m.clip(w_k, -top_w, top_w)
         v, x, z = lag_step(m, x, z, u_k, p.w_c, p.max_accel, p.decel, dt, p.speed_overshoot,
                            p.speed_overshoot_s, over)
         w, xw, zw = lag_step(m, xw, zw, w_k, p.yaw_bandwidth, p.max_yaw_accel, p.yaw_decel, dt,
-                             p.yaw_overshoot, p.yaw_overshoot_s, over_w)
+                             p.yaw_overshoot, p.yaw_overshoot_s, over_w, top_w)
     return v_out[sample_step], w_out[sample_step]
