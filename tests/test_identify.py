@@ -166,6 +166,29 @@ def test_fit_finds_the_turn_rate_loops_two_time_scales(share):
     assert rms(p.with_(yaw_overshoot=0.0), series)[1] > 2.0 * result.yaw_rate_rms
 
 
+def test_fit_finds_an_overshoot_the_motors_cap_at_speed():
+    """A feed-forward that over-drives (share 0.6) on a skid-steer rover whose mixer leaves
+    half the turn rate at full speed: turning in place the rate overshoots whole, driving fast
+    it stops at the clamp (SITL rover-skid with ATC_STR_RAT_FF 0.5, 2026-12-05). The model's
+    cap (plant.turn_rate_cap) is what the fit searches, so it finds the share, the slow time
+    constant and the coupling, and explains the log to the noise."""
+    truth = TRUE.with_(yaw_overshoot=0.6, yaw_overshoot_s=0.8, speed_turn_coupling=0.5)
+    series = synthetic(truth, 60.0, speed_amp=4.5, rate_amp=2.6)
+    # the log has both: overshoots past the target at rest and rates held at the cap at speed
+    top = truth.max_yaw_rate * (1 - 0.5 * np.minimum(np.abs(series.speed) / truth.max_speed, 1))
+    fast = np.abs(series.speed) > 2.0
+    assert np.sum(fast & (np.abs(series.yaw_rate) > top - 0.06)) > 100
+    assert np.all(np.abs(series.yaw_rate[fast]) < top[fast] + 0.1)     # 5 sigma of the noise
+    result = fit(series, defaults())
+    p = result.params
+    assert abs(p.yaw_overshoot - 0.6) < 0.1, p.yaw_overshoot
+    # the cap where the log drives (the coupling and the top speed trade off above it)
+    for v in (0.0, 1.0, 2.0, 3.0):
+        cap = RoverModel(p).tops(0.0, v)[1]
+        assert abs(cap - RoverModel(truth).tops(0.0, v)[1]) < 0.1, (v, cap)
+    assert result.yaw_rate_rms < 0.026
+
+
 def test_logs_fitted_together_determine_what_each_leaves_to_its_prior():
     # One flight turns on the spot (the speed channel is never driven), the other drives
     # straight (the turn-rate channel never): each alone leaves a channel at its prior; joined,
