@@ -257,9 +257,16 @@ class RoverModel:
         and the turn-rate range the speed ``v`` leaves (both the state at the step's start, so
         neither clamp depends on the other's result: the motors share one range); the turning
         radius and the lateral-acceleration limit take turn rate away with speed as well."""
+        u, w, _ = self.clamp_with_top(speed, yaw_rate, omega, v)
+        return u, w
+
+    def clamp_with_top(self, speed: Num, yaw_rate: Num, omega: Num = 0.0,
+                       v: Num = 0.0) -> tuple[Num, Num, Num]:
+        """:meth:`clamp_command`, and the top turn rate it clamped to (what caps an
+        overshooting turn rate: :func:`turn_rate_cap`)."""
         top, top_w = self.tops(omega, v)
         m = self._m
-        return m.clip(speed, -top, top), m.clip(yaw_rate, -top_w, top_w)
+        return m.clip(speed, -top, top), m.clip(yaw_rate, -top_w, top_w), top_w
 
     def tops(self, omega: Num = 0.0, v: Num = 0.0) -> tuple[Num, Num]:
         """(top speed, top turn rate) the state (``omega``, ``v``) leaves: what
@@ -297,15 +304,13 @@ class RoverModel:
         """Advance ``dt`` seconds with the commands (v_ref, omega_ref) held (after the delay)."""
         if self.delay is not None:
             speed_cmd, yaw_rate_cmd = self.delay.push(speed_cmd, yaw_rate_cmd, dt)
-        top, top_w = self.tops(s.omega, s.v)
-        m = self._m
-        u, w = m.clip(speed_cmd, -top, top), m.clip(yaw_rate_cmd, -top_w, top_w)
+        u, w, top_w = self.clamp_with_top(speed_cmd, yaw_rate_cmd, s.omega, s.v)
         if self._paper:
             return self._step_exact(s, u, w, dt)
         return self._step_limited(s, u, w, dt, top_w)
 
     def _step_limited(self, s: RoverState, u: Num, w: Num, h: float,
-                      top_w: Num = math.inf) -> RoverState:
+                      top_w: Num) -> RoverState:
         """Rate-limited channels, exact per channel (:func:`_channel`), Simpson for x and y;
         with an overshoot, the channel's output x passes :func:`overshoot_step` (and, for the
         turn rate, the heading takes its integral, :func:`overshoot_integral`, and the motors
@@ -404,15 +409,19 @@ def turn_rate_cap(m: _ops.Ops, w0: Num, w_mid: Num, w_end: Num, i_mid: Num, i_en
     the quadratic through omega at 0, h/2 and h (Simpson's rule and its half-step form) in
     place of the exact integral, which is of the uncapped rate. The lag behind (x, z) runs on
     uncapped, as the fit's (:func:`companion.sim.lag_series.lag_series`, ``capped``)."""
-    on = g != 0
-    c_mid = m.where(on, m.clip(w_mid, -top, top), w_mid)
-    c_end = m.where(on, m.clip(w_end, -top, top), w_end)
+    c_mid, c_end = cap_overshoot(m, w_mid, g, top), cap_overshoot(m, w_end, g, top)
     cut = (c_mid != w_mid) | (c_end != w_end)
     if not np.any(cut):             # the usual case: nothing capped, the exact integrals stand
         return w_mid, w_end, i_mid, i_end
     q_mid = h / 24.0 * (5.0 * w0 + 8.0 * c_mid - c_end)
     q_end = h / 6.0 * (w0 + 4.0 * c_mid + c_end)
     return c_mid, c_end, m.where(cut, q_mid, i_mid), m.where(cut, q_end, i_end)
+
+
+def cap_overshoot(m: _ops.Ops, w: Num, g: Num, top: Num) -> Num:
+    """A turn rate ``w`` with a two-time-scale share ``g`` within +-``top`` (where g is 0 the
+    rate is the lag's own, within the clamp already, and left as it is)."""
+    return m.where(g != 0, m.clip(w, -top, top), w)
 
 
 def overshoot_target(v: Num, z: Num, g: Num) -> Num:
@@ -448,7 +457,7 @@ def lag_step(m: _ops.Ops, x: Num, z: Num, u: Num, b: Num, up: Num, down: Num, dt
         return x1, x1, z
     y, z1 = overshoot_step(m, x, x1, z, g, tau, dt)
     if cap is not None:
-        y = m.where(g != 0, m.clip(y, -cap, cap), y)
+        y = cap_overshoot(m, y, g, cap)
     return y, x1, z1
 
 

@@ -33,7 +33,7 @@ import numpy as np
 
 from ..core.ops import TAU
 from ..core.signals import Num
-from .plant import LAT_ACCEL_MIN_SPEED, CommandDelay, RoverModel, RoverParams, RoverState
+from .plant import LAT_ACCEL_MIN_SPEED, CommandDelay, RoverModel, RoverParams, RoverState, overshoot_target
 
 _compiled: Callable[..., None] | None = None     # _loop, compiled (when numba is here)
 _respond_compiled: Callable[..., None] | None = None     # _respond_loop, likewise
@@ -117,9 +117,9 @@ class LaneStepper:
             state = np.empty((10, n))
             for i, f in enumerate(fields[:7]):
                 state[i] = f
-            # no lag output yet: the one the turn rate tells (plant.overshoot_target)
+            # no lag output yet: the one the turn rate tells
             g = self._params[PARAMS.index("yaw_overshoot")]
-            state[7] = (state[4] + g * state[6]) / (1.0 + g) if s.w_lag is None else s.w_lag
+            state[7] = overshoot_target(state[4], state[6], g) if s.w_lag is None else s.w_lag
         h = float(h)
         if self._decays is None or self._decays[0] != h:
             decays = np.empty((8, n))

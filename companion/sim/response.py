@@ -69,8 +69,7 @@ def respond(params: RoverParams, t: ArrayLike, speed_cmd: ArrayLike,
         u_k, w_k = u_in[held[k]], w_in[held[k]]
         if delay is not None:
             u_k, w_k = delay.push(u_k + np.zeros(n), w_k + np.zeros(n), dt)
-        top, top_w = model.tops(w, v)
-        u_k, w_k = m.clip(u_k, -top, top), m.clip(w_k, -top_w, top_w)
+        u_k, w_k, top_w = model.clamp_with_top(u_k, w_k, w, v)
         v, x, z = lag_step(m, x, z, u_k, p.w_c, p.max_accel, p.decel, dt, p.speed_overshoot,
                            p.speed_overshoot_s, over)
         w, xw, zw = lag_step(m, xw, zw, w_k, p.yaw_bandwidth, p.max_yaw_accel, p.yaw_decel, dt,
