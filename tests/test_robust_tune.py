@@ -373,6 +373,47 @@ def test_a_cars_tune_leaves_out_references_it_cannot_accelerate_along(tmp_path):
     assert labels(config_for(slow_rover, 40.0, **tune_search(slow_rover))) == four[:3]
 
 
+def test_references_a_vehicle_cannot_follow_count_at_the_reach_weight(tmp_path):
+    from companion.commands.flight import tune_search
+    from companion.sim.vehicle_gains import config_for
+    weights = lambda vehicle, **kw: list(RobustConfig(vehicle=vehicle, **kw).reference_weights())  # noqa: E731
+    stock = RoverParams(max_yaw_rate=2.09, max_accel=1.01, max_decel=1.04, max_speed=3.1)
+    # the 0.12 Hz ellipse asks 1.80 m/s^2: a stock skid rover keeps it, at half
+    assert weights(stock) == [1.0] * 4                     # whole unless asked
+    assert weights(stock, reach_weight=0.5) == [1.0, 1.0, 1.0, 0.5]
+    # ATC_ACCEL_MAX 0.5 (SITL: 0.516 m/s^2): the 0.08 Hz ellipse (0.80) at half, the 0.12 Hz
+    # one out (its profile's accel_room 2)
+    slow = stock.with_(max_accel=0.516, max_decel=1.99)
+    assert weights(slow, reach_weight=0.5, accel_room=2.0) == [1.0, 1.0, 0.5]
+    # its speed is not counted: WP_SPEED 2 (the 0.08 Hz ellipse's 3.18 m/s is beyond it)
+    assert weights(stock.with_(max_speed=2.03), reach_weight=0.5) == [1.0, 1.0, 1.0, 0.5]
+    # references given count whole
+    given = (("a", Ellipse.paper(0.12)), ("b", Ellipse.paper(0.02)))
+    assert weights(slow, reach_weight=0.5, references=given) == [1.0, 1.0]
+    # what a skid-steer ArduPilot vehicle file is tuned with
+    path = tmp_path / "slow.toml"
+    vehicle_file.save(vehicle_file.VehicleFile(ROVER.with_(max_accel=0.516, max_decel=1.99),
+                                               name="slow"), path)
+    assert list(config_for(path, 40.0, **tune_search(path)).reference_weights()) == [1.0, 1.0, 0.5]
+
+
+def test_the_objective_weighs_each_reference_by_its_weight():
+    # objective = the weighted mean over references of log(steady RMS + floor) + 0.25 log(cost),
+    # + chatter: halving the fastest reference's weight moves it by exactly that
+    slow = ROVER.with_(max_accel=0.7, max_decel=0.7)        # the 0.08 Hz ellipse asks 0.80
+    cfg = RobustConfig(vehicle=slow, limits=Limits(4.0, 2.0944), neighbours=0, duration=20.0,
+                       references=(), accel_room=2.0)
+    assert list(replace(cfg, reach_weight=0.5).reference_weights()) == [1.0, 1.0, 0.5]
+    cands = _candidates(HAND)
+    whole, half = (evaluate(cands, replace(cfg, reach_weight=w), [slow]) for w in (1.0, 0.5))
+    assert np.array_equal(whole.steady_rms, half.steady_rms)
+    assert list(whole.rejected) == [""] and np.isfinite(whole.objective[0])
+    per_ref = np.log(whole.steady_rms[0, 0] + cfg.rms_floor) + 0.25 * np.log(whole.f_cost[0, 0])
+    expected = per_ref @ np.array([1.0, 1.0, 0.5]) / 2.5 - per_ref.mean()
+    assert half.objective[0] - whole.objective[0] == pytest.approx(expected, rel=1e-9)
+    assert abs(expected) > 1e-3                              # the weight moved it at all
+
+
 def test_a_px4_vehicles_neighbours_turn_up_to_two_samples_late(tmp_path):
     # PX4 SIH's course loop reverses later than its fitted model (gain sets tuned against one
     # sample swung across the path in five of nine sessions, 2026-12-03): its ensemble's slow
@@ -404,7 +445,7 @@ def test_the_tuners_settings_come_from_the_profiles_that_fly_the_vehicle(tmp_pat
     ardupilot_own = {"course_tau": 2.0, "predict_min_delay": 0.25, "cancel_min_overshoot": 0.1,
                      "rms_floor": 0.02}
     assert ardupilot_own == dict(ardupilot.PROFILE.tune)
-    assert tune_settings(skid) == {**ardupilot_own, "accel_room": 2.0}
+    assert tune_settings(skid) == {**ardupilot_own, "accel_room": 2.0, "reach_weight": 0.5}
     assert tune_settings(skid) == {**ardupilot.PROFILE.tune,
                                    **dict(skid_steer.PROFILE.tune_on_turn_rate)}
     assert tune_settings(car) == {**ardupilot_own,

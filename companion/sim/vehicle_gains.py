@@ -74,9 +74,11 @@ def record(result: RobustResult, cfg: RobustConfig, vehicle_path: str | Path,
            command: str) -> TunedGains:
     """The tuned gains with their record: vehicle file, its hash, the ensemble, the command."""
     sha = digest(vehicle_path)
+    weighed = [label if w == 1.0 else f"{label} (weight {w:g})"
+               for label, w in zip(result.references, cfg.reference_weights(), strict=True)]
     lines = [f"robust tune for the vehicle file {vehicle_path} (sha256 {sha[:16]}...)",
              f"command: {command}",
-             f"references: {', '.join(result.references)}; {cfg.duration:g} s each; telemetry "
+             f"references: {', '.join(weighed)}; {cfg.duration:g} s each; telemetry "
              f"{cfg.rate_hz:g} Hz" + (f" on {cfg.tick * 1000:g} ms ticks" if cfg.tick else ""),
              f"ensemble: the vehicle and {len(result.vehicles) - 1} neighbours (lags x1+-"
              f"{cfg.spread.lag:g}, rate limits x1+-{cfg.spread.limit:g}, delays +"
