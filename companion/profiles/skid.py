@@ -27,6 +27,6 @@ PROFILE = SteeringProfile(
     # weight (RobustConfig.reference_weights): the same rover's tune traded its 0.04 Hz tracking
     # for the 0.08 Hz ellipse (0.80 m/s^2 against its 0.52). Its two vehicle files, 128 x 4,
     # seeds 1-4 (2026-12-05, the model): 0.013-0.016 / 0.12-0.17 m at 0.04 / 0.08 Hz counting it
-    # whole, 0.003-0.009 / 0.20-0.28 at half; stock rovers (the 0.12 Hz ellipse at half) move
+    # whole, 0.003-0.009 / 0.18-0.28 at half; stock rovers (the 0.12 Hz ellipse at half) move
     # by at most 0.002 m at 0.04 and 0.08 Hz.
     tune_on_turn_rate=(("accel_room", 2.0), ("reach_weight", 0.5)))
