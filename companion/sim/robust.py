@@ -227,15 +227,18 @@ class RobustConfig:
         counting it whole flew 0.017-0.018 m at 0.04 Hz, Kanayama 0.035 (2026-12-05)."""
         if self.references:
             return np.ones(len(self.references))
-        accel = float(np.min(np.minimum(self.vehicle.max_accel, self.vehicle.decel)))
-        return np.array([self.reach_weight if ellipse_path_accel(f) > accel else 1.0
+        return np.array([self.reach_weight if ellipse_path_accel(f) > self._slower_accel else 1.0
                          for f in self._paper_kept()])
+
+    @property
+    def _slower_accel(self) -> float:
+        """m/s^2: the slower of the vehicle's speed limits (acceleration, deceleration)."""
+        return float(np.min(np.minimum(self.vehicle.max_accel, self.vehicle.decel)))
 
     def _paper_kept(self) -> list[float]:
         """The paper's ellipses :meth:`reference_list` keeps (their f_r, Hz)."""
         top = TURN_ROOM * float(np.min(self.vehicle.max_yaw_rate))
-        accel = (math.inf if self.accel_room is None else self.accel_room
-                 * float(np.min(np.minimum(self.vehicle.max_accel, self.vehicle.decel))))
+        accel = math.inf if self.accel_room is None else self.accel_room * self._slower_accel
         fastest = (math.inf if self.speed_room is None
                    else self.speed_room * float(np.min(self.vehicle.max_speed)))
         return [f for f in PAPER_F_R if f == min(PAPER_F_R)
