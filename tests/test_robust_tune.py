@@ -275,7 +275,7 @@ def test_gains_files_keep_every_law_parameter(tmp_path):
                    speed_law="paper", accel_ff_turn=0.005, brake_accel=0.21, brake_yaw_accel=0.98,
                    min_progress=0.3, course_tau=2.0, brake_integrate=4.0,
                    approach_cone=0.5, predict_s=0.5, cancel_overshoot=0.47,
-                   cancel_overshoot_s=1.2, along_integral=0.5)
+                   cancel_overshoot_s=1.2)
     defaults = PZCGains(0.7, 0.6)
     changed = [f.name for f in fields(PZCGains) if getattr(pzc, f.name) != getattr(defaults, f.name)]
     assert len(changed) == len(fields(PZCGains)) - 2          # all but k_dc, lambda_c
