@@ -16,7 +16,7 @@ import pytest
 
 from companion.core.angles import wrap
 from companion.core.limits import Limits
-from companion.core.pzc import ALONG_SHARE, PZCGains, PZCLaw, reference_heading_rate
+from companion.core.pzc import PZCGains, PZCLaw, reference_heading_rate
 from companion.core.signals import Estimate, Reference
 
 
@@ -351,44 +351,6 @@ def test_brake_integrate_lets_the_position_integrators_run_out_to_that_many_knee
     assert law.int_x == pytest.approx([0.0, 1.5 * 49 * 0.02])
     with pytest.raises(ValueError, match="brake_integrate"):
         PZCGains(brake_integrate=0.5)
-
-
-def test_the_along_path_integrator_pushes_along_the_reference_by_its_share_of_k_i():
-    # reference moving east at 1 m/s from x = 0.1 ahead of the rover at rest: p~ . t = 0.1 m
-    # (0.05 m across it, which the along integrator does not see); K_I = 0.25, share 2
-    g = PZCGains(0.5, 0.5, brake_accel=0.0)
-    along = replace(g, along_integral=2.0)
-    ref = Reference(0.1, 0.05, vx=1.0, vy=0.0)
-    plain, law = PZCLaw(g), PZCLaw(along)
-    for k in range(50):
-        a = plain.step(0.02 * k, _estimate(0.0), ref)
-        b = law.step(0.02 * k, _estimate(0.0), ref)
-    assert law.int_along == pytest.approx(0.1 * 49 * 0.02)
-    assert b.ux - a.ux == pytest.approx(2.0 * 0.25 * 0.1 * 49 * 0.02)
-    assert b.uy == pytest.approx(a.uy)                        # nothing across the path
-    # a reference standing still: no direction, nothing summed, nothing pushed
-    plain, law = PZCLaw(g), PZCLaw(along)
-    for k in range(50):
-        a = plain.step(0.02 * k, _estimate(0.0), Reference(0.1, 0.05))
-        b = law.step(0.02 * k, _estimate(0.0), Reference(0.1, 0.05))
-    assert law.int_along == 0.0 and (b.ux, b.uy) == (a.ux, a.uy)
-    # its push held at 5 % of the reference's speed (0.1 m/s here: int at 0.1 / (2 x 0.25)),
-    # beyond the braking curve's knee too (K_P 1, 0.5 m/s^2: 0.5 m), where the position
-    # integrators hold
-    law = PZCLaw(replace(along, brake_accel=0.5))
-    for k in range(100):
-        law.step(0.02 * k, _estimate(0.0), Reference(1.5, 0.0, vx=2.0, vy=0.0))
-    assert law.int_x == 0.0 and law.int_along == pytest.approx(0.1 / (2.0 * 0.25))
-    assert ALONG_SHARE == 0.05
-    # lanes of an array, each its own share; off (0) by default and in the paper's law
-    law = PZCLaw(replace(g, along_integral=np.array([0.0, 2.0])), n=2)
-    for k in range(50):
-        cmd = law.step(0.02 * k, Estimate(*(np.zeros(2),) * 6),
-                       Reference(np.full(2, 0.1), np.zeros(2), vx=np.ones(2), vy=np.zeros(2)))
-    assert cmd.ux[1] - cmd.ux[0] == pytest.approx(2.0 * 0.25 * 0.1 * 49 * 0.02)
-    assert PZCGains().along_integral == 0.0
-    with pytest.raises(ValueError, match="along_integral"):
-        PZCGains(along_integral=-0.1)
 
 
 def test_the_approach_cone_holds_u_p_within_its_angle_of_the_reference_direction():

@@ -40,15 +40,6 @@ Extensions beyond the paper, each off by default (the paper's law exactly) and c
   position integrators held while it acts (nothing changes where |p_ref'| = 0). A rover that
   steers along u_p (PX4) cannot reverse a velocity across the path faster than it turns; without
   the cone a metre's error sends it across at right angles and over the path, into a swing;
-* ``along_integral`` = s (a share of K_I): a third integrator, on p~'s component along the
-  reference's direction t = p_ref' / |p_ref'|,
-      u_p += s K_I (int p~ . t) t,   |s K_I int p~ . t| <= 0.05 |p_ref'| (ALONG_SHARE),
-  summed only where the reference moves and held at that bound. On a closed path a speed loop
-  that settles a little below its command leaves the rover a steady distance behind: in the
-  world frame that error turns with the path, so eq. (25)'s integrators (x, y) average it out
-  and only K_P holds it (ArduPilot SITL's skid rover: 1-1.6 % slow, 0.01-0.03 m behind at
-  0.08 Hz, more in a session's early flights). The bound, not the braking knee, keeps the start's
-  metres from winding it up: a lag of a few centimetres is beyond the knee of many gain sets;
 * ``lead_tau``, ``lead_max_gain``: the actuator lead of :mod:`companion.core.lead`;
 * ``course_tau`` (s): the law steers the course over ground, phi-hat + beta-hat, beta-hat the
   angle from the heading to the filtered pose's displacement, summed with forgetting time
@@ -114,14 +105,12 @@ class PZCGains:
     predict_s: Num = 0.0
     cancel_overshoot: Num = 0.0
     cancel_overshoot_s: Num = 1.0
-    along_integral: Num = 0.0
 
     def __post_init__(self) -> None:
         if self.speed_law not in SPEED_LAWS:
             raise ValueError(f"speed_law must be one of {SPEED_LAWS}, not {self.speed_law!r}")
         for name in ("accel_ff_turn", "brake_accel", "brake_yaw_accel", "min_progress",
-                     "course_tau", "approach_cone", "predict_s", "cancel_overshoot",
-                     "along_integral"):
+                     "course_tau", "approach_cone", "predict_s", "cancel_overshoot"):
             value = getattr(self, name)
             if value is not None and _any_negative(value):
                 raise ValueError(f"{name} must be >= 0, not {value!r}")
@@ -163,11 +152,6 @@ def _any_negative(value: Num) -> bool:
         return bool((value < 0).any())
     except AttributeError:
         return value < 0
-
-
-# The along-path integrator's reach (PZCGains.along_integral): its push along the path is at most
-# this share of the reference's speed
-ALONG_SHARE = 0.05
 
 
 def braking_p(m: _ops.Ops, kp: Num, alpha: Num, err_abs: Num) -> tuple[Num, Num]:
@@ -221,7 +205,6 @@ class PZCLaw:
         self._brake_zone = not (isinstance(gains.brake_integrate, (int, float))
                                 and gains.brake_integrate <= 1.0)
         self._progress = not _ops.is_plain_zero(gains.min_progress)
-        self._along = not _ops.is_plain_zero(gains.along_integral)
         self._cone = not _ops.is_plain_zero(gains.approach_cone)
         # tan(chi); a lane of 0 (no cone) an unbounded one
         self._cone_tan = (self._m.where(gains.approach_cone > 0, self._m.tan(gains.approach_cone),
@@ -231,7 +214,7 @@ class PZCLaw:
     def reset(self) -> None:
         zero = self._m.zeros(self.n)
         self.t: float | None = None
-        self.int_x = self.int_y = self.int_yaw = self.int_along = zero
+        self.int_x = self.int_y = self.int_yaw = zero
 
     def step(self, t: float, est: Estimate, ref: Reference) -> Command:
         m, g, lim = self._m, self.gains, self.limits
@@ -258,20 +241,6 @@ class PZCLaw:
                 int_y = m.where(hold, self.int_y, int_y)
         ux = kp * ex + g.ki * int_x + g.velocity_ff * ref.vx
         uy = kp * ey + g.ki * int_y + g.velocity_ff * ref.vy
-        int_along = self.int_along
-        if self._along:
-            # The along-path integrator: p~ . t summed where the reference moves, its push along
-            # t at most ALONG_SHARE of the reference's speed (a speed loop a few per cent short;
-            # the start's metres would wind it far beyond that), and held there.
-            ref_speed, tx, ty = reference_direction(ref, m)
-            gain = g.along_integral * g.ki
-            cap = ALONG_SHARE * ref_speed / m.maximum(gain, 1e-12)
-            int_along = m.where(ref_speed > 1e-6,
-                                m.clip(self.int_along + (ex * tx + ey * ty) * dt, -cap, cap),
-                                self.int_along)
-            push = m.where(ref_speed > 1e-6, gain * int_along, 0.0)
-            ux = ux + push * tx
-            uy = uy + push * ty
         heading_rate = None
         if self._accel_ff:
             ux = ux + g.accel_ff * ref.ax
@@ -323,7 +292,6 @@ class PZCLaw:
         self.int_x = keep_if(m, speed_free, int_x, self.int_x)
         self.int_y = keep_if(m, speed_free, int_y, self.int_y)
         self.int_yaw = keep_if(m, rate_free, int_yaw, self.int_yaw)
-        self.int_along = keep_if(m, speed_free, int_along, self.int_along)
         return cmd
 
     def _in_cone(self, ref_speed: Num, tx: Num, ty: Num, ux: Num, uy: Num

@@ -29,14 +29,4 @@ PROFILE = SteeringProfile(
     # seeds 1-4 (2026-12-05, the model): 0.013-0.016 / 0.12-0.17 m at 0.04 / 0.08 Hz counting it
     # whole, 0.003-0.009 / 0.18-0.28 at half; stock rovers (the 0.12 Hz ellipse at half) move
     # by at most 0.002 m at 0.04 and 0.08 Hz.
-    # And every candidate integrates its error along the path too (core.pzc, along_integral,
-    # at half K_I): ArduPilot SITL's skid rover settles 1-1.6 % below its speed command, the
-    # least early in a session, which leaves it a steady 0.01-0.03 m behind on the 0.08 Hz
-    # ellipse; in the world frame that error turns with the path and eq. (25)'s integrators
-    # cannot take it back (2026-12-06: ATC_STR_RAT_FF=0.5, one vehicle file and gains flown
-    # nine times in one session, 0.059-0.074 m in the first three flights, 0.047-0.049 in the
-    # last four, the speed at 0.984 and 0.990 x the command). The model with the speed 1.5 %
-    # short, re-tuned (128 x 4, seed 1, the matrix's vehicle files; without -> with): 0.060 ->
-    # 0.037 m (rate-ff), 0.041 -> 0.031 (stock), 0.067 -> 0.055 (thr-mix) at 0.08 Hz; at the
-    # vehicle's own speed 0.044 -> 0.037, 0.031 -> 0.030, 0.058 -> 0.052.
-    tune_on_turn_rate=(("accel_room", 2.0), ("reach_weight", 0.5), ("along_integral", 0.5)))
+    tune_on_turn_rate=(("accel_room", 2.0), ("reach_weight", 0.5)))

@@ -45,7 +45,7 @@ TUNED_DIR = Path(__file__).parent / "tuned"
 
 # Law settings newer than the first gains files: written only when on (not at their default)
 OMITTED_WHEN_OFF = ("min_progress", "course_tau", "brake_integrate", "approach_cone",
-                    "predict_s", "cancel_overshoot", "cancel_overshoot_s", "along_integral")
+                    "predict_s", "cancel_overshoot", "cancel_overshoot_s")
 
 
 @dataclass(frozen=True)
@@ -132,7 +132,7 @@ def parse(data: dict, where: str) -> TunedGains:
                                 f"not {kwargs[key]!r}")
     # seconds and accelerations that are off at 0 (accel_ff_turn absent: as accel_ff)
     for key in ("accel_ff", "accel_ff_turn", "brake_accel", "brake_yaw_accel", "min_progress",
-                "course_tau", "approach_cone", "predict_s", "cancel_overshoot", "along_integral"):
+                "course_tau", "approach_cone", "predict_s", "cancel_overshoot"):
         if key in pzc:
             kwargs[key] = _number(pzc, key, f"{where}: pzc", positive=False)
             if kwargs[key] < 0:

@@ -139,8 +139,6 @@ class RobustConfig:
     # 1: the integrators hold at the knee; PX4's over-driving speed loop: more)
     brake_integrate: float = 1.0
     approach_cone: float = 0.0         # rad, every candidate's approach cone (core.pzc; 0: none)
-    # every candidate's along-path integrator, a share of its K_I (core.pzc; 0: none)
-    along_integral: float = 0.0
     # s: on a vehicle whose identified speed delay is at least this, the search chooses whether
     # and how far ahead each candidate predicts its speed (core.predict, PZCGains.predict_s:
     # PREDICT_RANGE); None: none does (the autopilot's profile says)
@@ -167,8 +165,7 @@ class RobustConfig:
         candidate with them and the tuned gains carry them."""
         return {"min_progress": self.min_progress, "speed_law": self.speed_law,
                 "course_tau": self.course_tau, "brake_integrate": self.brake_integrate,
-                "approach_cone": self.approach_cone, "along_integral": self.along_integral,
-                **self.overshoot_cancel()}
+                "approach_cone": self.approach_cone, **self.overshoot_cancel()}
 
     def overshoot_cancel(self) -> dict[str, float]:
         """The law's overshoot cancellation for this vehicle (PZCGains.cancel_overshoot,
