@@ -307,7 +307,8 @@ PROFILE = AutopilotProfile(
     # on turn-rate setpoints the law steers the heading, and ArduPilot SITL's heading drifts
     # from its course after calibrate's manoeuvres (0.006 rad in the refining flight, 0.04 rad
     # five flights later, both frames, 2026-12-02), which ran the stock skid rover 6 cm inside
-    # the 0.08 Hz ellipse; a real rover's compass does the same.
+    # the 0.08 Hz ellipse; a real rover's compass does the same. (A skid-steer rover's own
+    # profile shortens it to 0.7 s, profiles/skid.py; the car, not flown with that, keeps 2 s.)
     # And on a speed loop at least predict_min_delay s late the search may take each
     # candidate's speed from the law run up to that delay ahead (core.predict, robust's
     # PREDICT_RANGE): SITL's car (0.47-0.5 s); the skid-steer rovers (0.15-0.2 s) are tuned as
