@@ -442,11 +442,10 @@ def test_the_tuners_settings_come_from_the_profiles_that_fly_the_vehicle(tmp_pat
     skid = ROVER
     car = ROVER.with_(min_turn_radius=0.9)
     px4_car = ROVER.with_(course_gain=3.9, min_turn_radius=0.56)
-    ardupilot_own = {"course_tau": 2.0, "predict_min_delay": 0.25, "cancel_min_overshoot": 0.1,
+    ardupilot_own = {"course_tau": 0.7, "predict_min_delay": 0.25, "cancel_min_overshoot": 0.1,
                      "rms_floor": 0.02}
     assert ardupilot_own == dict(ardupilot.PROFILE.tune)
-    assert tune_settings(skid) == {**ardupilot_own, "accel_room": 2.0, "reach_weight": 0.5,
-                                   "course_tau": 0.7}
+    assert tune_settings(skid) == {**ardupilot_own, "accel_room": 2.0, "reach_weight": 0.5}
     assert tune_settings(skid) == {**ardupilot.PROFILE.tune,
                                    **dict(skid_steer.PROFILE.tune_on_turn_rate)}
     assert tune_settings(car) == {**ardupilot_own,

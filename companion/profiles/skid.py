@@ -29,9 +29,4 @@ PROFILE = SteeringProfile(
     # seeds 1-4 (2026-12-05, the model): 0.013-0.016 / 0.12-0.17 m at 0.04 / 0.08 Hz counting it
     # whole, 0.003-0.009 / 0.18-0.28 at half; stock rovers (the 0.12 Hz ellipse at half) move
     # by at most 0.002 m at 0.04 and 0.08 Hz.
-    # And its course correction (core.course) forgets in 0.7 s, not ArduPilot's 2 s: SITL's
-    # EKF heading moves against the course over ground within a lap for about 300 s after boot
-    # (2026-12-06, the ATC_STR_RAT_FF=0.5 rover's gains flown alternately with 0.7 and 2 s on one
-    # fresh SITL: 0.054 / 0.069, 0.067 / 0.076 m in the first four flights, 0.047 / 0.049,
-    # 0.045 / 0.050 later; the model, re-tuned, 0.047 against 0.044 m, stock 0.031 both).
-    tune_on_turn_rate=(("accel_room", 2.0), ("reach_weight", 0.5), ("course_tau", 0.7)))
+    tune_on_turn_rate=(("accel_room", 2.0), ("reach_weight", 0.5)))
