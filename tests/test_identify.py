@@ -281,11 +281,14 @@ def check_recovered(params: dict, rel: float = 0.15,
                     turning_speeds: tuple[float, float] | None = None) -> None:
     """The identified file's figures against TRUE, for what any log of ours excites.
 
-    ``turning_speeds`` (m/s, low and high): the log turned at its limit only at those speeds,
-    so it determines the top turn rate there, not the clamp and its loss with speed apart
-    (``max_yaw_rate`` x (1 - ``speed_turn_coupling`` x v / ``max_speed``): one ellipse log of
-    the failsafe test below fitted 2.51 rad/s with coupling 0.39, against TRUE's 2.0 and 0.15,
-    and the same top turn rate within 8 % from 2.1 to 3.3 m/s)."""
+    ``turning_speeds`` (m/s, low and high): the log turned at its limit only at those speeds;
+    the top turn rate there (``max_yaw_rate`` x (1 - ``speed_turn_coupling`` x v /
+    ``max_speed``)) is checked instead of the clamp and its loss with speed apart. Why: the
+    fit's three chains do not always find the best of that valley on such a log. One log of the
+    failsafe test below (a loaded machine moves where its stop falls) fitted 2.51 rad/s with
+    coupling 0.39, turn-rate RMS 0.018 rad/s, where TRUE's 2.0 and 0.15 give 0.011 and seed 1
+    or six chains find 1.93-2.16 (0.009): the same top turn rate within 8 % from 2.1 to 3.3
+    m/s. (docs/calibrate-and-identify.md, "what the fit can miss".)"""
     s, w = params["speed"], params["turn_rate"]
     assert within(s["accel_max_m_s2"], TRUE.max_accel, rel), s
     assert within(w["accel_max_rad_s2"], TRUE.max_yaw_accel, rel), w
@@ -328,8 +331,7 @@ def test_identify_a_companion_run_log_end_to_end(vehicle_file, tmp_path):
                   "--plot", str(plots), "--json")
     assert p.returncode == 0, p.stderr
     r = json.loads(p.stdout)
-    turning = turning_speeds(flown["csv"], 3.0)
-    check_recovered(r["params"], turning_speeds=turning)
+    check_recovered(r["params"])
     assert r["rms"]["speed_m_s"] < 0.05 and r["rms"]["yaw_rate_rad_s"] < 0.05
     assert r["check"]["log"] == flown["csv"] and r["check"]["yaw_rate_rad_s"] < 0.15
     assert r["out"] == str(out)
@@ -355,7 +357,7 @@ def test_identify_a_companion_run_log_end_to_end(vehicle_file, tmp_path):
     j = json.loads(both.stdout)
     assert j["log"] == f"{flown['tlog']} + {flown['csv']}" and j["samples"] > r["samples"]
     assert f"fitted to {flown['tlog']} + {flown['csv']}" in (tmp_path / "j.toml").read_text()
-    check_recovered(j["params"], turning_speeds=turning)
+    check_recovered(j["params"])
 
 
 def _pause_when_tracked(plant: PlantProcess, logs: Path, mission_s: float, pause: float,
