@@ -306,7 +306,8 @@ def check_recovered(params: dict, rel: float = 0.15,
 def turning_speeds(csv_path: str, limit: float) -> tuple[float, float]:
     """The 5th and 95th percentile of the speed (m/s, from the CSV's tracked positions) while
     the companion's turn-rate command sat at ``limit``: where the log shows the turn clamp."""
-    rows = [r for r in csv.DictReader(open(csv_path)) if r["x"] and r["mission_time"]]
+    rows = [r for r in csv.DictReader(Path(csv_path).read_text().splitlines())
+            if r["x"] and r["mission_time"]]
     t, x, y, w = (np.array([float(r[k]) for r in rows])
                   for k in ("vehicle_time", "x", "y", "yaw_rate_cmd"))
     keep = np.diff(t, prepend=-1.0) > 0          # (a repeated stamp after the stop)
