@@ -8,8 +8,8 @@ preflight` asks for: with this build's default its offboard loss switched to RTL
 the companion does not take back (exit 5, tests/test_companion_field_faults.py). Skipped unless
 PX4_SITL or PX4_DIR is set.
 
-Not yet in `make sitl-test` (CI): a SITL test enters it after ten runs in a row beside another
-SITL, and these have had fewer (docs/field-faults.md). ``PZC_CANDIDATE_SITL=1`` runs them.
+In `make sitl-test` (CI) since 2026-12-06: eleven runs in a row, each stall, beside another
+SITL (docs/sitl-testing.md).
 """
 
 from __future__ import annotations
@@ -21,11 +21,9 @@ import pytest
 from companion_harness import Companion, ellipse_mission
 from field_harness import UdpStallProxy
 from px4_harness import HOLD, OFFBOARD, GroundStation, ground_speed
-from sitl_common import CANDIDATE
 from sitl_plant.testing import free_udp_port
 
 BOOT_WALL = 60.0
-pytestmark = CANDIDATE   # the stop bound moved from 4 s to 7 s into the stall on 2026-12-02
 
 
 @pytest.mark.px4
