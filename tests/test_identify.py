@@ -26,6 +26,7 @@ from companion.ident import channels
 from companion.ident.excite import Excitation, Plan
 from companion.ident.fit import BOUND, FITTED, PRIOR, Series, fit, join, rms
 from companion.live.flightlog import CSV_FIELDS
+from companion.logs.logread import read_csv
 from companion.profiles import ardupilot
 from companion.profiles.priors import defaults
 from companion.sim.plant import RoverModel, RoverParams, RoverState
@@ -295,24 +296,21 @@ def check_recovered(params: dict, rel: float = 0.15,
     if turning_speeds is None:
         assert within(w["max_rad_s"], TRUE.max_yaw_rate, rel), w
     else:
-        c_w = params["coupling"]["speed_turn"]
+        fitted = RoverModel(TRUE.with_(max_yaw_rate=w["max_rad_s"], max_speed=s["max_m_s"],
+                                       speed_turn_coupling=params["coupling"]["speed_turn"]))
         for v in turning_speeds:
-            top = w["max_rad_s"] * (1.0 - c_w * min(v / s["max_m_s"], 1.0))
-            truth = TRUE.max_yaw_rate * (1.0 - TRUE.speed_turn_coupling * v / TRUE.max_speed)
-            assert within(top, truth, rel), (v, top, truth, w, c_w)
+            top, truth = fitted.tops(0.0, v)[1], RoverModel(TRUE).tops(0.0, v)[1]
+            assert within(top, truth, rel), (v, top, truth, params["coupling"], w)
     assert abs(w["delay_s"] - TRUE.yaw_delay) <= 0.05, w
 
 
 def turning_speeds(csv_path: str, limit: float) -> tuple[float, float]:
-    """The 5th and 95th percentile of the speed (m/s, from the CSV's tracked positions) while
-    the companion's turn-rate command sat at ``limit``: where the log shows the turn clamp."""
-    rows = [r for r in csv.DictReader(Path(csv_path).read_text().splitlines())
-            if r["x"] and r["mission_time"]]
-    t, x, y, w = (np.array([float(r[k]) for r in rows])
-                  for k in ("vehicle_time", "x", "y", "yaw_rate_cmd"))
-    keep = np.diff(t, prepend=-1.0) > 0          # (a repeated stamp after the stop)
-    t, x, y, w = t[keep], x[keep], y[keep], w[keep]
-    v = np.hypot(np.gradient(x, t), np.gradient(y, t))[np.abs(w) >= limit - 1e-6]
+    """The 5th and 95th percentile of the speed (m/s, the flight log's, from its tracked
+    positions) while the companion's turn-rate command sat at ``limit``: where the log shows
+    the turn clamp."""
+    flight = read_csv(csv_path)
+    at_limit = np.abs(flight.yaw_rate_cmd) >= limit - 1e-6
+    v = np.interp(flight.cmd_t[at_limit], flight.t, flight.speed)
     assert v.size > 100, "the log never turned at its limit"
     lo, hi = np.percentile(v, [5, 95])
     return float(lo), float(hi)
