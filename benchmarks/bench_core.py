@@ -21,19 +21,16 @@ import os
 import statistics
 import sys
 import time
-from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+import numpy as np
 
-import numpy as np  # noqa: E402
-
-from companion.core.baselines import KanayamaGains, KanayamaTracker, PIDGains, PIDTracker  # noqa: E402
-from companion.core.filter import FilterGains  # noqa: E402
-from companion.core.limits import Limits  # noqa: E402
-from companion.core.pzc import PZCGains, PZCTracker  # noqa: E402
-from companion.core.trajectory import Ellipse  # noqa: E402
-from companion.sim.batch import SimConfig, simulate  # noqa: E402
-from companion.sim.plant import RoverModel, RoverParams, RoverState  # noqa: E402
+from companion.core.baselines import KanayamaGains, KanayamaTracker, PIDGains, PIDTracker
+from companion.core.filter import FilterGains
+from companion.core.limits import Limits
+from companion.core.pzc import PZCGains, PZCTracker
+from companion.core.trajectory import Ellipse
+from companion.sim.batch import SimConfig, simulate
+from companion.sim.plant import RoverModel, RoverParams, RoverState
 
 
 def step_time_us(tracker, blocks: int, per_block: int = 2000) -> tuple[float, float, float]:
@@ -103,8 +100,8 @@ def vehicle_seconds(n: int, full: bool, plant_dt: float, duration: float) -> flo
 
 
 def paper_table_wall(jobs: int) -> float:
-    from companion.commands.paper_table import compute, tuned_gains
     from companion.sim.experiment import TableConfig
+    from companion.sim.paper_table import compute, tuned_gains
     fg, pg, source = tuned_gains(1000.0, 20.0)
     start = time.perf_counter()
     compute(TableConfig(rate_hz=1000.0, w_c=20.0), (fg, pg), source, jobs)

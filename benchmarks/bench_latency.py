@@ -31,7 +31,6 @@ from array import array
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
 os.environ["MAVLINK20"] = "1"
 
 from companion import mission as missions  # noqa: E402

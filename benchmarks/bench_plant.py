@@ -11,16 +11,13 @@ Run: .venv/bin/python benchmarks/bench_plant.py
 from __future__ import annotations
 
 import os
-import sys
 import time
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-
-from companion.sim.plant import RoverParams  # noqa: E402
-from sitl_plant import modes, setpoint  # noqa: E402
-from sitl_plant.testing import Pilot, PlantProcess  # noqa: E402
-from sitl_plant.vehicle import Vehicle, VehicleConfig  # noqa: E402
+from companion.sim.plant import RoverParams
+from sitl_plant import modes, setpoint
+from sitl_plant.testing import Pilot, PlantProcess
+from sitl_plant.vehicle import Vehicle, VehicleConfig
 
 
 def bench_step(name: str, params: RoverParams, n: int = 200_000) -> None:

@@ -18,19 +18,16 @@ from __future__ import annotations
 
 import argparse
 import statistics
-import sys
 import time
 from contextlib import contextmanager
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+import numpy as np
 
-import numpy as np  # noqa: E402
-
-from companion.commands.calibrate import FINAL_SEARCH, tune_workers  # noqa: E402
-from companion.commands.flight import tune_search  # noqa: E402
-from companion.sim import plant_lanes, robust, vehicle_gains  # noqa: E402
-from companion.sim.plant import RoverState  # noqa: E402
+from companion.commands.calibrate import FINAL_SEARCH, tune_workers
+from companion.commands.flight import tune_search
+from companion.sim import plant_lanes, robust, vehicle_gains
+from companion.sim.plant import RoverState
 
 ROOT = Path(__file__).resolve().parent.parent
 VEHICLES = [ROOT / "companion/sim/vehicles/ardupilot_skid.toml",

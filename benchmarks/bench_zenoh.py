@@ -9,7 +9,7 @@
    same run with ``--no-zenoh`` gives the loop's own telemetry-to-setpoint latency without
    publishing, for comparison;
 3. fleet capacity: ``n`` plant + companion pairs at 20 Hz through one ``companion router`` with
-   one ``companion monitor`` (tests/zenoh_harness.run_fleet), for growing ``n``; the largest ``n``
+   one ``companion monitor`` (testbed.zenoh_fleet.run_fleet), for growing ``n``; the largest ``n``
    with every mission done, no missed control cycle in any companion (gaps + overruns, as
    ``companion run --json`` counts them) and no state gap over 200 ms at the monitor; the
    router's and the monitor's CPU time. The transports take turns at each size, and one stops
@@ -41,20 +41,17 @@ import threading
 import time
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
-sys.path.insert(0, str(ROOT / "tests"))
+import zenoh
 
-import zenoh  # noqa: E402
-
-from companion.bus import Bus, BusOptions, decode, prepare  # noqa: E402
-from companion.live.events import LoopRecord, StatusEvent  # noqa: E402
-from zenoh_harness import (  # noqa: E402
+from companion.bus import Bus, BusOptions, decode, prepare
+from companion.live.events import LoopRecord, StatusEvent
+from testbed.missions import mission_file
+from testbed.process import ROOT
+from testbed.zenoh_fleet import (
     config,
     endpoint,
     free_tcp_port,
     make_pki,
-    mission_file,
     run_fleet,
     tls_endpoint,
     tls_isolated,

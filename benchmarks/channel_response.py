@@ -22,12 +22,9 @@ from pathlib import Path
 
 import numpy as np
 
-ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
-
-from companion.ident import fit  # noqa: E402
-from companion.ident.data import read_series  # noqa: E402
-from companion.sim import vehicle_file  # noqa: E402
+from companion.ident import fit
+from companion.ident.data import read_series
+from companion.sim import vehicle_file
 
 MIN_AMPLITUDE = 0.05      # m/s: a smaller setpoint swing at 2 f_r says nothing about the gain
 

@@ -19,8 +19,7 @@ import sys
 import tempfile
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT / "tests"))
+from testbed.process import ROOT
 
 
 def main() -> int:
@@ -28,7 +27,7 @@ def main() -> int:
     p.add_argument("missions", nargs="+")
     p.add_argument("--param", action="append", default=[], metavar="NAME=VALUE")
     args = p.parse_args()
-    from ardupilot_harness import ArduPilotSITL
+    from testbed.ardupilot import ArduPilotSITL
     params = {k: float(v) for k, v in (item.split("=", 1) for item in args.param)}
     with tempfile.TemporaryDirectory(prefix="default-run-") as tmp:
         sitl = ArduPilotSITL(Path(tmp), params=params).start()

@@ -1,9 +1,10 @@
 """The companion against PX4's own following on PX4 SITL (SIH Ackermann rover), in one session.
 
 For each ``--f-r`` of the paper's ellipse (60 s, anchored at the rover's start), on a fresh PX4
-process each (``tests/px4_harness.py``; PX4 runs in real time, so each flight costs its 60 s):
+process each (``testbed/px4.py``; PX4 runs in real time, so each flight costs its 60 s):
 
-1. PX4's OFFBOARD position following (:mod:`native_follow`: position + velocity setpoints);
+1. PX4's OFFBOARD position following (:func:`testbed.baselines.follow`: position + velocity
+   setpoints);
 2. ``companion run`` with the shipped default gains, or ``--vehicle FILE`` (a ``companion
    calibrate`` result), or ``--calibrate`` (calibrate on a fresh PX4 first, then fly its file).
 
@@ -30,12 +31,7 @@ import time
 from itertools import pairwise
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
-sys.path.insert(0, str(ROOT / "tests"))
-sys.path.insert(0, str(ROOT / "benchmarks"))
-
-from sim_to_real import companion  # noqa: E402
+from testbed.process import companion_json
 
 
 def heading_lead_deg(csv_path: str) -> float:
@@ -82,8 +78,8 @@ def main() -> int:
     if not (os.environ.get("PX4_SITL") or os.environ.get("PX4_DIR")):
         raise SystemExit("px4_tracking: set PX4_SITL (the px4 binary) or PX4_DIR")
     from companion import mission as missions
-    from native_follow import follow
-    from px4_harness import PX4SITL
+    from testbed.baselines import follow
+    from testbed.px4 import PX4SITL
 
     speeds = [float(v) for v in args.f_r.split(",")]
     rows, out = [], {"duration": args.duration}
@@ -94,7 +90,7 @@ def main() -> int:
         if args.calibrate:
             with PX4SITL(Path(tmp) / "px4-cal") as sitl:
                 t0 = time.monotonic()
-                cal = companion(["calibrate", "--connect", sitl.url(), "--out",
+                cal = companion_json(["calibrate", "--connect", sitl.url(), "--out",
                                  str(work / "rover"), "--arm", "--no-zenoh", "--log-dir",
                                  str(work / "logs"), "--json"], timeout=1200)
                 out["calibrate_wall_s"] = time.monotonic() - t0
@@ -113,7 +109,7 @@ def main() -> int:
                 argv = ["run", "--connect", sitl.url(), "--mission", str(mission), "--arm",
                         "--json", "--no-zenoh", "--log-dir", str(work / "logs"),
                         *(["--vehicle", vehicle] if vehicle else []), *args.extra.split()]
-                r = companion(argv, timeout=args.duration + 180)
+                r = companion_json(argv, timeout=args.duration + 180)
             row.update(companion_rms=r["steady_rms"], heading_lead_deg=heading_lead_deg(r["csv"]),
                        gains=r["gains_source"], csv=r["csv"])
             rows.append(row)

@@ -2,7 +2,7 @@
 
 For each baud rate, ``sitl-plant`` (paced at real time, so the byte rates are real) and
 ``companion run --connect /dev/pts/N --baud B`` fly the paper's ellipse (f_r 0.12 Hz, d_cen 0.3 m)
-over two pseudo-terminals joined by tests/serial_harness.PtyCable, which moves at most B / 10
+over two pseudo-terminals joined by testbed.pty_cable.PtyCable, which moves at most B / 10
 bytes a second each way (8N1) and drops what a UART could not carry. Prints per baud rate: the
 bytes a second each way and their share of the link, bytes dropped, the loop's rate and missed
 cycles, the tracking figures and read -> sent latency. Asserts nothing.
@@ -21,10 +21,8 @@ import tempfile
 import time
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT / "tests"))
-
-from serial_harness import PtyCable  # noqa: E402
+from testbed.process import ROOT
+from testbed.pty_cable import PtyCable
 
 
 def fly(baud: int, seconds: float, rate: float, mission: Path) -> dict:

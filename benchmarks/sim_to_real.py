@@ -4,9 +4,10 @@ For each gains file and each speed of the paper's ellipse, ``companion demo`` fl
 ``sitl-plant --vehicle FILE`` (the identified model, lockstep: seconds) and, with ``--sitl``,
 ``companion run`` flies it against ArduPilot Rover SITL (``rover-skid``; one instance booted for
 every run, extra parameters with ``--param NAME=VALUE``). With ``--native`` ArduPilot's own
-GUIDED position-target following flies each speed too (:mod:`native_follow`). It prints, per
-row, the steady RMS over the last 30 s on each side, the share of that time the yaw-rate setpoint
-sat at its limit (a limit cycle) and whether plant and vehicle agree (within 25 % or 0.05 m).
+GUIDED position-target following (:func:`testbed.baselines.follow`) flies each speed too. It
+prints, per row, the steady RMS over the last 30 s on each side, the share of that time the
+yaw-rate setpoint sat at its limit (a limit cycle) and whether plant and vehicle agree (within
+25 % or 0.05 m).
 
     python benchmarks/sim_to_real.py --vehicle V.toml --gains A.toml --gains B.toml \\
         --f-r 0.04,0.08 --sitl [--native] [--speedup 1] [--json]
@@ -17,79 +18,15 @@ Needs ``ARDUPILOT_SITL`` (or ``ARDUPILOT_DIR``) for ``--sitl``; prints figures, 
 from __future__ import annotations
 
 import argparse
-import csv
 import json
 import math
-import subprocess
 import sys
 import tempfile
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
-sys.path.insert(0, str(ROOT / "tests"))
-sys.path.insert(0, str(ROOT / "benchmarks"))
-
-MISSIONS = {0.04: "paper_ellipse_004.toml", 0.08: "paper_ellipse_008.toml",
-            0.12: "paper_ellipse_012.toml"}
-KANAYAMA_GAINS = ROOT / "benchmarks" / "kanayama_gains.toml"
-
-
-def at_limit_share(csv_path: str, limit: float, duration: float = 60.0) -> float:
-    """Share of the last half's cycles with the yaw-rate setpoint at its limit (from the CSV)."""
-    values = []
-    with open(csv_path) as f:
-        for row in csv.DictReader(f):
-            try:
-                t, w = float(row["mission_time"]), float(row["yaw_rate_cmd"])
-            except (TypeError, ValueError):
-                continue
-            if t >= duration / 2:
-                values.append(abs(w) >= 0.98 * limit)
-    return sum(values) / len(values) if values else math.nan
-
-
-def companion(argv: list[str], timeout: float) -> dict:
-    """``companion ARGV`` as a process; its JSON result (the last stdout line), or exit with
-    the tail of its stderr."""
-    p = subprocess.run([sys.executable, "-m", "companion", *argv], capture_output=True,
-                       text=True, timeout=timeout, cwd=ROOT)
-    if p.returncode != 0:
-        raise SystemExit(f"companion {argv[0]}: exit {p.returncode}: {p.stderr.strip()[-600:]}")
-    return json.loads(p.stdout.strip().splitlines()[-1])
-
-
-def ready_argv(url: str, folder: Path) -> list[str]:
-    """``companion`` arguments of a short stand-still mission (written into ``folder``), flown
-    first so that a timed command's clock starts on a booted vehicle (GPS fix, EKF position,
-    arming checks: about 45 s on a fresh SITL, not the command's time; the run waits for the
-    estimate itself, up to its --estimate-wait). The benchmarks that boot SITL share it."""
-    mission = folder / "ready.toml"
-    folder.mkdir(parents=True, exist_ok=True)
-    mission.write_text('name = "ready"\nframe = "start"\nduration = 1\n[trajectory]\n'
-                       'kind = "ellipse"\nf_r = 0.01\nax = 0\nbx = 0\nay = 0\nby = 0\n')
-    return ["run", "--connect", url, "--mission", str(mission), "--arm", "--json",
-            "--no-zenoh", "--no-log", "-q", "--telemetry-timeout", "90",
-            "--arm-timeout", "120", "--lost-timeout", "120"]
-
-
-def kanayama_argv(frame: str) -> list[str]:
-    """``companion run`` arguments flying Kanayama's law with the gains picked by hand for the
-    vehicle kind ``frame`` ("skid" or "ackermann", :data:`KANAYAMA_GAINS`): the classical
-    baseline issue 20 compares with, not its defaults, which limit-cycle on ArduPilot's rovers.
-    The benchmarks that fly it share it."""
-    import tomllib
-    gains = tomllib.loads(KANAYAMA_GAINS.read_text())[frame]
-    return ["--controller", "kanayama", "--controller-gains",
-            ",".join(f"{name}={float(value):g}" for name, value in gains.items())]
-
-
-def wait_ready(url: str, folder: Path, timeout: float = 300) -> float:
-    """The stand-still mission of :func:`ready_argv`, flown; the wall seconds it took."""
-    import time
-    t0 = time.monotonic()
-    companion(ready_argv(url, folder), timeout)
-    return time.monotonic() - t0
+from testbed.missions import PAPER_ELLIPSES
+from testbed.process import companion_json
+from testbed.scoring import at_limit_share
 
 
 def limit_flags(vehicle) -> list[str]:
@@ -102,17 +39,17 @@ def limit_flags(vehicle) -> list[str]:
 
 
 def on_plant(vehicle_path: str, gains: str, f_r: float, logs: Path, limits: list[str]) -> dict:
-    r = companion(["demo", "--vehicle", vehicle_path, "--mission",
-                    str(ROOT / "missions" / MISSIONS[f_r]), "--gains", gains, *limits,
-                    "--d-cen", "0", "--json", "--no-plot", "--no-zenoh", "--log-dir", str(logs),
-                    "-q"], timeout=300)
+    r = companion_json(["demo", "--vehicle", vehicle_path, "--mission",
+                        str(PAPER_ELLIPSES[f_r]), "--gains", gains, *limits,
+                        "--d-cen", "0", "--json", "--no-plot", "--no-zenoh", "--log-dir",
+                        str(logs), "-q"], timeout=300)
     return r
 
 
 def on_sitl(url: str, gains: str, f_r: float, logs: Path, limits: list[str]) -> dict:
-    return companion(["run", "--connect", url, "--mission", str(ROOT / "missions" / MISSIONS[f_r]),
-                       "--gains", gains, *limits, "--arm", "--json", "--no-zenoh",
-                       "--log-dir", str(logs), "-q"], timeout=400)
+    return companion_json(["run", "--connect", url, "--mission", str(PAPER_ELLIPSES[f_r]),
+                           "--gains", gains, *limits, "--arm", "--json", "--no-zenoh",
+                           "--log-dir", str(logs), "-q"], timeout=400)
 
 
 def main() -> int:
@@ -139,7 +76,7 @@ def main() -> int:
         tmp = Path(tmp)
         sitl = None
         if args.sitl:
-            from ardupilot_harness import ArduPilotSITL
+            from testbed.ardupilot import ArduPilotSITL
             sitl = ArduPilotSITL(tmp / "sitl", speedup=args.speedup, params=params).start()
         try:
             for gains in args.gains:
@@ -158,7 +95,7 @@ def main() -> int:
                     print(json.dumps(row), file=sys.stderr, flush=True)
             if args.native and sitl is not None:
                 from companion import mission as missions
-                from native_follow import follow
+                from testbed.baselines import follow
                 for f_r in speeds:
                     r = follow(sitl.url(0), missions.paper_ellipse(f_r, 60.0), arm=True)
                     rows.append({"gains": "ArduPilot GUIDED position targets", "f_r": f_r,

@@ -19,7 +19,7 @@ defaults in ``defaults`` and, in ``calibrated``, the gains picked by hand for th
 (``benchmarks/kanayama_gains.toml``: ``[skid]`` for ``rover-skid``, ``[ackermann]`` for
 ``rover``; the classical baseline of issue 20, whose defaults limit-cycle on these rovers), all
 within the same limits as pzc. Then ArduPilot's own GUIDED
-position-target following (:mod:`native_follow`) flies each speed. Scored as
+position-target following (:func:`testbed.baselines.follow`) flies each speed. Scored as
 ``benchmarks/sitl_tracking.py`` scores: the steady RMS of |p_ref - p| over the last 30 s and
 f_cost, both from the vehicle's own LOCAL_POSITION_NED; and the share of that time the yaw-rate
 setpoint sat at its limit (a limit cycle shows as a large share). Prints one markdown table and
@@ -43,13 +43,11 @@ import tempfile
 import time
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
-sys.path.insert(0, str(ROOT / "tests"))
-sys.path.insert(0, str(ROOT / "benchmarks"))
-
-from companion.core import controllers  # noqa: E402
-from sim_to_real import MISSIONS, at_limit_share, kanayama_argv  # noqa: E402
+from companion.core import controllers
+from testbed.baselines import kanayama_argv
+from testbed.missions import PAPER_ELLIPSES
+from testbed.process import ROOT
+from testbed.scoring import at_limit_share
 
 CALIBRATED = "companion/sim/vehicles/ardupilot_skid.toml"
 CONFIGS = {"defaults": [], "calibrated": ["--vehicle", CALIBRATED]}
@@ -71,7 +69,7 @@ def fly(url: str, controller: str, f_r: float, config: str, logs: Path,
     ``vehicle``: the calibrated configuration's vehicle file; ``model``: the SITL frame."""
     flags = ["--vehicle", vehicle] if CONFIGS[config] else []
     argv = [sys.executable, "-m", "companion", "run", "--connect", url, "--mission",
-            str(ROOT / "missions" / MISSIONS[f_r]), *flags,
+            str(PAPER_ELLIPSES[f_r]), *flags,
             *controller_argv(controller, config, model),
             "--arm", "--json", "--no-zenoh", "--log-dir", str(logs), "-q",
             # the first run waits for SITL's boot (GPS, EKF origin, arming: about 40 s)
@@ -164,7 +162,7 @@ def main() -> int:
     p.add_argument("--keep", metavar="DIR", help="keep the flight logs here")
     p.add_argument("--json", action="store_true")
     args = p.parse_args()
-    from ardupilot_harness import ArduPilotSITL
+    from testbed.ardupilot import ArduPilotSITL
 
     params = {k: float(v) for k, v in (item.split("=", 1) for item in args.param)}
     speeds = [float(v) for v in args.f_r.split(",")]
@@ -172,7 +170,7 @@ def main() -> int:
     configs = args.configs.split(",")
     for name in names:
         controllers.get(name)
-    bad = [c for c in configs if c not in CONFIGS] + [f for f in speeds if f not in MISSIONS]
+    bad = [c for c in configs if c not in CONFIGS] + [f for f in speeds if f not in PAPER_ELLIPSES]
     if bad:
         p.error(f"unknown configuration or speed: {bad}")
     out = {"date": datetime.date.today().isoformat(), "speedup": args.speedup, "params": params,
@@ -195,7 +193,7 @@ def main() -> int:
                         print(json.dumps(row), file=sys.stderr, flush=True)
                 if args.native:
                     from companion import mission as missions
-                    from native_follow import follow
+                    from testbed.baselines import follow
                     r = follow(url, missions.paper_ellipse(f_r, 60.0), arm=True)
                     out["rows"].append({"f_r": f_r, "config": "-", "controller": NATIVE,
                                         "steady_rms": r["steady_rms"], "f_cost": r["f_cost"],

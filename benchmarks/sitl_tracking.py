@@ -4,10 +4,10 @@ Boots ``ardurover`` (``--model``: ``rover-skid`` by default, ``rover`` for ArduP
 Ackermann car on rover.parm alone; ``--param NAME=VALUE`` for another vehicle), then
 
 0. a one-second stand-still ``companion run`` that waits for the fresh SITL's GPS and EKF
-   (:func:`sim_to_real.wait_ready`), so calibrate's clock starts on a booted vehicle;
+   (:func:`testbed.missions.wait_ready`), so calibrate's clock starts on a booted vehicle;
 1. ``companion calibrate --connect ... --out DIR --arm``: identify live, tune;
 2. ``companion run --vehicle DIR/vehicle.toml`` on the paper's ellipse at each ``--f-r``;
-3. ArduPilot's GUIDED position-target following (:mod:`native_follow`) on the same ellipses,
+3. ArduPilot's GUIDED position-target following (:func:`testbed.baselines.follow`) on the same ellipses,
 
 and prints, per speed, the steady RMS over the last 30 s of each and the share of that time the
 companion's yaw-rate setpoint sat at its limit (a limit cycle shows as a large share).
@@ -27,12 +27,9 @@ import tempfile
 import time
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
-sys.path.insert(0, str(ROOT / "tests"))
-sys.path.insert(0, str(ROOT / "benchmarks"))
-
-from sim_to_real import MISSIONS, at_limit_share, companion, wait_ready  # noqa: E402
+from testbed.missions import PAPER_ELLIPSES, wait_ready
+from testbed.process import companion_json
+from testbed.scoring import at_limit_share
 
 
 def main() -> int:
@@ -46,9 +43,9 @@ def main() -> int:
     p.add_argument("--keep", metavar="DIR", help="keep vehicle.toml, gains.toml and logs here")
     p.add_argument("--json", action="store_true")
     args = p.parse_args()
-    from ardupilot_harness import ArduPilotSITL
     from companion import mission as missions
-    from native_follow import follow
+    from testbed.ardupilot import ArduPilotSITL
+    from testbed.baselines import follow
 
     params = {k: float(v) for k, v in (item.split("=", 1) for item in args.param)}
     speeds = [float(v) for v in args.f_r.split(",")]
@@ -62,7 +59,7 @@ def main() -> int:
             url = sitl.url(0)
             out["boot_s"] = wait_ready(url, work / "logs")   # not calibrate's time
             t0 = time.monotonic()
-            cal = companion(["calibrate", "--connect", url, "--out", str(work / "rover"),
+            cal = companion_json(["calibrate", "--connect", url, "--out", str(work / "rover"),
                              "--arm", "--no-zenoh", "--log-dir", str(work / "logs"), "--json"],
                             timeout=1800)   # a loaded machine: calibrate took 575 s once
             out["calibrate_wall_s"] = time.monotonic() - t0
@@ -76,8 +73,8 @@ def main() -> int:
             from companion.sim import vehicle_file
             yaw_limit = float(vehicle_file.load(vehicle).params.max_yaw_rate)
             for f_r in speeds:
-                r = companion(["run", "--connect", url, "--vehicle", vehicle, "--mission",
-                               str(ROOT / "missions" / MISSIONS[f_r]), "--arm", "--json",
+                r = companion_json(["run", "--connect", url, "--vehicle", vehicle, "--mission",
+                               str(PAPER_ELLIPSES[f_r]), "--arm", "--json",
                                "--no-zenoh", "--log-dir", str(work / "logs")], timeout=600)
                 rows.append({"f_r": f_r, "companion_rms": r["steady_rms"],
                              "at_limit": at_limit_share(r["csv"], yaw_limit),

@@ -11,7 +11,8 @@ fresh ``ardurover`` is booted and
    flies the same, the classical law live within the same vehicle's limits, with the gains
    picked by hand for the frame (``benchmarks/kanayama_gains.toml``, ``[skid]`` or
    ``[ackermann]``: not its defaults, which limit-cycle on these rovers);
-4. ArduPilot's own GUIDED position-target following (:mod:`native_follow`) flies the same.
+4. ArduPilot's own GUIDED position-target following (:func:`testbed.baselines.follow`) flies
+   the same.
 
 Scored from the vehicle's own LOCAL_POSITION_NED: the steady RMS of |p_ref - p| over the last
 30 s. Rows are written one JSON file per configuration into ``--out`` as they finish (several
@@ -26,7 +27,7 @@ is printed from every row in the folder (``--table``: print only).
 only) instead of ``rover-skid``; it needs a vehicle model for Ackermann steering (issue 20,
 item 1) to calibrate. ``--repeat N`` calibrates (and flies) each configuration N times on N
 fresh SITL boots (item 3's repeatability). Where the vehicle cannot follow the reference the
-floor (:mod:`reach_floor`, the identified top speed) is printed beside it.
+floor (:mod:`testbed.reach_floor`, the identified top speed) is printed beside it.
 
 Needs ``ARDUPILOT_SITL`` (or ``ARDUPILOT_DIR``); prints figures, asserts nothing.
 """
@@ -44,12 +45,9 @@ import tempfile
 import time
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
-sys.path.insert(0, str(ROOT / "tests"))
-sys.path.insert(0, str(ROOT / "benchmarks"))
-
-from sim_to_real import MISSIONS, kanayama_argv, ready_argv  # noqa: E402
+from testbed.baselines import kanayama_argv
+from testbed.missions import PAPER_ELLIPSES, ready_argv
+from testbed.process import ROOT
 
 # name -> the ArduPilot parameters set over the frame's defaults (stock ArduPilot values in
 # the comments: ATC_ACCEL_MAX 1 (SITL rover-skid), ATC_DECEL_MAX 0 (= accel), ATC_STR_ACC_MAX
@@ -87,7 +85,7 @@ def companion(argv: list[str], timeout: float) -> tuple[dict, float, str]:
 
 
 def wait_ready(url: str, logs: Path) -> float:
-    """sim_to_real's stand-still mission, flown so that calibrate's clock starts on a booted
+    """The stand-still mission (:func:`testbed.missions.ready_argv`), flown so that calibrate's clock starts on a booted
     vehicle (its result is not checked: a vehicle still not ready fails calibrate, in its own
     row). The wall seconds it took."""
     t0 = time.monotonic()
@@ -97,9 +95,9 @@ def wait_ready(url: str, logs: Path) -> float:
 
 def one(name: str, params: dict[str, float], frame: str, speeds: list[float], work: Path,
         native: bool, kanayama: bool = True) -> dict:
-    from ardupilot_harness import ArduPilotSITL
     from companion import mission as missions
-    from native_follow import follow
+    from testbed.ardupilot import ArduPilotSITL
+    from testbed.baselines import follow
 
     logs = work / "logs"
     row: dict = {"config": name, "frame": frame, "params": params, "runs": {}}
@@ -122,7 +120,7 @@ def one(name: str, params: dict[str, float], frame: str, speeds: list[float], wo
         row["refine"] = {k: v for k, v in cal["refine"].items() if k != "tlog"}
         vehicle = cal["vehicle"]
         for f_r in speeds:
-            mission = str(ROOT / "missions" / MISSIONS[f_r])
+            mission = str(PAPER_ELLIPSES[f_r])
             base = ["run", "--connect", url, "--vehicle", vehicle, "--mission", mission, "--arm",
                     "--json", "--no-zenoh", "--log-dir", str(logs), "-q"]
             flown = [("pzc", [])] + ([("kanayama", kanayama_argv(frame))] if kanayama else [])
@@ -143,8 +141,8 @@ def one(name: str, params: dict[str, float], frame: str, speeds: list[float], wo
 
 def floor_for(row: dict, f_r: float) -> float | None:
     """The reach floor at ``f_r`` for the identified top speed, or along the reference's path
-    with its acceleration and deceleration too (:func:`reach_floor.path_floor`), the larger
-    (None below 1 cm)."""
+    with its acceleration and deceleration too (:func:`testbed.reach_floor.path_floor`), the
+    larger (None below 1 cm)."""
     try:
         speed = row["identified"]["speed"]
         top = float(speed["max_m_s"])
@@ -152,7 +150,7 @@ def floor_for(row: dict, f_r: float) -> float | None:
         decel = float(speed["decel_max_m_s2"] or accel)
     except (KeyError, TypeError, ValueError):
         return None
-    from reach_floor import floor, path_floor
+    from testbed.reach_floor import floor, path_floor
     value, _ = floor(f_r, top, iterations=4000)
     value = max(value, path_floor(f_r, top, accel, decel, iterations=4000)[0])
     return value if value >= 0.01 else None
@@ -210,7 +208,7 @@ def main() -> int:
     speeds = [float(v) for v in args.f_r.split(",")]
     if not args.table:
         names = args.configs.split(",")
-        bad = [n for n in names if n not in CONFIGS] + [f for f in speeds if f not in MISSIONS]
+        bad = [n for n in names if n not in CONFIGS] + [f for f in speeds if f not in PAPER_ELLIPSES]
         if bad:
             p.error(f"unknown configuration or speed: {bad}")
         for name in names:

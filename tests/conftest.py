@@ -49,9 +49,9 @@ def pytest_collection_modifyitems(config, items):
 @pytest.fixture
 def ardupilot(tmp_path):
     """Start ArduPilot Rover SITL: ``ardupilot(speedup=5, params={"NAME": value})`` returns a
-    running ``ardupilot_harness.ArduPilotSITL``; every one is stopped after the test. Skips when
+    running ``testbed.ardupilot.ArduPilotSITL``; every one is stopped after the test. Skips when
     neither ARDUPILOT_SITL nor ARDUPILOT_DIR is set."""
-    from ardupilot_harness import sitl_factory
+    from testbed.ardupilot import sitl_factory
     with sitl_factory(tmp_path) as start:
         yield start
 
@@ -59,8 +59,8 @@ def ardupilot(tmp_path):
 @pytest.fixture
 def px4(tmp_path):
     """Start PX4 SITL (SIH Ackermann rover): ``px4(params={"NAME": value})`` returns a running
-    ``px4_harness.PX4SITL``; every one is stopped after the test. Skips when neither PX4_SITL
+    ``testbed.px4.PX4SITL``; every one is stopped after the test. Skips when neither PX4_SITL
     nor PX4_DIR is set."""
-    from px4_harness import px4_factory
+    from testbed.px4 import px4_factory
     with px4_factory(tmp_path) as start:
         yield start

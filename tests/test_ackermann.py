@@ -24,8 +24,8 @@ from companion.mission.paths import Circle
 from companion.profiles import ackermann, ardupilot, skid
 from companion.sim.plant import LAT_ACCEL_MIN_SPEED, RoverModel, RoverParams, RoverState
 from companion.sim.vehicle_file import VehicleFile, load, save
-from companion_harness import companion_cli
 from sitl_plant.testing import Pilot, PlantProcess
+from testbed.process import companion_cli
 
 G = 9.80665
 # Like ArduPilot SITL's `rover` on rover.parm (identified 2026-12-02): 0.9 m turning circle

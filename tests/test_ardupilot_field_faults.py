@@ -18,16 +18,12 @@ from pathlib import Path
 
 import pytest
 
-from ardupilot_harness import CompanionProcess, GroundStation, circle_mission, ground_speed
-from field_harness import (
-    TO_COMPANION,
-    TO_VEHICLE,
-    StallProxy,
-    held_reference,
-    largest_error,
-    simstate_xy,
-)
-from safety_harness import read_tlog
+from testbed.ardupilot import CompanionProcess, GroundStation
+from testbed.field_faults import TO_COMPANION, TO_VEHICLE, StallProxy
+from testbed.missions import circle_mission
+from testbed.safety import read_tlog
+from testbed.scoring import held_reference, largest_error, simstate_xy
+from testbed.sitl import ground_speed
 
 SPEEDUP = 2
 BOOT_WALL = 120.0 / SPEEDUP + 30.0

@@ -1,10 +1,10 @@
 """The ground station in the loop on the real autopilot: ArduPilot Rover SITL (``rover-skid``).
 
-A ground station (``gcs_harness.GroundStation``, system 255) on SERIAL0 uploads a mission with
+A ground station (``testbed.mission_gcs.GroundStation``, system 255) on SERIAL0 uploads a mission with
 the mission protocol; ``companion mission pull`` on SERIAL1 reads it back into a .plan, compared
 item by item; ``companion run --mission vehicle`` flies it, and the ground station hears the
 companion's STATUSTEXT and NAMED_VALUE_FLOAT through ArduPilot's routing and pauses / resumes it
-with MAV_CMD_DO_PAUSE_CONTINUE. Skipped without ARDUPILOT_SITL (tests/ardupilot_harness.py).
+with MAV_CMD_DO_PAUSE_CONTINUE. Skipped without ARDUPILOT_SITL (testbed/ardupilot.py).
 """
 
 from __future__ import annotations
@@ -17,11 +17,11 @@ import time
 
 import pytest
 
-from ardupilot_harness import CompanionProcess
 from companion.mav import mission_transfer as mt
 from companion.mission import geo
-from companion_harness import companion_cli
-from gcs_harness import COMPANION, GroundStation
+from testbed.ardupilot import CompanionProcess
+from testbed.mission_gcs import COMPANION, GroundStation
+from testbed.process import companion_cli
 
 SPEEDUP = 5
 TRACK_SPEEDUP = 2
@@ -216,7 +216,7 @@ def test_the_gcs_failsafe_still_fires_while_the_companion_runs(ardupilot, tmp_pa
     With the companion's onboard identity (the vehicle's system id, component 191) ArduPilot's
     GCS failsafe fires and stops the rover; heart-beating as 255 (``--source-system 255``, what
     the companion did before) it keeps the failsafe from ever firing."""
-    from ardupilot_harness import circle_mission
+    from testbed.missions import circle_mission
     # FS_GCS_TIMEOUT is vehicle time, heartbeats come once a wall second: at SPEEDUP 5 a 5 s
     # timeout is one wall second and a late heartbeat under load trips it; 20 s is 4 wall s
     sitl = ardupilot(speedup=SPEEDUP, params={"FS_GCS_ENABLE": 1, "FS_GCS_TIMEOUT": 20})

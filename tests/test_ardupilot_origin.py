@@ -14,8 +14,8 @@ import time
 
 import pytest
 
-from ardupilot_harness import GUIDED, HOLD, ROOT, CompanionProcess, GroundStation
-from origin_harness import (
+from testbed.ardupilot import GUIDED, HOLD, CompanionProcess, GroundStation
+from testbed.origin import (
     CMAC,
     closest_approaches,
     metres_between,
@@ -24,6 +24,7 @@ from origin_harness import (
     plan_waypoints,
     write_plan,
 )
+from testbed.process import ROOT
 
 SPEEDUP = 5
 BOOT_WALL = 120.0 / SPEEDUP + 20.0     # wall s: boot to armable, with margin

@@ -1,7 +1,7 @@
 """The companion against the real autopilot: ArduPilot Rover SITL (``rover-skid``), each test
 with its own ``ardurover`` process, ``companion run --connect tcp:...`` as a real process on its
 SERIAL0 and a ground station (the pilot) on its SERIAL1. Skipped unless ARDUPILOT_SITL or
-ARDUPILOT_DIR is set (``tests/ardupilot_harness.py``); ``make sitl-test`` runs only these.
+ARDUPILOT_DIR is set (``testbed/ardupilot.py``); ``make sitl-test`` runs only these.
 
 Time: the vehicle runs at ``SPEEDUP`` x real time (its clock, ``time_boot_ms``, is simulation
 time), so the boot to armed (about 46 s of vehicle time: ArduPilot arms in GUIDED only once its
@@ -23,20 +23,11 @@ from pathlib import Path
 
 import pytest
 
-import ardupilot_harness as harness
-from ardupilot_harness import (
-    GUIDED,
-    HOLD,
-    MANUAL,
-    SKIP_REASON,
-    CompanionProcess,
-    GroundStation,
-    circle_mission,
-    from_vehicle,
-    ground_speed,
-)
-from safety_harness import read_tlog
-from sitl_common import process_gone, sent_by_companion, started_by_a_dying_process
+import testbed.ardupilot as harness
+from testbed.ardupilot import GUIDED, HOLD, MANUAL, SKIP_REASON, CompanionProcess, GroundStation, from_vehicle
+from testbed.missions import circle_mission
+from testbed.safety import read_tlog
+from testbed.sitl import ground_speed, process_gone, sent_by_companion, started_by_a_dying_process
 
 SPEEDUP = 5
 BOOT_WALL = 120.0 / SPEEDUP + 20.0      # wall s: boot to armed (~40-50 vehicle s) with margin
@@ -321,7 +312,7 @@ def test_instances_side_by_side_and_stopped_on_every_way_out(tmp_path):
     harness._stop_all()
     assert _gone(pid) and not c.alive() and c.lock is None
     # the test process dies without running any of that: SITL gets SIGTERM from the kernel
-    orphan = started_by_a_dying_process("ardupilot_harness", "ArduPilotSITL",
+    orphan = started_by_a_dying_process("testbed.ardupilot", "ArduPilotSITL",
                                         tmp_path / "orphan", 30)
     try:
         assert _gone(orphan), f"ardurover {orphan} outlived the process that started it"

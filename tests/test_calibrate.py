@@ -14,8 +14,8 @@ from companion.sim import gains as gains_mod
 from companion.sim import vehicle_file
 from companion.sim.plant import RoverParams
 from companion.sim.vehicle_gains import digest
-from companion_harness import ROOT, companion_cli
 from sitl_plant.testing import Pilot, PlantProcess
+from testbed.process import ROOT, companion_cli
 
 TRUE = RoverParams(w_c=1 / 0.12, w_c_yaw=1 / 0.05, max_speed=2.5, max_yaw_rate=1.8,
                    max_accel=0.8, max_yaw_accel=1.6, speed_delay=0.1, yaw_delay=0.05,

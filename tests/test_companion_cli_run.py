@@ -9,8 +9,8 @@ import sys
 import time
 from functools import partial
 
-from companion_harness import ROOT, companion_cli
 from sitl_plant.testing import free_udp_port
+from testbed.process import ROOT, companion_cli
 
 companion = partial(companion_cli, timeout=30.0)
 

@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from companion_harness import companion_cli
+from testbed.process import companion_cli
 
 FIELDS = ("f_cost", "steady_rms", "setpoints_sent", "telemetry_received", "loop_rate_hz",
           "latency_p50_ms", "latency_p99_ms", "duration_s", "plot")

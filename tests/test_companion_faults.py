@@ -13,17 +13,11 @@ import time
 
 import pytest
 
-from companion_harness import (
-    ROOT,
-    Companion,
-    FakeVehicle,
-    Proxy,
-    ellipse_mission,
-    finite_setpoint,
-    is_mode_command,
-    is_zero,
-)
 from sitl_plant.testing import PlantProcess, free_udp_port
+from testbed.fake_vehicle import FakeVehicle, finite_setpoint, is_mode_command, is_zero
+from testbed.missions import ellipse_mission
+from testbed.process import ROOT, Companion
+from testbed.udp_proxy import Proxy
 
 HOLD, GUIDED = 4, 15
 

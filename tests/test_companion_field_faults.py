@@ -2,14 +2,16 @@
 flagged or stepped pauses the run and it resumes once healthy; the autopilot's own failsafe is
 never taken back; a pilot during the companion's failsafe is a pilot. Real processes, real UDP.
 
-The vehicle is :class:`companion_harness.FakeVehicle` (ArduPilot-like: heartbeats, ACKs,
+The vehicle is :class:`testbed.fake_vehicle.FakeVehicle` (ArduPilot-like: heartbeats, ACKs,
 EKF_STATUS_REPORT, STATUSTEXT on its script). Each test checks what went on the wire.
 """
 
 from __future__ import annotations
 
-from companion_harness import Companion, FakeVehicle, ellipse_mission, is_mode_command, is_zero
 from sitl_plant.testing import free_udp_port
+from testbed.fake_vehicle import FakeVehicle, is_mode_command, is_zero
+from testbed.missions import ellipse_mission
+from testbed.process import Companion
 
 HEALTHY, GLITCHING, NO_GPS = 0x33F, 0x833F, 0x27     # ArduPilot SITL's flags (field-faults.md)
 GUIDED, HOLD, MANUAL = 15, 4, 0

@@ -13,9 +13,12 @@ from pathlib import Path
 import pytest
 
 from companion.live.flightlog import CSV_FIELDS
-from companion_harness import ROOT, Companion, Proxy, companion_cli, ellipse_mission, is_zero
-from safety_harness import read_tlog
 from sitl_plant.testing import PlantProcess
+from testbed.fake_vehicle import is_zero
+from testbed.missions import ellipse_mission
+from testbed.process import ROOT, Companion, companion_cli
+from testbed.safety import read_tlog
+from testbed.udp_proxy import Proxy
 
 ENV = {**os.environ, "PYTHONPATH": str(ROOT)}
 

@@ -15,8 +15,11 @@ from companion.core.pzc import PZCGains, PZCTracker
 from companion.core.trajectory import Ellipse
 from companion.sim.batch import SimConfig, simulate
 from companion.sim.plant import RoverParams
-from companion_harness import Companion, Proxy, ellipse_mission, is_mode_command, is_zero
 from sitl_plant.testing import PlantProcess
+from testbed.fake_vehicle import is_mode_command, is_zero
+from testbed.missions import ellipse_mission
+from testbed.process import Companion
+from testbed.udp_proxy import Proxy
 
 MISSION = "missions/paper_ellipse_012.toml"
 

@@ -13,9 +13,11 @@ import pytest
 
 from companion.errors import UserError
 from companion.mav.signing import load_key
-from companion_harness import ROOT, Companion, ellipse_mission, is_zero
-from safety_harness import GUIDED, InjectingProxy, encoder, frame, make_key, read_tlog
 from sitl_plant.testing import MASK_SPEED_TURN_RATE, Pilot, PlantProcess
+from testbed.fake_vehicle import is_zero
+from testbed.missions import ellipse_mission
+from testbed.process import ROOT, Companion
+from testbed.safety import GUIDED, InjectingProxy, encoder, frame, make_key, read_tlog
 
 
 # --- key files ---------------------------------------------------------------------------------

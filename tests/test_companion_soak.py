@@ -10,9 +10,9 @@ import time
 
 import pytest
 
-from companion_harness import Companion
-from safety_harness import read_tlog, rss_kb
 from sitl_plant.testing import PlantProcess
+from testbed.process import Companion
+from testbed.safety import read_tlog, rss_kb
 
 MINUTES = 10
 MAX_SPEED, MAX_YAW_RATE = 6.0, 6.0

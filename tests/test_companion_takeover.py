@@ -10,8 +10,11 @@ import time
 
 import pytest
 
-from companion_harness import Companion, FakeVehicle, Proxy, ellipse_mission, is_mode_command, is_zero
 from sitl_plant.testing import PlantProcess, free_udp_port
+from testbed.fake_vehicle import FakeVehicle, is_mode_command, is_zero
+from testbed.missions import ellipse_mission
+from testbed.process import Companion
+from testbed.udp_proxy import Proxy
 
 HOLD, GUIDED = 4, 15
 # Vehicle seconds: the companion's setup (rate negotiation, parameters, the estimator's first

@@ -12,8 +12,9 @@ from companion.sim import gains as gains_mod
 from companion.sim import vehicle_file, vehicle_gains
 from companion.sim.gains import TunedGains
 from companion.sim.plant import RoverParams
-from companion_harness import Companion, ellipse_mission
 from sitl_plant.testing import PlantProcess
+from testbed.missions import ellipse_mission
+from testbed.process import Companion
 
 ROVER = RoverParams(w_c=1 / 0.13, w_c_yaw=1 / 0.05, max_speed=2.5, max_yaw_rate=1.5,
                     max_accel=1.0, max_yaw_accel=2.0, speed_delay=0.1, yaw_delay=0.05,
@@ -85,7 +86,7 @@ def test_the_shipped_preset_has_gains_tuned_for_it_and_the_demo_flies_them(tmp_p
     import sys
 
     from companion.sim.vehicle_file import preset_path
-    from companion_harness import ROOT
+    from testbed.process import ROOT
     shipped = vehicle_gains.find_beside(preset_path("ardupilot-skid"), 40.0)
     assert shipped is not None, "re-tune the preset's gains: its vehicle file changed"
     assert shipped.pzc.lead_tau == 0.0

@@ -15,8 +15,9 @@ import pytest
 
 from companion import cli
 from companion.commands.config_file import keyed_actions
-from companion_harness import ROOT, companion_cli, ellipse_mission
 from sitl_plant.testing import PlantProcess
+from testbed.missions import ellipse_mission
+from testbed.process import ROOT, companion_cli
 
 MISSION = str(ROOT / "missions" / "circle.toml")
 

@@ -17,7 +17,7 @@ from companion.core.limits import Limits
 from companion.core.signals import Command, Estimate, Measurement
 from companion.core.tracker import Tracker
 from companion.core.trajectory import Ellipse
-from companion_harness import companion_cli
+from testbed.process import companion_cli
 
 LIMITS = Limits(max_speed=4.0, max_yaw_rate=3.0)
 

@@ -13,7 +13,7 @@ from pathlib import Path
 import pytest
 
 from companion.sim import gains as gains_mod
-from companion_harness import companion_cli
+from testbed.process import companion_cli
 
 ROOT = Path(__file__).resolve().parent.parent
 

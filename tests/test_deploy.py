@@ -234,8 +234,8 @@ def test_sysusers_file_creates_the_units_user(tmp_path):
 def _fly_as_nobody(caps: list[str], tmp_dir: Path) -> str:
     """``companion run --realtime`` as user nobody with these ambient capabilities, against
     sitl-plant for a second; its stderr."""
-    from companion_harness import ellipse_mission
     from sitl_plant.testing import PlantProcess
+    from testbed.missions import ellipse_mission
     mission = ellipse_mission(tmp_dir / "m.toml", 1.0)
     mission.chmod(0o644)
     setpriv = ["setpriv", "--reuid=65534", "--regid=65534", "--clear-groups"]

@@ -21,10 +21,13 @@ import pytest
 
 from companion.mav import mission_transfer as mt
 from companion.mission import geo
-from companion_harness import ROOT, Companion, Proxy, ellipse_mission, is_mode_command
-from gcs_harness import COMPANION, GroundStation
 from sitl_plant.earth import CMAC
 from sitl_plant.testing import PlantProcess, free_udp_port
+from testbed.fake_vehicle import is_mode_command
+from testbed.mission_gcs import COMPANION, GroundStation
+from testbed.missions import ellipse_mission
+from testbed.process import ROOT, Companion
+from testbed.udp_proxy import Proxy
 
 ORIGIN = CMAC[:2]
 LEG = [(0.0, 0.0), (12.0, 0.0), (12.0, 10.0), (0.0, 10.0)]     # north, east (m): home first

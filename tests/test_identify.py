@@ -20,6 +20,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 
 from companion.core.signals import Reference
 from companion.ident import channels
@@ -32,10 +33,11 @@ from companion.profiles.priors import defaults
 from companion.sim.plant import RoverModel, RoverParams, RoverState
 from companion.sim.response import respond
 from companion.sim.vehicle_file import VehicleFile, load, save
-from companion_harness import ROOT, Companion, companion_cli, ellipse_mission, mavlink2
-from safety_harness import read_tlog
-from sitl_common import CANDIDATE
 from sitl_plant.testing import Pilot, PlantProcess, free_udp_port
+from testbed.marks import CANDIDATE
+from testbed.missions import ellipse_mission
+from testbed.process import ROOT, Companion, companion_cli
+from testbed.safety import read_tlog
 
 # Fits are CPU-bound and some tests run three of them: under make test's load beside a SITL suite
 # the longest took 222 s of the 300 s default (pyproject.toml). The guard is against a hang.
@@ -522,7 +524,7 @@ def test_an_abort_from_the_control_channel_stops_the_manoeuvre_and_fits_nothing(
     """``abort`` over Zenoh mid-manoeuvre is a stop asked for, as SIGTERM is: HOLD, exit 0,
     said as an abort request, and half a manoeuvre is not fitted into a vehicle file."""
     from companion.bus import control_request
-    from zenoh_harness import ISOLATED, endpoint, free_tcp_port, secret_file, session
+    from testbed.zenoh_fleet import ISOLATED, endpoint, free_tcp_port, secret_file, session
     out, port = tmp_path / "v.toml", free_tcp_port()
     key = secret_file(tmp_path / "secret")
     replies = []

@@ -2,7 +2,9 @@
 
 Every ``import`` in ``companion/`` and ``sitl_plant/`` is read with ``ast`` (lazy imports inside
 functions included) and held against the table below; a new import that runs back up a layer, or
-an I/O module pulled into the mathematics, fails here with the file and line.
+an I/O module pulled into the mathematics, fails here with the file and line. Above them both,
+``testbed/`` (what the tests and benchmarks share) and ``benchmarks/``: the product never imports
+them, and they reach the product through its library layers, never through a command's module.
 """
 
 from __future__ import annotations
@@ -126,6 +128,42 @@ def test_every_subpackage_says_what_lives_there_and_what_it_may_import():
         assert len(lines) == 2 and lines[1].startswith("May import"), (
             f"{init.relative_to(ROOT)}: two lines, what lives here and 'May import: ...'")
         assert init.parent.name in ALLOWED, f"{init.parent.name} missing from the layer table"
+
+
+# Above the product: the test bed, the benchmarks and the tests. What they may not import.
+ABOVE = {"testbed", "benchmarks"}
+COMMAND_MODULES = ("companion.commands", "companion.cli", "companion.__main__")
+
+
+def _top_modules(folder: str) -> set[str]:
+    """The bare module names of ``folder``'s files (what ``import NAME`` would find there only
+    with the folder on ``sys.path``)."""
+    return {p.stem for p in (ROOT / folder).glob("*.py")} - {"__init__", "conftest"}
+
+
+@pytest.mark.parametrize("path", module_files(PACKAGE) + module_files(ROOT / "sitl_plant"),
+                         ids=lambda p: str(p.relative_to(ROOT)))
+def test_the_product_never_imports_the_test_bed_or_the_benchmarks(path):
+    bad = [f"{path.relative_to(ROOT)}:{line}: imports {module}"
+           for line, module in imports(path, package_of(path))
+           if module.split(".")[0] in ABOVE]
+    assert not bad, "\n".join(bad)
+
+
+@pytest.mark.parametrize("path", module_files(ROOT / "testbed") + module_files(ROOT / "benchmarks"),
+                         ids=lambda p: str(p.relative_to(ROOT)))
+def test_the_test_bed_and_benchmarks_are_packages_that_use_no_command_internals(path):
+    """No ``sys.path`` edit, no module of ``tests/`` or a sibling script imported by its bare
+    name (a benchmark imports another only as ``benchmarks.NAME``), no ``companion.commands``
+    module (what a benchmark needs of a command lives in a library layer)."""
+    bare = _top_modules("tests") | _top_modules("benchmarks") | _top_modules("testbed")
+    bad = [f"{path.relative_to(ROOT)}:{line}: imports {module}"
+           for line, module in imports(path, package_of(path))
+           if module.startswith(COMMAND_MODULES) or module.split(".")[0] in bare]
+    bad += [f"{path.relative_to(ROOT)}:{node.lineno}: reaches sys.path"
+            for node in ast.walk(ast.parse(path.read_text())) if isinstance(node, ast.Attribute)
+            and node.attr == "path" and isinstance(node.value, ast.Name) and node.value.id == "sys"]
+    assert not bad, "\n".join(bad)
 
 
 def test_documented_python_names_still_work():

@@ -15,15 +15,18 @@ from pathlib import Path
 
 import pytest
 
-from companion_harness import companion_cli
+from testbed.process import companion_cli
 
 pytest.importorskip("mcap")
 pytest.importorskip("foxglove")
 from mcap.reader import NonSeekingReader, make_reader  # noqa: E402
 
-from companion_harness import ROOT, Companion, Proxy, ellipse_mission, is_zero  # noqa: E402
-from safety_harness import read_tlog  # noqa: E402
 from sitl_plant.testing import PlantProcess  # noqa: E402
+from testbed.fake_vehicle import is_zero  # noqa: E402
+from testbed.missions import ellipse_mission  # noqa: E402
+from testbed.process import ROOT, Companion  # noqa: E402
+from testbed.safety import read_tlog  # noqa: E402
+from testbed.udp_proxy import Proxy  # noqa: E402
 
 ENV = {**os.environ, "PYTHONPATH": str(ROOT)}
 
@@ -164,7 +167,8 @@ def test_sigkill_of_a_run_logging_mcap_loses_at_most_100_ms(tmp_path):
 def test_export_round_trips_an_ardupilot_sitl_flights_tlog(ardupilot, tmp_path):
     """A 15 s circle flown on ArduPilot Rover SITL, logged as MCAP live; its .tlog exported:
     every MAVLink message of every type is in the MCAP, counted by the mcap library."""
-    from ardupilot_harness import CompanionProcess, circle_mission
+    from testbed.ardupilot import CompanionProcess
+    from testbed.missions import circle_mission
     sitl = ardupilot(speedup=5)
     mission = circle_mission(tmp_path / "circle.toml", duration=15.0)
     logs = tmp_path / "logs"

@@ -13,7 +13,10 @@ from itertools import pairwise
 import pytest
 
 from companion.live.stats import TrackingStats
-from companion_harness import Companion, FakeVehicle, ellipse_mission, free_udp_port
+from sitl_plant.testing import free_udp_port
+from testbed.fake_vehicle import FakeVehicle
+from testbed.missions import ellipse_mission
+from testbed.process import Companion
 
 PERIOD = 0.025
 PATTERN_MS = (20, 20, 20, 40)

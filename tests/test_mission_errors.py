@@ -14,7 +14,7 @@ from pathlib import Path
 
 import pytest
 
-from companion_harness import companion_cli
+from testbed.process import companion_cli
 
 CIRCLE = '[trajectory]\nkind = "circle"\nradius = 5.0\nspeed = 1.0\n'
 HOME = [-35.363261, 149.16523, 584]

@@ -22,8 +22,9 @@ from companion import mission as missions  # noqa: E402
 from companion.errors import UserError  # noqa: E402
 from companion.live import origin as origin_mod  # noqa: E402
 from companion.mission import geo  # noqa: E402
-from companion_harness import Companion, Proxy, ellipse_mission  # noqa: E402
-from origin_harness import (  # noqa: E402
+from sitl_plant.testing import Pilot, PlantProcess  # noqa: E402
+from testbed.missions import ellipse_mission  # noqa: E402
+from testbed.origin import (
     CMAC,
     closest_approaches,
     metres_between,
@@ -32,7 +33,8 @@ from origin_harness import (  # noqa: E402
     plan_waypoints,
     write_plan,
 )
-from sitl_plant.testing import Pilot, PlantProcess  # noqa: E402
+from testbed.process import Companion  # noqa: E402
+from testbed.udp_proxy import Proxy  # noqa: E402
 
 BOOT = moved(CMAC, 50.0, 0.0)                  # the plant's EKF origin: 50 m north of the plan
 ORIGIN_ARG = f"--origin={BOOT[0]:.7f},{BOOT[1]:.7f}"

@@ -16,7 +16,7 @@ from companion.core.pzc import PZCGains, PZCTracker
 from companion.sim.batch import SimConfig, simulate
 from companion.sim.gains import find_tuned
 from companion.sim.plant import RoverParams
-from companion_harness import companion_cli
+from testbed.process import companion_cli
 
 ROOT = Path(__file__).resolve().parent.parent
 SHIPPED = sorted(str(p.relative_to(ROOT)) for p in (ROOT / "missions").iterdir()

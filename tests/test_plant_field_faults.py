@@ -9,8 +9,11 @@ from __future__ import annotations
 
 import pytest
 
-from companion_harness import Companion, Proxy, ellipse_mission, is_mode_command, is_zero
 from sitl_plant.testing import PlantProcess
+from testbed.fake_vehicle import is_mode_command, is_zero
+from testbed.missions import ellipse_mission
+from testbed.process import Companion
+from testbed.udp_proxy import Proxy
 
 HOLD = 4
 FAULT_AT, FAULT_FOR = 6.0, 3.0          # vehicle s (the plant boots at 0, tracking from ~1 s)

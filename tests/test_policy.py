@@ -17,8 +17,9 @@ from companion.core.limits import DEFAULT_LIMITS, Limits
 from companion.core.pzc import PZCGains
 from companion.live.policy import GainOptions, KnownVehicle, choose_limits, resolve
 from companion.sim.gains import TunedGains
-from companion_harness import Companion, ellipse_mission
 from sitl_plant.testing import PlantProcess
+from testbed.missions import ellipse_mission
+from testbed.process import Companion
 
 ROOT = Path(__file__).resolve().parents[1]
 SKID = ROOT / "companion" / "sim" / "vehicles" / "ardupilot_skid.toml"

@@ -1,6 +1,6 @@
 """``companion preflight`` against the real autopilot: ArduPilot Rover SITL (``rover-skid``,
 stock parameters), skipped unless ARDUPILOT_SITL or ARDUPILOT_DIR is set
-(``tests/ardupilot_harness.py``).
+(``testbed/ardupilot.py``).
 
 Right after boot the EKF has no origin and the pre-arm checks fail; once it runs, a stock
 skid-steer rover passes everything but the GCS failsafe (FS_GCS_ENABLE 0) and signing; ``--fix
@@ -17,7 +17,8 @@ import time
 
 import pytest
 
-from ardupilot_harness import ROOT, GroundStation
+from testbed.ardupilot import GroundStation
+from testbed.process import ROOT
 
 SPEEDUP = 2           # slow enough that the first preflight ends before the EKF has an origin
 READY_WALL = 120.0 / SPEEDUP + 30.0      # wall s until the EKF has an origin and can arm

@@ -18,10 +18,12 @@ import time
 
 import pytest
 
-from companion_harness import Companion, ellipse_mission
-from field_harness import UdpStallProxy
-from px4_harness import HOLD, OFFBOARD, GroundStation, ground_speed
 from sitl_plant.testing import free_udp_port
+from testbed.field_faults import UdpStallProxy
+from testbed.missions import ellipse_mission
+from testbed.process import Companion
+from testbed.px4 import HOLD, OFFBOARD, GroundStation
+from testbed.sitl import ground_speed
 
 BOOT_WALL = 60.0
 

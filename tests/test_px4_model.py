@@ -28,7 +28,7 @@ from companion.profiles import px4
 from companion.sim import vehicle_file
 from companion.sim.batch import SimConfig, simulate
 from companion.sim.plant import RoverModel, RoverParams, RoverState
-from companion_harness import companion_cli
+from testbed.process import companion_cli
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -1,7 +1,7 @@
 """The companion against real PX4: PX4 SITL with SIH and the Ackermann rover
 (``10045_sihsim_rover_ackermann``), each test with its own ``px4`` process, ``companion run
 --connect udpin:...:14540+N`` as a real process on its offboard link and a ground station (the
-pilot) on its GCS link. Skipped unless PX4_SITL or PX4_DIR is set (``tests/px4_harness.py``);
+pilot) on its GCS link. Skipped unless PX4_SITL or PX4_DIR is set (``testbed/px4.py``);
 ``make sitl-test`` runs these with the ArduPilot ones.
 
 PX4 runs in real time (SIH at 250 Hz), so a test costs its vehicle seconds in wall seconds; the
@@ -23,11 +23,11 @@ from pathlib import Path
 
 import pytest
 
-import px4_harness as harness
-from companion_harness import ellipse_mission
-from px4_harness import HOLD, OFFBOARD, SKIP_REASON, CompanionProcess, GroundStation, ground_speed
-from safety_harness import read_tlog
-from sitl_common import process_gone, sent_by_companion, started_by_a_dying_process
+import testbed.px4 as harness
+from testbed.missions import ellipse_mission
+from testbed.px4 import HOLD, OFFBOARD, SKIP_REASON, CompanionProcess, GroundStation
+from testbed.safety import read_tlog
+from testbed.sitl import ground_speed, process_gone, sent_by_companion, started_by_a_dying_process
 
 BOOT_WALL = 60.0                         # s: PX4 up to armed in OFFBOARD, with margin
 CREEP = 0.6                              # m/s: above what PX4's Hold lets the SIH rover creep at
@@ -280,7 +280,7 @@ def test_instances_side_by_side_and_stopped_on_every_way_out(tmp_path):
     pid = c.proc.pid
     harness._stop_all()
     assert _gone(pid) and not c.alive() and c.lock is None
-    orphan = started_by_a_dying_process("px4_harness", "PX4SITL", tmp_path / "orphan", 60)
+    orphan = started_by_a_dying_process("testbed.px4", "PX4SITL", tmp_path / "orphan", 60)
     try:
         assert _gone(orphan), f"px4 {orphan} outlived the process that started it"
     finally:

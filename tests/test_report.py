@@ -12,7 +12,7 @@ from pathlib import Path
 
 import pytest
 
-from companion_harness import ROOT, companion_cli
+from testbed.process import ROOT, companion_cli
 
 VEHICLE = ROOT / "companion" / "sim" / "vehicles" / "ardupilot_skid.toml"
 

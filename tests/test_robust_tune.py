@@ -21,7 +21,7 @@ from companion.sim import vehicle_file
 from companion.sim.plant import RoverParams
 from companion.sim.robust import RobustConfig, Spread, ensemble, evaluate, tune
 from companion.sim.tuning import Candidates
-from companion_harness import companion_cli
+from testbed.process import companion_cli
 
 ROOT = Path(__file__).resolve().parent.parent
 

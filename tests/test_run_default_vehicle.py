@@ -9,8 +9,9 @@ import pytest
 from companion import profiles
 from companion.live import presets
 from companion.sim import vehicle_file
-from companion_harness import Companion, ellipse_mission
 from sitl_plant.testing import PlantProcess
+from testbed.missions import ellipse_mission
+from testbed.process import Companion
 
 ARDUPILOT = profiles.autopilot_named("ardupilot")
 RECORDED = presets.recorded(ARDUPILOT, "ardupilot-skid")

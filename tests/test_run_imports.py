@@ -13,8 +13,8 @@ import subprocess
 import sys
 from pathlib import Path
 
-from companion_harness import ellipse_mission
 from sitl_plant.testing import PlantProcess
+from testbed.missions import ellipse_mission
 
 ROOT = Path(__file__).resolve().parents[1]
 HEAVY = ("matplotlib", "scipy", "pandas", "PIL", "tqdm", "cryptography", "IPython")

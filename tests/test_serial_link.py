@@ -1,5 +1,5 @@
 """Serial links: ``sitl-plant`` and ``companion run`` on the two ends of a pseudo-terminal cable
-paced like a 115200-baud UART (tests/serial_harness.py), and the one-line errors for a device that
+paced like a 115200-baud UART (testbed/pty_cable.py), and the one-line errors for a device that
 is absent, busy, forbidden or not a terminal."""
 
 from __future__ import annotations
@@ -18,11 +18,12 @@ from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 
 from companion.errors import UserError
 from companion.mav.connection import DEFAULT_BAUD, serial_target
-from companion_harness import ROOT, Companion, companion_cli
-from field_harness import held_reference, largest_error
-from serial_harness import PtyCable
-from sitl_common import CANDIDATE, ground_speed
 from test_companion_run import MISSION, batch_twin
+from testbed.marks import CANDIDATE
+from testbed.process import ROOT, Companion, companion_cli
+from testbed.pty_cable import PtyCable
+from testbed.scoring import held_reference, largest_error
+from testbed.sitl import ground_speed
 
 QUICK = ("--mission", "missions/circle.toml", "--no-zenoh", "--no-log",
          "--heartbeat-timeout", "30")   # an error must come at open, long before this
@@ -261,7 +262,7 @@ def test_not_a_terminal_and_bad_baud_are_one_line(tmp_path):
 def _serial_sitl(workdir: Path, device: str, speedup: float):
     """ArduPilot SITL with its SERIAL2 (its own UART driver, MAVLink 2 at 921600) on
     ``device``; SERIAL0 (TCP) is for a ground station, which SITL needs before it boots."""
-    from ardupilot_harness import ArduPilotSITL
+    from testbed.ardupilot import ArduPilotSITL
 
     class SerialSITL(ArduPilotSITL):
         def argv(self) -> list[str]:
@@ -278,7 +279,8 @@ def test_ardupilot_sitl_over_its_own_uart_driver(tmp_path):
     """ArduPilot SITL's SERIAL2 is its UART driver on one end of the cable (a real autopilot's
     serial code, MAVLink 2 at 921600), the companion on the other; SERIAL0 (TCP) is a ground
     station, which SITL needs before it boots."""
-    from ardupilot_harness import GroundStation, circle_mission
+    from testbed.ardupilot import GroundStation
+    from testbed.missions import circle_mission
 
     speedup = 2
     mission = circle_mission(tmp_path / "circle.toml", duration=20.0)
@@ -310,7 +312,8 @@ def test_a_serial_link_stall_stops_the_rover_and_the_mission_completes(tmp_path)
     3 s in; the companion's stale-telemetry failsafe holds its reference; once bytes flow again
     it re-engages GUIDED and the mission completes. The ground station on SERIAL0 (TCP) watches
     the pose and times the stall on the vehicle's clock."""
-    from ardupilot_harness import GUIDED, GroundStation, circle_mission
+    from testbed.ardupilot import GUIDED, GroundStation
+    from testbed.missions import circle_mission
 
     speedup, stall_s = 2, 10.0
     mission = circle_mission(tmp_path / "circle.toml", duration=40.0)

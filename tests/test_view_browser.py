@@ -24,8 +24,8 @@ from pathlib import Path
 
 import pytest
 
-from companion_harness import ROOT
-from zenoh_harness import free_tcp_port
+from testbed.process import ROOT
+from testbed.zenoh_fleet import free_tcp_port
 
 pytest.importorskip("rerun", reason="companion view needs rerun-sdk (pip install .[view])")
 playwright = pytest.importorskip("playwright.sync_api", reason="playwright is not installed")

@@ -13,16 +13,8 @@ import pytest
 from companion.bus import STATE_SCHEMA, STATUS_SCHEMA, control_request
 from companion.cli import main
 from sitl_plant.testing import PlantProcess
-from zenoh_harness import (
-    ISOLATED,
-    Collector,
-    Proc,
-    endpoint,
-    free_tcp_port,
-    mission_file,
-    secret_file,
-    session,
-)
+from testbed.missions import mission_file
+from testbed.zenoh_fleet import ISOLATED, Collector, Proc, endpoint, free_tcp_port, secret_file, session
 
 STATE_FIELDS = {"schema": str, "vehicle_id": str, "seq": int, "every": int, "sent_at": float,
                 "vehicle_time": float, "mission_time": float, "pose": dict, "filtered": dict,

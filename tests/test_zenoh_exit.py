@@ -11,16 +11,8 @@ import pytest
 from companion.bus import encode, status_payload
 from companion.live.events import StatusEvent
 from sitl_plant.testing import PlantProcess, free_udp_port
-from zenoh_harness import (
-    ISOLATED,
-    Collector,
-    Proc,
-    endpoint,
-    free_tcp_port,
-    mission_file,
-    secret_file,
-    session,
-)
+from testbed.missions import mission_file
+from testbed.zenoh_fleet import ISOLATED, Collector, Proc, endpoint, free_tcp_port, secret_file, session
 
 
 @pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGINT])

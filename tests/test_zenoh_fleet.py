@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import pytest
 
-from zenoh_harness import run_fleet
+from testbed.zenoh_fleet import run_fleet
 
 N, RATE, DURATION = 10, 20.0, 10.0
 MAX_GAP_MS = 200.0

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import json
 
-from zenoh_harness import ISOLATED, Proc, endpoint, free_tcp_port
+from testbed.zenoh_fleet import ISOLATED, Proc, endpoint, free_tcp_port
 
 
 def test_monitor_once_json_and_record_see_a_demo(tmp_path):

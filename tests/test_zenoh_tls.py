@@ -24,8 +24,9 @@ from companion.bus import BusOptions, control_request, encode, prepare, state_pa
 from companion.cli import main
 from companion.live.events import LoopRecord
 from companion.security import pki
-from companion_harness import companion_cli
-from zenoh_harness import (
+from testbed.missions import mission_file
+from testbed.process import companion_cli
+from testbed.zenoh_fleet import (
     Collector,
     Proc,
     WireRecorder,
@@ -33,7 +34,6 @@ from zenoh_harness import (
     endpoint,
     free_tcp_port,
     make_pki,
-    mission_file,
     secret_file,
     session,
     tls_endpoint,

@@ -2,7 +2,8 @@
 
 Six scenarios x four controllers (paper-gain PZC, tuned PZC, the paper's PID, Kanayama) in batch
 simulation; see :mod:`companion.sim.experiment` for the set-up and what the paper leaves unsaid.
-The controllers are split over up to two worker processes (``--jobs``), one per core here.
+The controllers are split over up to two worker processes (``--jobs``), one per core here
+(:mod:`companion.sim.paper_table` computes it; this module reads the flags and prints).
 
 ``pzc_tuned`` gains, first found wins: ``--gains FILE``; the shipped file for this rate and w_c
 (``companion/sim/tuned/``); else a short tuning run on the spot. The JSON says which
@@ -50,87 +51,10 @@ def _check(args) -> None:
         raise UserError(f"--jobs must be at least 1, not {args.jobs!r}")
 
 
-def tuned_gains(rate: float, w_c: float, progress=None, duration: float = 60.0):
-    """(FilterGains, PZCGains, source) for pzc_tuned when no --gains file is given."""
-    from ..sim import gains as gains_mod
-    shipped = gains_mod.find_tuned(rate, w_c)
-    if shipped is not None:
-        return shipped.filter, shipped.pzc, f"shipped {gains_mod.tuned_path(rate, w_c).name}"
-    from ..core.limits import Limits
-    from ..sim.tuning import TuneConfig, tune
-    cfg = TuneConfig(rate_hz=rate, w_c=w_c, duration=duration, population=48, rounds=3,
-                     limits=Limits())     # the table's plant has no limits; tune for it
-    result = tune(cfg, progress)
-    return (result.gains.filter, result.gains.pzc,
-            f"tuned on the fly (population {cfg.population}, {cfg.rounds} rounds; "
-            f"`companion tune --rate {rate:g} --w-c {w_c:g}` searches longer)")
-
-
-def _worker(config, tuned, source, only, shared, conn):
-    from ..sim.experiment import run_table
-
-    def progress(frac):
-        shared.value = frac
-    try:
-        conn.send(("ok", run_table(config, tuned, source, progress, only)))
-    except BaseException as exc:  # noqa: BLE001  (a worker: reported by the parent, which owns the exit code)
-        conn.send(("error", f"{type(exc).__name__}: {exc}"))
-    finally:
-        conn.close()
-
-
 def _advance(bar, percent: float) -> None:
     # update() honours tqdm's mininterval, so a fast caller does not flood the terminal.
     if bar is not None and percent > bar.n:
         bar.update(round(percent - bar.n, 1))
-
-
-def _split(names: tuple[str, ...], jobs: int) -> list[tuple[str, ...]]:
-    # pzc + pzc_tuned run as one stacked tracker, so they stay together; roughly equal halves.
-    if jobs < 2:
-        return [names]
-    first = tuple(n for n in names if n in ("pzc", "pzc_tuned"))
-    rest = tuple(n for n in names if n not in first)
-    return [part for part in (first, rest) if part]
-
-
-def compute(config, tuned, source, jobs: int, bar=None):
-    """Run the table, in ``jobs`` processes when more than one; ``bar`` is a tqdm bar or None."""
-    from ..sim.experiment import merge, run_table
-    parts = _split(config.controllers, jobs)
-    if len(parts) == 1:
-        def progress(frac):
-            _advance(bar, 100 * frac)
-        return run_table(config, tuned, source, progress)
-    import multiprocessing as mp
-    ctx = mp.get_context("fork" if sys.platform.startswith("linux") else "spawn")
-    shared = [ctx.Value("d", 0.0, lock=False) for _ in parts]
-    pipes = [ctx.Pipe(duplex=False) for _ in parts]
-    # typeshed types get_context(str) as BaseContext, whose subclasses (fork, spawn) have Process
-    procs = [ctx.Process(target=_worker,  # type: ignore[attr-defined]
-                         args=(config, tuned, source, part, value, send), daemon=True)
-             for part, value, (_, send) in zip(parts, shared, pipes, strict=True)]
-    try:
-        for proc in procs:
-            proc.start()
-        results: list = [None] * len(parts)
-        while any(r is None for r in results):
-            for i, (recv, _) in enumerate(pipes):
-                if results[i] is None and recv.poll():
-                    results[i] = recv.recv()
-                elif results[i] is None and not procs[i].is_alive() and not recv.poll():
-                    results[i] = ("error", f"worker exited with code {procs[i].exitcode}")
-            _advance(bar, 100 * sum(v.value for v in shared) / len(shared))
-            time.sleep(0.05)
-    finally:
-        for proc in procs:
-            if proc.is_alive():
-                proc.terminate()
-            proc.join()
-    errors = [msg for kind, msg in results if kind == "error"]
-    if errors:
-        raise RuntimeError("paper-table worker failed: " + "; ".join(errors))
-    return merge([table for _, table in results])
 
 
 def _print_table(result) -> None:
@@ -167,6 +91,7 @@ def _cell(c: dict) -> str:
 def run(args) -> int:
     _check(args)
     from ..sim.experiment import TableConfig
+    from ..sim.paper_table import compute, tuned_gains
 
     # A gains file is read (and any mistake in it reported) before anything else starts.
     preset = None
@@ -194,7 +119,8 @@ def run(args) -> int:
                              with_literal=args.literal,
                              trace_every=0.02 if args.plot else None)
         started = time.perf_counter()
-        result = compute(config, (fg, pg), source, args.jobs, bar)
+        result = compute(config, (fg, pg), source, args.jobs,
+                         lambda frac: _advance(bar, 100 * frac))
         wall = time.perf_counter() - started
     finally:
         if bar is not None:

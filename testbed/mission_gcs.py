@@ -4,17 +4,15 @@ every message with its arrival time, and sending as a GCS does (commands, missio
 
 from __future__ import annotations
 
-import os
 import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
-os.environ["MAVLINK20"] = "1"
-from pymavlink import mavutil  # noqa: E402
+from pymavlink import mavutil
 
-from companion.mav import mission_transfer as mt  # noqa: E402
+from companion.mav import mission_transfer as mt
 
 COMPANION = 191
 

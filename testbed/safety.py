@@ -8,7 +8,10 @@ import time
 from pathlib import Path
 from typing import Any
 
-from companion_harness import Proxy, mavlink2, mavutil
+from pymavlink import mavutil
+from pymavlink.dialects.v20 import ardupilotmega as mavlink2
+
+from testbed.udp_proxy import Proxy
 
 HOLD, GUIDED = 4, 15
 
@@ -37,7 +40,7 @@ def frame(mav: Any, msg: Any) -> bytes:
 
 
 class InjectingProxy(Proxy):
-    """The recording proxy of companion_harness, plus frames injected from the plant's side
+    """The recording proxy of :mod:`testbed.udp_proxy`, plus frames injected from the plant's side
     (same source address as the plant: what a corrupted or hostile link delivers)."""
 
     def to_companion(self, data: bytes) -> None:

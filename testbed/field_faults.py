@@ -1,5 +1,5 @@
 """Faults for the field tests (issue 21): a TCP proxy that stalls or drops the companion's link,
-the simulator's truth (SIMSTATE) in metres, and the figures read from a companion's tlog.
+and its UDP twin for PX4's offboard link (what is scored afterwards: :mod:`testbed.scoring`).
 
 The proxy listens on a free loopback port and keeps one upstream connection to the autopilot
 (opened with the first client, reused by the next: ArduPilot SITL's SERIAL0 serves one client).
@@ -13,14 +13,10 @@ one.
 
 from __future__ import annotations
 
-import csv
-import math
 import select
 import socket
 import threading
-from typing import Any
 
-EARTH = 6378100.0      # m: ArduPilot's flat-earth radius (AP_Common/Location.cpp)
 BOTH, TO_COMPANION, TO_VEHICLE = "both", "to_companion", "to_vehicle"   # what a stall holds
 
 
@@ -116,37 +112,6 @@ class StallProxy:
                 other.sendall(data)
             except OSError:
                 pass
-
-
-def simstate_xy(msg: Any, origin: Any) -> tuple[float, float]:
-    """SIMSTATE's true position (1e-7 degrees) in metres north / east of ``origin``'s."""
-    dn = (msg.lat - origin.lat) * 1e-7 * math.pi / 180 * EARTH
-    de = ((msg.lng - origin.lng) * 1e-7 * math.pi / 180 * EARTH
-          * math.cos(origin.lat * 1e-7 * math.pi / 180))
-    return dn, de
-
-
-def _tracked_rows(csv_path: str) -> list[tuple[float, float, float]]:
-    """(vehicle time, mission time, err_pos) of each tracked cycle in a companion's flight csv."""
-    with open(csv_path, newline="") as f:
-        return [(float(row["vehicle_time"]), float(row["mission_time"]), float(row["err_pos"]))
-                for row in csv.DictReader(f) if row["mission_time"]]
-
-
-def largest_error(csv_path: str, after_s: float) -> float:
-    """The companion's largest position error (its flight csv's ``err_pos``) from mission time
-    ``after_s`` on."""
-    return max((e for _, mt, e in _tracked_rows(csv_path) if mt >= after_s), default=math.nan)
-
-
-def held_reference(csv_path: str) -> tuple[float, float]:
-    """Across the longest pause in tracking (between two tracked cycles of the companion's csv):
-    (vehicle seconds it lasted, mission seconds the reference moved meanwhile). A reference
-    held while the rover was stopped moves by one cycle at most; one that ran on moves as far
-    as the vehicle's clock."""
-    rows = _tracked_rows(csv_path)
-    gaps = [(b[0] - a[0], b[1] - a[1]) for a, b in zip(rows, rows[1:], strict=False)]
-    return max(gaps, default=(0.0, 0.0))
 
 
 class UdpStallProxy:

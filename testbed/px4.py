@@ -39,23 +39,21 @@ import socket
 from collections.abc import Callable, Iterator
 from pathlib import Path
 
-import pytest
-from pymavlink import mavutil  # noqa: E402
+from pymavlink import mavutil
 
-import sitl_common  # first: it sets MAVLINK20 before pymavlink is imported
-from companion_harness import Companion
-from sitl_common import (  # noqa: F401  (the tests use them)
+from sitl_plant.testing import free_udp_port
+from testbed import sitl
+from testbed.process import Companion
+from testbed.sitl import (
     FORBIDDEN_PORT,
     InstanceLock,
     SITLProcess,
     claim_instance,
-    ground_speed,
     port_free,
     started_under,
 )
-from sitl_common import LIVE as _LIVE  # noqa: F401  (the tests use them)
-from sitl_common import stop_all as _stop_all  # noqa: F401  (the tests use it)
-from sitl_plant.testing import free_udp_port
+from testbed.sitl import LIVE as _LIVE  # noqa: F401  (the harness's own tests read them here)
+from testbed.sitl import stop_all as _stop_all  # noqa: F401
 
 SKIP_REASON = ("PX4 SITL not configured: set PX4_SITL (the px4 binary of a posix SITL build) or "
                "PX4_DIR (a PX4-Autopilot tree with build/px4_sitl_default/bin/px4)")
@@ -78,14 +76,14 @@ def px4_paths() -> tuple[Path, Path]:
     elif tree_env:
         binary, source = Path(tree_env, "build", "px4_sitl_default", "bin", "px4"), "PX4_DIR"
     else:
-        pytest.skip(SKIP_REASON)
+        sitl.skip(SKIP_REASON)
     if not (binary.is_file() and os.access(binary, os.X_OK)):
-        pytest.fail(f"{source}: {binary} is not an executable px4", pytrace=False)
+        sitl.fail(f"{source}: {binary} is not an executable px4")
     etc = binary.resolve().parent.parent / "etc"
     airframes = etc / "init.d-posix" / "airframes"
     if not any(airframes.glob(f"*_{AIRFRAME}")):
-        pytest.fail(f"{source}: no airframe {AIRFRAME} under {airframes} (PX4 main after July "
-                    "2025 has it)", pytrace=False)
+        sitl.fail(f"{source}: no airframe {AIRFRAME} under {airframes} (PX4 main after July "
+                  "2025 has it)")
     return binary, etc
 
 
@@ -199,7 +197,7 @@ def px4_factory(workdir: Path) -> Iterator[Callable[..., PX4SITL]]:
 
 # --------------------------------------------------------------------------- ground station
 
-class GroundStation(sitl_common.GroundStation):
+class GroundStation(sitl.GroundStation):
     """A ground station on PX4's GCS link, for a ``with`` block: listens where the harness
     told PX4 to send (``gcs_port``) and answers to ``18570 + N``; read continuously by a thread
     into ``seen`` (wall time, message). Only the vehicle's own heartbeats set ``mode`` /

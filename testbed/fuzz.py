@@ -13,7 +13,7 @@ from collections import Counter, deque
 from collections.abc import Callable
 from typing import Any
 
-from safety_harness import encoder, frame
+from testbed.safety import encoder, frame
 
 CATEGORIES = ("random_bytes", "random_v2_header", "bit_flip", "truncated", "wrong_length",
               "wrong_ids", "replay", "bad_values")

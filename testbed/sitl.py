@@ -1,7 +1,8 @@
-"""What the two SITL harnesses (``ardupilot_harness``, ``px4_harness``) share: the lock that
-claims one instance number across processes, the process that runs in its own session and is
-stopped by process group on every way out (``with`` blocks, the factories, an atexit hook, the
-parent-death signal), and the ground station that reads the vehicle's link in a thread.
+"""What the two SITL harnesses (:mod:`testbed.ardupilot`, :mod:`testbed.px4`) share: skipping
+or failing a test when the machine has no usable SITL, the lock that claims one instance number
+across processes, the process that runs in its own session and is stopped by process group on
+every way out (``with`` blocks, the factories, an atexit hook, the parent-death signal), and the
+ground station that reads the vehicle's link in a thread.
 
 What differs between the autopilots stays in each harness: where the binary is, the ports of an
 instance and how to tell they are free (PX4 also has a lock of its own), the working folder and
@@ -26,24 +27,31 @@ import threading
 import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
-from typing import Any, TypeVar
+from typing import Any, NoReturn, TypeVar
 
-os.environ["MAVLINK20"] = "1"
-import pytest  # noqa: E402
-from pymavlink import mavutil  # noqa: E402
+from pymavlink import mavutil
 
-from companion_harness import ROOT  # noqa: E402
-
-# A SITL test enters `make sitl-test` (and so CI) only after ten runs in a row on this machine
-# with another SITL running beside it (docs/sitl-testing.md); until then it is a candidate,
-# run with PZC_CANDIDATE_SITL=1.
-CANDIDATE = pytest.mark.skipif(not os.environ.get("PZC_CANDIDATE_SITL"),
-                               reason="candidate SITL test (not yet ten runs in a row beside "
-                                      "another SITL): PZC_CANDIDATE_SITL=1 runs it")
+from testbed.process import ROOT
 
 FORBIDDEN_PORT = 14550                   # a ground station's: never ours
 LOCK_DIR = Path(tempfile.gettempdir())
 COMPANION_COMPID = 191                   # MAV_COMP_ID_ONBOARD_COMPUTER: the companion's frames
+
+
+# --------------------------------------------------------------------------- finding it
+
+def skip(reason: str) -> NoReturn:
+    """No such SITL on this machine: the test is skipped (pytest's skip, imported only here, so a
+    benchmark imports the test bed without pytest's help and stops on the same exception)."""
+    import pytest
+    pytest.skip(reason)
+
+
+def fail(reason: str) -> NoReturn:
+    """A SITL named but not usable: the test fails in one line (a misconfigured machine should
+    not pass by skipping)."""
+    import pytest
+    pytest.fail(reason, pytrace=False)
 
 
 # --------------------------------------------------------------------------- claiming an instance
@@ -389,7 +397,7 @@ def process_gone(pid: int, timeout: float) -> bool:
 def started_by_a_dying_process(module: str, cls: str, workdir: Path, timeout: float) -> int:
     """The pid of a ``module.cls(workdir).start()`` run by a Python process that then dies at
     once (``os._exit``: no finalizer, no atexit); only the parent-death signal can stop it."""
-    code = ("import os, sys; from pathlib import Path; sys.path.insert(0, 'tests'); "
+    code = ("import os, sys; from pathlib import Path; "
             f"import {module} as h; s = h.{cls}(Path(sys.argv[1])).start(); "
             "print(s.proc.pid, flush=True); os._exit(1)")
     out = subprocess.run([sys.executable, "-c", code, str(workdir)], capture_output=True,

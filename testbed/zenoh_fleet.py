@@ -24,10 +24,10 @@ from typing import Any
 import zenoh
 
 from companion.bus import decode
-from companion_harness import with_log_dir
 from sitl_plant.testing import free_port
+from testbed.missions import mission_file
+from testbed.process import ROOT, with_log_dir
 
-ROOT = Path(__file__).resolve().parents[1]
 ISOLATED = ["--no-zenoh-scouting"]
 
 
@@ -288,12 +288,6 @@ class Proc:
         lines = [line for line in self.stdout.splitlines() if line.startswith("{")]
         assert lines, f"no JSON on stdout:\n{self.stdout}\nstderr:\n{self.stderr[-2000:]}"
         return json.loads(lines[-1])
-
-
-def mission_file(path: Path, duration: float, name: str = "ellipse") -> Path:
-    path.write_text(f'name = "{name}"\nframe = "start"\nduration = {duration}\n'
-                    '[trajectory]\nkind = "ellipse"\nf_r = 0.12\n')
-    return path
 
 
 def secret_file(path: Path, secret: str = "correct horse battery staple") -> Path:

@@ -33,22 +33,20 @@ from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
-import pytest
-from pymavlink import mavutil  # noqa: E402
+from pymavlink import mavutil
 
-import sitl_common  # first: it sets MAVLINK20 before pymavlink is imported
-from companion_harness import ROOT, Companion  # noqa: F401  (ROOT: the tests use it from here)
-from sitl_common import (  # noqa: F401  (the tests use them)
+from testbed import sitl
+from testbed.process import Companion
+from testbed.sitl import (
     FORBIDDEN_PORT,
     InstanceLock,
     SITLProcess,
     claim_instance,
-    ground_speed,
     port_free,
     started_under,
 )
-from sitl_common import LIVE as _LIVE  # noqa: F401  (the tests use them)
-from sitl_common import stop_all as _stop_all  # noqa: F401  (the tests use it)
+from testbed.sitl import LIVE as _LIVE  # noqa: F401  (the harness's own tests read them here)
+from testbed.sitl import stop_all as _stop_all  # noqa: F401
 
 SKIP_REASON = ("ArduPilot SITL not configured: set ARDUPILOT_SITL (the ardurover binary) or "
                "ARDUPILOT_DIR (an ArduPilot tree with build/sitl/bin/ardurover)")
@@ -79,13 +77,12 @@ def sitl_paths(model: str = "rover-skid") -> tuple[Path, list[Path]]:
         defaults = [Path(tree_env, "Tools", "autotest", "default_params", n) for n in names]
         source = "ARDUPILOT_DIR"
     else:
-        pytest.skip(SKIP_REASON)
+        sitl.skip(SKIP_REASON)
     if not (binary.is_file() and os.access(binary, os.X_OK)):
-        pytest.fail(f"{source}: {binary} is not an executable ardurover", pytrace=False)
+        sitl.fail(f"{source}: {binary} is not an executable ardurover")
     missing = [str(p) for p in defaults if not p.is_file()]
     if missing:
-        pytest.fail(f"{source}: default parameter file(s) missing: {', '.join(missing)}",
-                    pytrace=False)
+        sitl.fail(f"{source}: default parameter file(s) missing: {', '.join(missing)}")
     return binary, defaults
 
 
@@ -169,7 +166,7 @@ def sitl_factory(workdir: Path) -> Iterator[Callable[..., ArduPilotSITL]]:
 
 # --------------------------------------------------------------------------- ground station
 
-class GroundStation(sitl_common.GroundStation):
+class GroundStation(sitl.GroundStation):
     """A pilot / ground station on another of the vehicle's links (SERIAL1 by default), for a
     ``with`` block: pymavlink over TCP, read continuously by a thread into ``seen`` (wall time,
     message) so nothing is missed while the test does other things. Only the vehicle's own
@@ -197,14 +194,3 @@ class CompanionProcess(Companion):
 
     def __init__(self, url: str, *args: str):
         super().__init__(None, *args, url=url)
-
-
-def circle_mission(path: Path, duration: float, radius: float = 3.0, speed: float = 1.0) -> Path:
-    """A clockwise circle from the rover's start pose, within a stock skid-steer rover's limits
-    (the shipped 40 Hz gains for its 1.2 rad/s speed loop)."""
-    path.write_text(
-        f'name = "sitl circle"\nframe = "start"\nduration = {duration:g}\n'
-        f'[trajectory]\nkind = "circle"\ncenter = [0.0, {radius:g}]\nradius = {radius:g}\n'
-        f'speed = {speed:g}\ndirection = "cw"\nstart_bearing_deg = 270.0\n'
-        f'[limits]\nmax_speed = 2.0\nmax_yaw_rate = 1.5\n[vehicle]\nw_c = 1.2\n')
-    return path
