@@ -7,7 +7,7 @@ BIN = $(VENV)/bin
 # wait on real-time flights, not the CPU (5:17 against one process's 19:52); WORKERS=0 is one process.
 WORKERS ?= 4
 # The linter's paths; the type checker's are in pyproject.toml ([tool.mypy] files)
-LINT_PATHS = companion sitl_plant tests benchmarks
+LINT_PATHS = companion sitl_plant tests testbed benchmarks
 
 .PHONY: demo test check sitl-test bench paper-table lock clean
 

@@ -361,7 +361,7 @@ def test_pages_the_code_names_exist():
     """``docs/...md`` named in a docstring or comment (companion/, sitl_plant/, deploy/, tests/)
     is a page that exists."""
     problems = []
-    sources = [p for folder in ("companion", "sitl_plant", "deploy", "tests", "benchmarks")
+    sources = [p for folder in ("companion", "sitl_plant", "deploy", "tests", "testbed", "benchmarks")
                for p in sorted((ROOT / folder).rglob("*")) if p.is_file()
                and p.suffix in {".py", ".service", ".toml", ".sysusers", ""}]
     for path in sources:
