@@ -12,7 +12,7 @@ import importlib
 import sys
 
 from . import __version__
-from .commands import config_file
+from .app import config_file
 from .errors import ExitCode, UserError
 
 # Sub-command modules, in the order ``companion --help`` lists them.
@@ -54,7 +54,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
-    try:   # --config FILE fills a command's flags (companion.commands.config_file)
+    try:   # --config FILE fills a command's flags (companion.app.config_file)
         args = config_file.parse_args(parser, argv)
     except config_file.ConfigError as err:
         print(f"{err.prog}: error: {err}", file=sys.stderr)

@@ -23,7 +23,8 @@ ALLOWED: dict[str, set[str]] = {
     "mission": {"core", "sim", "errors"},
     "mav": {"errors", "secretfile"},
     "profiles": {"core", "sim", "errors"},
-    "live": {"core", "sim", "mission", "mav", "profiles", "errors"},
+    "vehicle": {"core", "sim", "profiles", "errors"},
+    "live": {"core", "sim", "mission", "mav", "profiles", "vehicle", "errors"},
     "bus": {"live", "security", "errors", "secretfile"},
     "security": {"errors", "secretfile"},
     "logs": {"core", "live", "mission", "errors"},
@@ -33,11 +34,15 @@ ALLOWED: dict[str, set[str]] = {
     "errors": set(),
     "secretfile": {"errors"},
     "progress": {"live"},
-    "cli": {"__init__", "errors", "commands"},
+    "cli": {"__init__", "errors", "commands", "app"},
     "__main__": {"cli"},
     "__init__": set(),
+    "app": {"core", "sim", "mission", "mav", "live", "bus", "security", "logs", "ident",
+            "errors", "progress", "secretfile", "__init__", "preflight", "profiles", "view",
+            "vehicle"},
     "commands": {"core", "sim", "mission", "mav", "live", "bus", "security", "logs", "ident",
-                 "errors", "progress", "secretfile", "__init__", "preflight", "profiles", "view"},
+                 "errors", "progress", "secretfile", "__init__", "preflight", "profiles", "view",
+                 "vehicle", "app"},
 }
 SITL_PLANT_ALLOWED = {"core", "sim", "mission", "mav", "profiles", "errors"}   # mission: geo only
 PURE = {"core", "profiles"}   # no I/O: the mathematics, and the facts of autopilots and steering

@@ -25,6 +25,11 @@ imported by :mod:`companion.mission.plan_import`)::
     [vehicle]                # optional, for simulation: companion.sim.plant.RoverParams fields
     d_cen = 0.0
     w_c = 20.0
+    file = "rover.toml"      # optional: the identified vehicle; the keys above override it
+
+A ``[vehicle] file`` is named here, not read: the command flying the mission loads it once
+(:func:`companion.app.vehicle.for_mission`) and applies the keys over it (``Mission.vehicle``
+is None until then).
 
 Every problem is one :class:`~companion.errors.UserError` line naming the file, the key path and
 the bad value: unknown keys, missing or mistyped fields, non-finite numbers, non-increasing
@@ -50,7 +55,6 @@ from ..core.pzc import PZCGains
 from ..core.trajectory import Ellipse, Trajectory
 from ..errors import UserError
 from ..sim import gains as _gains
-from ..sim import vehicle_file as _vehicle_file
 from ..sim.plant import RoverParams
 from . import paths
 from .polyline import Polyline
@@ -79,7 +83,8 @@ class Mission:
     filter_gains: FilterGains | None
     pzc_gains: PZCGains | None
     limits: Limits | None
-    vehicle: RoverParams | None       # for simulation (d_cen, w_c)
+    vehicle: RoverParams | None       # for simulation (d_cen, w_c); None with a [vehicle]
+                                      # file until the command loads it (with_vehicle_file)
     frame: str                        # "start" (relative to the start pose) or "local"
     source: str                       # the file it came from
     kind: str = ""                    # trajectory kind, e.g. "circle"
@@ -87,6 +92,7 @@ class Mission:
     profile: MotionProfile | None = None   # length and peaks over the mission
     warnings: tuple[str, ...] = ()    # one line per imported item that is not followed
     vehicle_file: str | None = None   # [vehicle] file: the identified vehicle (companion identify)
+    vehicle_keys: tuple[tuple[str, float], ...] = ()   # [vehicle]'s own keys (over the file's)
     # Placed by latitude / longitude (TOML frame "geodetic", kind "plan", .plan, .waypoints):
     # `datum` is the (lat, lon) of the trajectory's local (0, 0), the EKF origin it was loaded
     # for (else the plan's home or the TOML's own origin); `placer` reloads the same mission
@@ -94,6 +100,11 @@ class Mission:
     geodetic: bool = False
     datum: tuple[float, float] | None = None
     placer: Callable[..., Mission] | None = field(default=None, compare=False, repr=False)
+
+    def with_vehicle_file(self, params: RoverParams) -> Mission:
+        """The mission with its ``[vehicle] file``'s model (loaded by the command) under its
+        own ``[vehicle]`` keys."""
+        return replace(self, vehicle=params.with_(**dict(self.vehicle_keys)))
 
     def at_origin(self, origin: tuple[float, float]) -> Mission:
         """The same mission placed around the EKF origin ``origin`` = (lat, lon) (a local or
@@ -210,7 +221,7 @@ def _from_table(top: Table, base: Path, origin: tuple[float, float] | None) -> M
         raise top.error("laps", f"give duration or laps, not both (duration = {duration:g})")
     filter_gains, pzc_gains = _read_gains(top, base)
     limits = _read_limits(top.table("limits"))
-    vehicle, vehicle_file = _read_vehicle(top.table("vehicle"), base)
+    vehicle, vehicle_file, vehicle_keys = _read_vehicle(top.table("vehicle"), base)
     spec = top.table("trajectory", required=True)
     traj, warnings, datum = _build_trajectory(spec, base, laps, origin)
     top.done()
@@ -242,7 +253,7 @@ def _from_table(top: Table, base: Path, origin: tuple[float, float] | None) -> M
                    limits=limits, vehicle=vehicle, frame=frame, source=src,
                    kind=_kind_name(traj), period=period, profile=profile,
                    warnings=tuple(warnings), vehicle_file=vehicle_file,
-                   geodetic=geodetic, datum=datum)
+                   vehicle_keys=vehicle_keys, geodetic=geodetic, datum=datum)
 
 
 def _latlon(table: Table, key: str, required: bool = False) -> tuple[float, float] | None:
@@ -289,26 +300,28 @@ def _read_limits(table: Table | None) -> Limits | None:
     return limits
 
 
-def _read_vehicle(table: Table | None, base: Path) -> tuple[RoverParams | None, str | None]:
-    """``[vehicle]``: a vehicle file (``file = "rover.toml"``, from ``companion identify``)
-    and / or the simple model's keys, which override the file's values."""
+def _read_vehicle(table: Table | None, base: Path
+                  ) -> tuple[RoverParams | None, str | None, tuple[tuple[str, float], ...]]:
+    """``[vehicle]``: (the model of its keys, None when a vehicle file is named (the command
+    loads it: ``Mission.with_vehicle_file``); the file's path; the keys given). The file
+    (``file = "rover.toml"``, from ``companion identify``) is named relative to the mission."""
     if table is None:
-        return None, None
-    base_params, path = RoverParams(), None
+        return None, None, ()
+    path = None
     name = table.string("file")
     if name is not None:
         path = _file_key(table, "file", name, base)
-        try:
-            base_params = _vehicle_file.load(path).params
-        except UserError as err:   # name the mission file and key too, still on one line
-            raise table.error("file", str(err)) from None
+        if not path.is_file():
+            raise table.error("file", f"{path}: no such vehicle file")
     keys: dict[str, dict[str, Any]] = {"d_cen": dict(minimum=0.0, maximum=100.0), "w_c": dict(positive=True, maximum=1e4),
             "w_c_yaw": dict(positive=True, maximum=1e4), "max_speed": dict(positive=True),
             "max_yaw_rate": dict(positive=True), "max_accel": dict(positive=True)}
     given = {k: table.number(k, None, **kw) for k, kw in keys.items()}
     table.done()
-    params = base_params.with_(**{k: v for k, v in given.items() if v is not None})
-    return params, (str(path) if path is not None else None)
+    own = tuple((k, v) for k, v in given.items() if v is not None)
+    if path is not None:
+        return None, str(path), own
+    return RoverParams().with_(**dict(own)), None, own
 
 
 def _build_trajectory(spec: Table, base: Path, laps: float | None,
