@@ -82,14 +82,12 @@ def _refine_mission(space: float):
 
 
 # The refining flight's gains: a quick robust search (the tuner's 21 seeds and 11 random sets,
-# one round; 48 x 2 took 11 s of CPU), enough to fly 30 s of the 0.08 Hz ellipse without a limit
-# cycle (the tuner rejects those on every neighbour); the gains kept are tuned once, at the end,
-# on the model kept (2026-12-02: the two full tunes were 457 of calibrate's 692 s).
+# one round), enough to fly 30 s of the 0.08 Hz ellipse without a limit cycle (the tuner rejects
+# those on every neighbour); the gains kept are tuned once, at the end, on the model kept: two
+# full tunes were most of calibrate's time.
 REFINE_SEARCH = {"population": 32, "rounds": 1}
-# The final search: 128 x 4 instead of the tuner's 256 x 6 (77 s of CPU; 128 x 3: 24 s); on the
-# bundled ardupilot-skid model 128 x 3 ended at 0.0021 / 0.054 m (0.04 / 0.08 Hz) in simulation
-# against 256 x 6's 0.0018 / 0.051 m. (2026-12-02, load 2.5: 128 x 4 took 15 s of CPU in one
-# process, 12 s of wall time on both cores: the same gains, robust.evaluate.)
+# The final search: 128 x 4 instead of the tuner's 256 x 6, a fraction of its CPU for nearly
+# the same tracking in simulation (the figures: docs/benchmarks-log.md, calibrate's two searches).
 FINAL_SEARCH = {"population": 128, "rounds": 4}
 MAX_WORKERS = 4             # processes for the final search: at most this many, one per core
 
@@ -250,10 +248,9 @@ CHANNEL_LIMITS = {"speed": ("max_speed", "max_accel"), "turn rate": ("max_yaw_ra
 
 
 def _overshoot(report, channel: str) -> str:
-    """What shows the vehicle overshooting its autopilot's own limits (measured 2026-12-02 on
-    ArduPilot SITL rover-skid with ATC_STR_RAT_FF 0.5: a turn rate of 3.6 rad/s identified
-    against ATC_STR_RAT_MAX's 2.09, RMS 0.27 rad/s: the feed-forward overdrives the rate
-    loop, which P and I then pull back; the model's channel has no overshoot), or ''."""
+    """What shows the vehicle overshooting its autopilot's own limits (a rate loop's
+    feed-forward that overdrives it, which P and I then pull back, as ArduPilot SITL's
+    rover-skid with ATC_STR_RAT_FF 0.5 does: docs/benchmarks-log.md), or ''."""
     f, priors = report.fit, report.priors
     for name in CHANNEL_LIMITS[channel]:
         fitted, prior = float(getattr(f.params, name)), getattr(priors.params, name)
