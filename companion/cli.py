@@ -43,8 +43,8 @@ class _Parser(argparse.ArgumentParser):
 
 def build_parser() -> argparse.ArgumentParser:
     parser = _Parser(prog="companion", description=(
-        "Companion-computer trajectory tracker for differential-drive rovers: the model-free "
-        "filter and PZC PI law of Lee et al. (2024), over MAVLink."))
+        "Companion-computer trajectory tracker for skid-steer and Ackermann rovers on ArduPilot "
+        "and PX4: the model-free filter and PZC PI law of Lee et al. (2024), over MAVLink."))
     parser.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
     for name in COMMANDS:

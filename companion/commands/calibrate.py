@@ -225,10 +225,9 @@ CHANNEL_LIMITS = {"speed": ("max_speed", "max_accel"), "turn rate": ("max_yaw_ra
 
 
 def _overshoot(report, channel: str) -> str:
-    """What shows the vehicle overshooting its autopilot's own limits (measured 2026-12-02 on
-    ArduPilot SITL rover-skid with ATC_STR_RAT_FF 0.5: a turn rate of 3.6 rad/s identified
-    against ATC_STR_RAT_MAX's 2.09, RMS 0.27 rad/s: the feed-forward overdrives the rate
-    loop, which P and I then pull back; the model's channel has no overshoot), or ''."""
+    """What shows the vehicle overshooting its autopilot's own limits (a rate loop's
+    feed-forward that overdrives it, which P and I then pull back, as ArduPilot SITL's
+    rover-skid with ATC_STR_RAT_FF 0.5 does: docs/benchmarks-log.md), or ''."""
     f, priors = report.fit, report.priors
     for name in CHANNEL_LIMITS[channel]:
         fitted, prior = float(getattr(f.params, name)), getattr(priors.params, name)
