@@ -239,10 +239,39 @@ def _overshoot(report, channel: str) -> str:
     return ""
 
 
+def _refine_and_tune(options, args, vehicle: Path, report, rate: float, command: str, log,
+                     timings: dict[str, float], cpu: dict[str, float]):
+    """Steps 2 and 3: the refining flight (unless --no-refine or --no-log), then the final
+    tune: (the gains, what the refining did, the children's CPU before the tune)."""
+    from ..sim.robust import worker_pool
+    from ..sim.vehicle_gains import tune_workers
+    refined = {"refined": False, "why": "--no-refine" if not args.refine else "--no-log"}
+    # the final tune's other processes start now and load what they need (2-3 s each) while
+    # the refining tune and flight go on: they wait idle until the tune
+    with worker_pool(tune_workers()) as pool:
+        if args.refine and args.log:
+            t0, c0 = time.monotonic(), time.process_time()
+            quick = _quick_gains(vehicle, rate, command, log)
+            timings["refine_tune"] = time.monotonic() - t0
+            cpu["refine_tune"] = time.process_time() - c0
+            log(f"refining: {REFINE_S:g} s of the paper's ellipse at {REFINE_F_R:g} Hz")
+            try:
+                refined = _refine(options, args, vehicle, report, log, quick, timings, cpu)
+            finally:
+                quick.unlink(missing_ok=True)
+            log("refined: " + ("one model fitted to both flights" if refined["refined"]
+                               else f"kept the manoeuvre's model ({refined['why']})"))
+        t0, c0, w0 = time.monotonic(), time.process_time(), _children_cpu()
+        gains = _tune(vehicle, rate, command, args, log, pool)
+        timings["tune"] = time.monotonic() - t0
+        cpu["tune"] = time.process_time() - c0
+    return gains, refined, w0
+
+
 def run(args) -> int:
     from ..app.flight import logger
     from ..live.policy import DEFAULT_RATE
-    from ..sim.vehicle_gains import FINAL_SEARCH, tune_workers
+    from ..sim.vehicle_gains import FINAL_SEARCH
     from .identify import FitOptions, _print, fly_and_fit, live_options
     args.population = FINAL_SEARCH["population"] if args.population is None else args.population
     args.rounds = FINAL_SEARCH["rounds"] if args.rounds is None else args.rounds
@@ -272,27 +301,8 @@ def run(args) -> int:
     rate = args.rate or DEFAULT_RATE
     command = "companion " + shlex.join(sys.argv[1:]) if sys.argv[1:2] == ["calibrate"] \
         else f"companion calibrate --connect {args.connect} --out {args.out}"
-    refined = {"refined": False, "why": "--no-refine" if not args.refine else "--no-log"}
-    from ..sim.robust import worker_pool
-    # the final tune's other processes start now and load what they need (2-3 s each) while
-    # the refining tune and flight go on: they wait idle until the tune
-    with worker_pool(tune_workers()) as pool:
-        if args.refine and args.log:
-            t0, c0 = time.monotonic(), time.process_time()
-            quick = _quick_gains(vehicle, rate, command, log)
-            timings["refine_tune"] = time.monotonic() - t0
-            cpu["refine_tune"] = time.process_time() - c0
-            log(f"refining: {REFINE_S:g} s of the paper's ellipse at {REFINE_F_R:g} Hz")
-            try:
-                refined = _refine(options, args, vehicle, report, log, quick, timings, cpu)
-            finally:
-                quick.unlink(missing_ok=True)
-            log("refined: " + ("one model fitted to both flights" if refined["refined"]
-                               else f"kept the manoeuvre's model ({refined['why']})"))
-        t0, c0, w0 = time.monotonic(), time.process_time(), _children_cpu()
-        gains = _tune(vehicle, rate, command, args, log, pool)
-        timings["tune"] = time.monotonic() - t0
-        cpu["tune"] = time.process_time() - c0
+    gains, refined, w0 = _refine_and_tune(options, args, vehicle, report, rate, command, log,
+                                          timings, cpu)
     cpu["tune_workers"] = _children_cpu() - w0     # the other cores' share (tune_workers())
     timings["total"] = time.monotonic() - t_start
     cpu["total"] = time.process_time() - cpu_start
