@@ -28,8 +28,8 @@ DEFAULT_ACCEL = 0.5        # m/s^2, peak along-path acceleration of line / polyl
 
 
 def build(spec: Table, base: Path, laps: float | None, origin: tuple[float, float] | None
-          ) -> tuple[Trajectory, tuple[str, ...], Any]:
-    """(the trajectory, warnings, the datum of one placed by lat / lon) of a ``[trajectory]``
+          ) -> tuple[Any, tuple[str, ...], Any]:
+    """(the trajectory (a dataclass: Ellipse, a path), warnings, the datum of one placed by lat / lon) of a ``[trajectory]``
     table; every problem a one-line error naming the key."""
     kind = spec.string("kind", required=True, choices=KINDS)
     speed: dict[str, Any] = {"positive": True, "maximum": MAX_SPEED}
