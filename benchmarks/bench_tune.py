@@ -24,10 +24,10 @@ from pathlib import Path
 
 import numpy as np
 
-from companion.commands.calibrate import FINAL_SEARCH, tune_workers
-from companion.commands.flight import tune_search
-from companion.sim import plant_lanes, robust, vehicle_gains
+from companion.app.vehicle import load, tuner_config
+from companion.sim import plant_lanes, robust
 from companion.sim.plant import RoverState
+from companion.sim.vehicle_gains import FINAL_SEARCH, tune_workers
 
 ROOT = Path(__file__).resolve().parent.parent
 VEHICLES = [ROOT / "companion/sim/vehicles/ardupilot_skid.toml",
@@ -72,7 +72,7 @@ def main() -> None:
     args = ap.parse_args()
     print(f"numba compiled the plant step: {plant_lanes.available()}")
     for path in args.vehicle:
-        cfg = vehicle_gains.config_for(path, 40.0, (), **tune_search(path, **FINAL_SEARCH))
+        cfg = tuner_config(load(path), 40.0, (), **FINAL_SEARCH)
         vehicles = robust.ensemble(cfg.vehicle, cfg.neighbours, cfg.spread, 1 / cfg.rate_hz,
                                    cfg.seed)
         refs = len(cfg.reference_list())
@@ -103,8 +103,7 @@ def main() -> None:
               f"{statistics.median(times[False]) / statistics.median(times[True]):.2f}; "
               f"same objective for all 64: {same}")
         if args.tune:
-            cfg = vehicle_gains.config_for(path, 40.0, (), **tune_search(
-                path, **FINAL_SEARCH, workers=tune_workers()))
+            cfg = tuner_config(load(path), 40.0, (), **FINAL_SEARCH, workers=tune_workers())
             t0 = time.perf_counter()
             result = robust.tune(cfg)
             print(f"  calibrate's final search {FINAL_SEARCH['population']} x "

@@ -7,6 +7,7 @@ from __future__ import annotations
 import pytest
 
 from companion import profiles
+from companion.app.vehicle import bundled
 from companion.live import presets
 from companion.sim import vehicle_file
 from sitl_plant.testing import PlantProcess
@@ -14,7 +15,7 @@ from testbed.missions import ellipse_mission
 from testbed.process import Companion
 
 ARDUPILOT = profiles.autopilot_named("ardupilot")
-RECORDED = presets.recorded(ARDUPILOT, "ardupilot-skid")
+RECORDED = presets.recorded(ARDUPILOT, bundled("ardupilot-skid"))
 SKID_SERVOS = {"SERVO1_FUNCTION": 73.0, "SERVO3_FUNCTION": 74.0}
 CAR_SERVOS = {"SERVO1_FUNCTION": 26.0, "SERVO3_FUNCTION": 70.0}
 
