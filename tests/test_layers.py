@@ -130,7 +130,7 @@ def test_every_subpackage_says_what_lives_there_and_what_it_may_import():
 
 def test_documented_python_names_still_work():
     mission = importlib.import_module("companion.mission")
-    bus = importlib.import_module("companion.bus")
+    bus = importlib.import_module("companion.bus.control_client")
     for name in ("load", "loads", "paper_ellipse", "Mission"):
         assert callable(getattr(mission, name))
     assert callable(bus.control_request)

@@ -20,7 +20,10 @@ from pathlib import Path
 import pytest
 import zenoh
 
-from companion.bus import BusOptions, control_request, encode, prepare, state_payload
+from companion.bus.codec import encode, state_payload
+from companion.bus.config import BusOptions
+from companion.bus.control_client import control_request
+from companion.bus.session import prepare
 from companion.cli import main
 from companion.live.events import LoopRecord
 from companion.security import pki
