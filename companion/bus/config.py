@@ -39,6 +39,7 @@ class Prepared:
 
     config: Any                          # zenoh.Config
     identity: Identity | None = None
+    note: str | None = None              # a line for the log: what was chosen for the user
 
 
 def zerror(exc: Exception) -> str:
@@ -68,9 +69,9 @@ def file_flag(opts: BusOptions) -> tuple[str | None, str]:
     return path, ("--zenoh-config" if opts.config_file else "$ZENOH_CONFIG")
 
 
-def from_flags(opts: BusOptions, default_mode: str = "peer"):
-    """A zenoh.Config: the file (if any), then the flags over it; UserError for what Zenoh
-    refuses."""
+def from_flags(opts: BusOptions, default_mode: str = "peer") -> tuple[Any, bool]:
+    """A zenoh.Config (the file, if any, then the flags over it) and whether a flag or the file
+    chose the mode; UserError for what Zenoh refuses."""
     import zenoh
     path, flag = file_flag(opts)
     if path:
@@ -82,6 +83,7 @@ def from_flags(opts: BusOptions, default_mode: str = "peer"):
             raise UserError(f"{flag} {path}: not a valid Zenoh config: {zerror(exc)}") from None
     else:
         config = zenoh.Config()
+    mode_chosen = opts.mode is not None or get(config, "mode") is not None
     mode = opts.mode or (None if path else default_mode)
     settings: list[tuple[str, str, str]] = []
     if mode:
@@ -100,4 +102,4 @@ def from_flags(opts: BusOptions, default_mode: str = "peer"):
             config.insert_json5(key, value)
         except Exception as exc:  # noqa: BLE001
             raise UserError(f"{what}: {zerror(exc)}") from None
-    return config
+    return config, mode_chosen

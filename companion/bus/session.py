@@ -14,7 +14,7 @@ from contextlib import contextmanager
 from typing import Any
 
 from ..errors import UserError
-from .config import BusOptions, Prepared, file_flag, from_flags, zerror
+from .config import BusOptions, Prepared, file_flag, from_flags, get, zerror
 from .tls import secure
 
 _sessions: set[Any] = set()             # every session this process opened and has not closed
@@ -23,10 +23,15 @@ _sessions_lock = threading.Lock()
 
 def prepare(opts: BusOptions, default_mode: str = "peer") -> Prepared:
     """The config (file, then flags over it) and, with mutual TLS, the checked identity."""
-    config = from_flags(opts, default_mode)
+    config, mode_chosen = from_flags(opts, default_mode)
     path, flag = file_flag(opts)
-    identity = secure(config, opts, f"{flag} {path}" if path else None)
-    return Prepared(config, identity)
+    before = get(config, "mode")
+    identity = secure(config, opts, f"{flag} {path}" if path else None, mode_chosen)
+    note = None
+    if get(config, "mode") != before:
+        note = (f"mode client over mutual TLS (nowhere to listen, so peers could not reach it): "
+                f"everything through {' '.join(opts.connect) or 'the connect endpoints'}")
+    return Prepared(config, identity, note)
 
 
 def open_session(opts: BusOptions, default_mode: str = "peer", prepared: Prepared | None = None,
@@ -36,6 +41,8 @@ def open_session(opts: BusOptions, default_mode: str = "peer", prepared: Prepare
     prepared = prepared or prepare(opts, default_mode)
     if log is not None and prepared.identity is not None:
         log(prepared.identity.describe())
+    if log is not None and prepared.note is not None:
+        log(prepared.note)
     try:
         session = zenoh.open(prepared.config)
     except Exception as exc:  # noqa: BLE001
