@@ -47,7 +47,10 @@ sys.path.insert(0, str(ROOT / "tests"))
 
 import zenoh  # noqa: E402
 
-from companion.bus import Bus, BusOptions, decode, prepare  # noqa: E402
+from companion.bus.codec import decode  # noqa: E402
+from companion.bus.config import BusOptions  # noqa: E402
+from companion.bus.session import prepare  # noqa: E402
+from companion.bus.vehicle import Bus  # noqa: E402
 from companion.live.events import LoopRecord, StatusEvent  # noqa: E402
 from zenoh_harness import (  # noqa: E402
     config,

@@ -521,7 +521,7 @@ def test_an_abort_from_the_control_channel_stops_the_manoeuvre_and_fits_nothing(
                                                                              tmp_path):
     """``abort`` over Zenoh mid-manoeuvre is a stop asked for, as SIGTERM is: HOLD, exit 0,
     said as an abort request, and half a manoeuvre is not fitted into a vehicle file."""
-    from companion.bus import control_request
+    from companion.bus.control_client import control_request
     from zenoh_harness import ISOLATED, endpoint, free_tcp_port, secret_file, session
     out, port = tmp_path / "v.toml", free_tcp_port()
     key = secret_file(tmp_path / "secret")

@@ -23,7 +23,7 @@ from typing import Any
 
 import zenoh
 
-from companion.bus import decode
+from companion.bus.codec import decode
 from companion_harness import with_log_dir
 from sitl_plant.testing import free_port
 
