@@ -214,7 +214,7 @@ def check_identified(report, space: float, log=lambda text: None) -> None:
     import numpy as np
 
     from .. import profiles
-    from ..ident.fit import FITTED
+    from ..ident.determinacy import FITTED
     from ..ident.priors import SPEED_FIELDS, YAW_FIELDS
     f, series = report.fit, report.series
     ident = profiles.from_setpoints(series.vector).ident
