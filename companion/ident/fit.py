@@ -230,8 +230,8 @@ def _fit_channels(series: Series, prior: RoverParams, search: Search,
     # the integrator doing the rest): searched after the usual fields, for turn-rate setpoints
     # only (PX4's course loop is fitted on its own grid), and not for a car: at full lock its
     # turn rate is the steering's |v| / R whatever the rate loop asks, while the model's share
-    # acts past the clamp, so the two trade against each other (SITL rover, 2026-12-02: share
-    # -0.11 with a 0.81 m radius where SITL's is 0.9 m, the live identify test's bound).
+    # acts past the clamp, so the two trade against each other (on SITL's car the radius came
+    # out 10 % short: docs/calibrate-and-identify.md).
     yaw_extra = YAW_FIELDS[-2:] if overshoot and not series.vector and not car else ()
     yaw, yaw_status, n_yaw, yaw_det = _fit_channel(series, prior, prior, yaw_fields, 1,
                                                     search, rng, extra=yaw_extra,

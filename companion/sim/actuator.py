@@ -17,15 +17,15 @@ from ..core.signals import Num
 def turn_rate_cap(m: _ops.Ops, w0: Num, w_mid: Num, w_end: Num, i_mid: Num, i_end: Num,
                   g: Num, top: Num, h: float) -> tuple[Num, Num, Num, Num]:
     """The overshooting turn rate (``yaw_overshoot`` g != 0) capped at ``top``, the turn-rate
-    range the state leaves (:meth:`RoverModel.tops`): the rate loop's feed-forward can drive
-    the motors past its target, not past what the motors give. A skid-steer rover at speed
-    has less steering left (the mixer shares one range), so the overshoot a fast rover would
-    have is cut where a slow one shows it whole (SITL ``rover-skid`` with ``ATC_STR_RAT_FF``
-    0.5: 3.8 rad/s at rest for a 2.5 rad/s target, 2.5-2.6 at 2-3 m/s). Returns (omega at
-    h/2, at h, the heading's change to each): where the cap cuts either, the heading takes
-    the quadratic through omega at 0, h/2 and h (Simpson's rule and its half-step form) in
-    place of the exact integral, which is of the uncapped rate. The lag behind (x, z) runs on
-    uncapped, as the fit's (:func:`companion.sim.lag_series.lag_series`, ``capped``)."""
+    range the state leaves (:meth:`companion.sim.plant.RoverModel.tops`): the rate loop's
+    feed-forward can drive the motors past its target, not past what the motors give. A
+    skid-steer rover at speed has less steering left (the mixer shares one range), so the
+    overshoot a fast rover would have is cut where a slow one shows it whole (measured:
+    docs/design/vehicle-model.md, the motors' cap). Returns (omega at h/2, at h, the heading's
+    change to each): where the cap cuts either, the heading takes the quadratic through omega
+    at 0, h/2 and h (Simpson's rule and its half-step form) in place of the exact integral,
+    which is of the uncapped rate. The lag behind (x, z) runs on uncapped, as the fit's
+    (:func:`companion.sim.lag_series.lag_series`, ``capped``)."""
     c_mid, c_end = cap_overshoot(m, w_mid, g, top), cap_overshoot(m, w_end, g, top)
     cut = (c_mid != w_mid) | (c_end != w_end)
     if not np.any(cut):             # the usual case: nothing capped, the exact integrals stand
@@ -68,7 +68,7 @@ def lag_step(m: _ops.Ops, x: Num, z: Num, u: Num, b: Num, up: Num, down: Num, dt
     its overshoot (:func:`overshoot_step`), capped at ``cap`` where g != 0 (the turn rate's:
     :func:`turn_rate_cap`; None: no cap, the speed's). Returns (what is measured, x, z)."""
     # x(h) only: the fit's step loop spends most of its time here, and the integrals (unused
-    # here) were a third of it (a stock manoeuvre's fit: 39.3 -> 26.0 s, the same parameters)
+    # here) were a third of it (docs/design/vehicle-model.md)
     _, x1, _, _ = channel(m, x, u, b, up, down, dt, both=False, integrals=False)
     if not over:
         return x1, x1, z

@@ -12,10 +12,9 @@ compiled the loop, else the numpy ``RoverModel``). :func:`respond_series` is
 series, what a fit's RMS and its plots run) the same way.
 
 Stepped by numpy, a batch step costs about 150 array operations whatever the number of vehicles
-is: on the robust tuner's batches (1,344 vehicles: 64 candidates on 7 neighbours and 3
-references, 2026-12-05) the plant was 3.1 of an evaluation's 5.7 s; respond on one model is
-all overhead (an 85 s manoeuvre's RMS 1.6 s, compiled 2 ms). Compiled by numba (when it is
-installed) a step is one pass over the vehicles. Both compute the same numbers (to rounding:
+is, which was most of a robust evaluation, and respond on one model is all overhead (measured:
+docs/design/vehicle-model.md). Compiled by numba (when it is installed) a step is one pass over
+the vehicles. Both compute the same numbers (to rounding:
 ``tests/test_plant_lanes.py``); ``RoverModel`` itself and ``respond(..., compiled=False)``
 are numpy, the reference, and know nothing of this module. The paper's exact linear step (no limits) is not
 compiled: nothing tunes on it.

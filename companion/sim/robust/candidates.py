@@ -28,9 +28,8 @@ EXTRA_RANGES = {
 EXTRA_FLAGS = ("split_accel_ff", "use_brake", "use_brake_yaw")
 # On a late speed loop (RobustConfig.predict_delay > 0) two more dimensions: whether the speed
 # is predicted (core.predict) and how far ahead, as a share of the identified delay. Seeded at
-# half of it: on SITL's car (0.47 s) the whole delay tracked the 0.08 Hz ellipse best and the
-# slow ones worst (model: 0.03 / 0.09 m at 0.04 / 0.08 Hz, 0.04 m at 0.02 Hz; flown 0.036 /
-# 0.109), half of it 0.019 / 0.112 m and 0.009 m at 0.02 Hz (2026-12-05).
+# half of it: the whole delay tracks the fastest reference best and the slow ones worst, half
+# of it nearly as well at the fastest and best at the slow ones (docs/design/robust-tuning.md).
 PREDICT_RANGE = (0.1, 1.0)
 PREDICT_SEED = 0.5
 # Braking scale when the vehicle has no identified limit (an infinite decel).

@@ -43,8 +43,8 @@ class RobustConfig:
     spread: Spread = Spread()
     noise_pos: float = 0.005           # m, EKF-like white noise on the position samples
     noise_yaw: float = 0.002           # rad
-    # (256 x 6, about 80 s on two busy cores: on ArduPilot SITL the same identified vehicle
-    # tuned at 160 x 5 tracked the 0.08 Hz ellipse to 0.094-0.100 m, at 256 x 6 to 0.065 m)
+    # (256 x 6: a smaller search left SITL's tracking measurably worse, for its time see
+    # docs/design/robust-tuning.md)
     population: int = 256
     rounds: int = 6
     elite: int = 12
@@ -116,22 +116,16 @@ class RobustConfig:
         share of the slower of its speed limits). The slowest is always kept.
 
         A turn rate at the limit holds every candidate that follows it there, which the
-        limit-cycle rule rejects, so only gains too slow to follow anything survive (SITL
-        rover-skid with ATC_STR_RAT_MAX 60 deg/s, 1.055 rad/s, 2026-12-02: with the 0.12 Hz
-        ellipse, 1.51 rad/s, 1.15 m at 0.08 Hz; with the 0.08 Hz one, 1.005 rad/s, 1.80 m; tuned
-        on 0.02 and 0.04 Hz alone the same vehicle file simulates 0.0038 / 0.083 m; Kanayama
-        0.13 m). An acceleration beyond the limit leaves the vehicle a metre or more behind
-        whatever the gains (the 0.12 Hz ellipse asks 1.80 m/s^2, ArduPilot's rovers have about
-        1.0); for SITL's car its log RMS in the objective bought small relative gains there with
-        the 0.08 Hz tracking (four robust tunes on all four ellipses: 0.174 / 0.266 / 0.341 m
-        simulated at 0.08 Hz; four without 0.12 Hz: 0.162-0.186 m; 0.022-0.026 m at 0.04 Hz
-        either way, 2026-12-03), so a car's tune leaves it out (``accel_room`` 1:
-        profiles.ackermann). A skid-steer rover's does not need to (stock rover-skid 0.049 /
-        0.052 m at 0.08 Hz with and without), and PX4's deceleration is too loosely identified to judge by (0.65 to
-        3 m/s^2 over sessions of one SIH rover). With ``speed_room``, those whose peak speed
-        exceeds that share of the vehicle's top speed are left out too: PX4 SIH's rover (3 m/s)
-        flew the 0.12 Hz ellipse (4.77 m/s) to 1.4-1.9 m whatever the gains, and it cost a
-        quarter of calibrate's final tune (2026-12-04)."""
+        limit-cycle rule rejects, so only gains too slow to follow anything survive. An
+        acceleration beyond the limit leaves the vehicle a metre or more behind whatever the
+        gains (the 0.12 Hz ellipse asks 1.80 m/s^2, ArduPilot's rovers have about 1.0); for a car
+        its log RMS in the objective bought small relative gains there with the 0.08 Hz
+        tracking, so a car's tune leaves it out (``accel_room`` 1: profiles.ackermann). A
+        skid-steer rover's does not need to (it tracks the same with and without), and PX4's
+        deceleration is too loosely identified to judge by. With ``speed_room``, those whose
+        peak speed exceeds that share of the vehicle's top speed are left out too: a rover
+        flies them a metre or more off whatever the gains, and they cost tuning time. The
+        measurements behind each: docs/design/robust-tuning.md."""
         if self.references:
             return self.references
         return tuple((f"ellipse {f:g} Hz", Ellipse.paper(f)) for f in self._paper_kept())
@@ -140,13 +134,12 @@ class RobustConfig:
         """Each reference's weight in the objective, in :meth:`reference_list`'s order:
         ``reach_weight`` for a paper ellipse the vehicle cannot follow (its peak acceleration
         along the path beyond the slower of the vehicle's speed limits), 1 for the rest and for
-        references given. Not its speed: stock rover-skid (3.06-3.11 m/s) follows the 0.08 Hz
-        ellipse (3.18 m/s at its peak) to 0.04 m.
+        references given. Not its speed: a rover whose top speed is a little below a
+        reference's peak still follows it closely.
 
         Such a reference leaves an error no gains take away, and in the objective the gains
-        that shave some of it cost the references the vehicle can follow: on SITL rover-skid
-        with ATC_ACCEL_MAX 0.5 (0.52 m/s^2 against the 0.08 Hz ellipse's 0.80) the tune
-        counting it whole flew 0.017-0.018 m at 0.04 Hz, Kanayama 0.035 (2026-12-05)."""
+        that shave some of it cost the references the vehicle can follow (measured:
+        docs/design/robust-tuning.md)."""
         if self.references:
             return np.ones(len(self.references))
         return np.array([self.reach_weight if ellipse_path_accel(f) > self._slower_accel else 1.0

@@ -58,8 +58,8 @@ def simulate_part(cands: Candidates, cfg: RobustConfig, vehicles: Sequence[Rover
             (np.asarray(result.speed_tv) + np.asarray(result.yaw_rate_tv)).reshape(shape))
 
 
-# Below this many candidates a batch is not split (the step loop's overhead, about a third of
-# a second per evaluation on this machine, would dominate each part).
+# Below this many candidates a batch is not split (the step loop's fixed overhead per
+# evaluation would dominate each part: docs/design/robust-tuning.md).
 MIN_SPLIT = 16
 
 

@@ -22,8 +22,9 @@ def _worker_start() -> None:
 
 
 def _warm() -> None:
-    """A worker's first task when the pool is started ahead (:func:`worker_pool`): unpickling
-    it imported this module, and one step loads the compiled plant (numba's cache)."""
+    """A worker's first task when the pool is started ahead (:func:`worker_pool`): the
+    evaluation its tasks run is imported, and one step loads the compiled plant (numba's cache)."""
+    from . import evaluation  # noqa: F401  (imported now, while the worker waits, not in round one)
     model = batch_model(RoverParams.stock_rover(), 2)
     model.step(RoverState(np.zeros(2), np.zeros(2), np.zeros(2), np.zeros(2), np.zeros(2)),
                0.0, 0.0, 0.02)
@@ -43,10 +44,10 @@ def workers(count: int) -> Iterator[Executor | None]:
 
 @contextlib.contextmanager
 def worker_pool(count: int) -> Iterator[Executor | None]:
-    """:func:`tune`'s processes started now and warmed (Python, numpy, this module and the
-    compiled plant loaded: about 2-3 s each on a slow day) while the caller does other work, for
-    ``tune(cfg, pool=...)`` with ``cfg.workers == count`` (calibrate: during its refining tune
-    and flight). Idle, a worker only waits."""
+    """:func:`~companion.sim.robust.search.tune`'s processes started now and warmed (Python,
+    numpy, the evaluation and the compiled plant loaded: seconds each) while the caller does
+    other work, for ``tune(cfg, pool=...)`` with ``cfg.workers == count`` (calibrate: during its
+    refining tune and flight). Idle, a worker only waits."""
     with workers(count) as pool:
         if pool is not None:
             for _ in range(count - 1):

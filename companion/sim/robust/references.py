@@ -24,7 +24,7 @@ def _ellipse_samples(f_r: float, samples: int) -> list[Reference]:
 
 
 # The ellipse's peaks are remembered: every evaluation asks for the reference list again, and
-# sampling them was 7 % of one (2026-12-05).
+# sampling them each time was a visible share of it (docs/design/robust-tuning.md).
 @functools.lru_cache(maxsize=64)
 def ellipse_turn_rate(f_r: float, samples: int = 2000) -> float:
     """The paper's ellipse's peak turn rate at ``f_r`` (rad/s; 1.13 at 0.08 Hz)."""

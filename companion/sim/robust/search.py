@@ -69,11 +69,10 @@ def confirmed(best: Candidates, best_obj: np.ndarray, cfg: RobustConfig,
     """The best of the elite that holds again simulated on its own, and that evaluation.
 
     Each vehicle draws the noise of the whole batch it is simulated in, so a gain set at the
-    edge of a limit cycle can hold in its round and not alone: on one calibration of the mixed
-    matrix rover (2026-12-05) the winner's 0.12 Hz ellipse held on every neighbour in its round
-    (worst 1.03 m) and limit-cycled on one alone (3.06 m), and calibrate stopped with nothing
-    robust while the third of the elite held both times. The winner that holds alone is taken
-    as before; only where it does not does the next one get its turn."""
+    edge of a limit cycle can hold in its round and not alone, and calibrate would stop with
+    nothing robust while another of the elite holds both times (docs/design/robust-tuning.md).
+    The winner that holds alone is taken as before; only where it does not does the next one
+    get its turn."""
     failed: tuple[Candidates, Evaluation] | None = None
     for i in np.flatnonzero(np.isfinite(best_obj)):
         winner = best.take(np.array([i]))
