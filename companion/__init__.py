@@ -1,5 +1,6 @@
-"""pzc-rover companion: the model-free filter and PZC tracking law of Lee et al. (2024)
-for differential-drive rovers, and the MAVLink process that runs them on a companion computer.
+"""pzc-rover companion: the model-free filter and PZC tracking law of Lee et al. (2024) for
+skid-steer and Ackermann rovers on ArduPilot and PX4, and the MAVLink process that runs them on
+a companion computer.
 
 Conventions (used by every module):
 

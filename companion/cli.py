@@ -12,7 +12,7 @@ import importlib
 import sys
 
 from . import __version__
-from .commands import config_file
+from .app import config_file
 from .errors import ExitCode, UserError
 
 # Sub-command modules, in the order ``companion --help`` lists them.
@@ -43,8 +43,8 @@ class _Parser(argparse.ArgumentParser):
 
 def build_parser() -> argparse.ArgumentParser:
     parser = _Parser(prog="companion", description=(
-        "Companion-computer trajectory tracker for differential-drive rovers: the model-free "
-        "filter and PZC PI law of Lee et al. (2024), over MAVLink."))
+        "Companion-computer trajectory tracker for skid-steer and Ackermann rovers on ArduPilot "
+        "and PX4: the model-free filter and PZC PI law of Lee et al. (2024), over MAVLink."))
     parser.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
     for name in COMMANDS:
@@ -54,7 +54,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
-    try:   # --config FILE fills a command's flags (companion.commands.config_file)
+    try:   # --config FILE fills a command's flags (companion.app.config_file)
         args = config_file.parse_args(parser, argv)
     except config_file.ConfigError as err:
         print(f"{err.prog}: error: {err}", file=sys.stderr)

@@ -103,7 +103,7 @@ def _origin(text: str) -> tuple[float, float, float]:
 
 def build_parser() -> argparse.ArgumentParser:
     p = _Parser(prog="sitl-plant", description=(
-        "A two-wheeled rover (the paper's model, companion.sim.plant) behind a MAVLink 2 autopilot "
+        "A skid-steer or Ackermann rover (companion.sim.plant) behind a MAVLink 2 autopilot "
         "that behaves like ArduPilot Rover (or PX4): heartbeat, modes, arming, message rates, "
         "SET_POSITION_TARGET_LOCAL_NED, the guided timeout."))
     _link_arguments(p)

@@ -201,7 +201,7 @@ def test_a_car_is_never_asked_to_turn_tighter_than_its_radius():
     from companion.core.pzc import PZCGains, PZCLaw
     from companion.core.signals import Estimate
     from companion.live.policy import GainOptions, KnownVehicle, choose_limits, limits_dict
-    from companion.sim.vehicle_gains import vehicle_limits
+    from companion.vehicle import vehicle_limits
     lim = vehicle_limits(CAR)
     assert lim.min_turn_radius == pytest.approx(0.9)
     assert vehicle_limits(CAR.with_(course_gain=3.0)).min_turn_radius == 0.0   # PX4's

@@ -10,10 +10,10 @@ from pathlib import Path
 
 import pytest
 
+from companion.app.vehicle import load as load_vehicle
 from companion.sim import gains as gains_mod
 from companion.sim import vehicle_file
 from companion.sim.plant import RoverParams
-from companion.sim.vehicle_gains import digest
 from companion_harness import ROOT, companion_cli
 from sitl_plant.testing import Pilot, PlantProcess
 
@@ -45,7 +45,7 @@ def test_calibrate_identifies_tunes_and_says_how_to_fly(tmp_path):
     assert found.max_accel == pytest.approx(TRUE.max_accel, rel=0.15)
     assert found.max_yaw_accel == pytest.approx(TRUE.max_yaw_accel, rel=0.15)
     g = gains_mod.load(out / "gains.toml")
-    assert g.vehicle_file == "vehicle.toml" and g.vehicle_sha256 == digest(out / "vehicle.toml")
+    assert g.vehicle_file == "vehicle.toml" and g.vehicle_sha256 == load_vehicle(out / "vehicle.toml").sha256
     assert r["identify"]["flight"]["max_distance_m"] <= 8.0
     # the refining flight: one model fitted to the manoeuvre and the track together, kept when
     # it explains both within 0.15 m/s and 0.15 rad/s and predicts the track better than the

@@ -6,10 +6,11 @@ from __future__ import annotations
 
 import csv
 
+from companion.app.vehicle import load
 from companion.core.filter import FilterGains
 from companion.core.pzc import PZCGains
 from companion.sim import gains as gains_mod
-from companion.sim import vehicle_file, vehicle_gains
+from companion.sim import vehicle_file
 from companion.sim.gains import TunedGains
 from companion.sim.plant import RoverParams
 from companion_harness import Companion, ellipse_mission
@@ -27,7 +28,7 @@ def _vehicle_with_gains(folder):
     vpath = folder / "vehicle.toml"
     vehicle_file.save(vehicle_file.VehicleFile(ROVER, name="test rover"), vpath)
     tuned = TunedGains(*GAINS, rate_hz=40.0, w_c=float(ROVER.w_c), vehicle_file="vehicle.toml",
-                       vehicle_sha256=vehicle_gains.digest(vpath), header="made by the test")
+                       vehicle_sha256=load(vpath).sha256, header="made by the test")
     tuned.save(folder / "gains.toml")
     return vpath
 
@@ -75,8 +76,8 @@ def test_a_missions_vehicle_file_is_used_like_run_vehicle(tmp_path):
 def test_gains_for_another_vehicle_file_are_not_used(tmp_path):
     vpath = _vehicle_with_gains(tmp_path)
     vehicle_file.save(vehicle_file.VehicleFile(ROVER.with_(max_accel=0.5)), vpath)  # re-identified
-    assert vehicle_gains.find_beside(vpath, 40.0) is None
-    assert gains_mod.load(tmp_path / "gains.toml").vehicle_sha256 != vehicle_gains.digest(vpath)
+    assert load(vpath).gains_at(40.0) is None
+    assert gains_mod.load(tmp_path / "gains.toml").vehicle_sha256 != load(vpath).sha256
 
 
 def test_the_shipped_preset_has_gains_tuned_for_it_and_the_demo_flies_them(tmp_path):
@@ -86,7 +87,7 @@ def test_the_shipped_preset_has_gains_tuned_for_it_and_the_demo_flies_them(tmp_p
 
     from companion.sim.vehicle_file import preset_path
     from companion_harness import ROOT
-    shipped = vehicle_gains.find_beside(preset_path("ardupilot-skid"), 40.0)
+    shipped = load(preset_path("ardupilot-skid")).gains_at(40.0)
     assert shipped is not None, "re-tune the preset's gains: its vehicle file changed"
     assert shipped.pzc.lead_tau == 0.0
     p = subprocess.run([sys.executable, "-m", "companion", "demo", "--preset", "ardupilot-skid",

@@ -1,4 +1,4 @@
-"""``--config FILE`` / ``--print-config`` (companion.commands.config_file): every flag of ``run``
+"""``--config FILE`` / ``--print-config`` (companion.app.config_file): every flag of ``run``
 is a key, values pass the flags' own checks, flags win over the file, paths are relative to the
 file, the printed settings read back, and ``companion run --config rover.toml`` flies."""
 
@@ -14,7 +14,7 @@ from pathlib import Path
 import pytest
 
 from companion import cli
-from companion.commands.config_file import keyed_actions
+from companion.app.config_file import keyed_actions
 from companion_harness import ROOT, companion_cli, ellipse_mission
 from sitl_plant.testing import PlantProcess
 

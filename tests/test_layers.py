@@ -23,7 +23,8 @@ ALLOWED: dict[str, set[str]] = {
     "mission": {"core", "sim", "errors"},
     "mav": {"errors", "secretfile"},
     "profiles": {"core", "sim", "errors"},
-    "live": {"core", "sim", "mission", "mav", "profiles", "errors"},
+    "vehicle": {"core", "sim", "profiles", "errors"},
+    "live": {"core", "sim", "mission", "mav", "profiles", "vehicle", "errors"},
     "bus": {"live", "security", "errors", "secretfile"},
     "security": {"errors", "secretfile"},
     "logs": {"core", "live", "mission", "errors"},
@@ -33,11 +34,15 @@ ALLOWED: dict[str, set[str]] = {
     "errors": set(),
     "secretfile": {"errors"},
     "progress": {"live"},
-    "cli": {"__init__", "errors", "commands"},
+    "cli": {"__init__", "errors", "commands", "app"},
     "__main__": {"cli"},
     "__init__": set(),
+    "app": {"core", "sim", "mission", "mav", "live", "bus", "security", "logs", "ident",
+            "errors", "progress", "secretfile", "__init__", "preflight", "profiles", "view",
+            "vehicle"},
     "commands": {"core", "sim", "mission", "mav", "live", "bus", "security", "logs", "ident",
-                 "errors", "progress", "secretfile", "__init__", "preflight", "profiles", "view"},
+                 "errors", "progress", "secretfile", "__init__", "preflight", "profiles", "view",
+                 "vehicle", "app"},
 }
 SITL_PLANT_ALLOWED = {"core", "sim", "mission", "mav", "profiles", "errors"}   # mission: geo only
 PURE = {"core", "profiles"}   # no I/O: the mathematics, and the facts of autopilots and steering
@@ -117,15 +122,48 @@ def test_sitl_plant_imports_only_the_mathematics_and_the_plant(path):
     assert not bad, "\n".join(bad)
 
 
+def subpackage_inits() -> list[Path]:
+    """Every package's ``__init__.py`` in ``companion/`` (nested ones too, the root's aside) and
+    ``sitl_plant/``."""
+    inits = [*PACKAGE.rglob("*/__init__.py"), *(ROOT / "sitl_plant").rglob("__init__.py")]
+    return sorted(p for p in inits if "__pycache__" not in p.parts)
+
+
+def docstring_problem(init: Path, text: str | None = None) -> str | None:
+    """Why a package's docstring does not say what lives there and what it may import, or None.
+    A layer of ``companion/`` says it in two lines (what lives here; ``May import: ...``) and is
+    in the layer table; any other package has a summary line and a ``May import`` line."""
+    doc = ast.get_docstring(ast.parse(init.read_text() if text is None else text)) or ""
+    lines = [line for line in doc.splitlines() if line.strip()]
+    where = init.relative_to(ROOT)
+    if not lines:
+        return f"{where}: no docstring (what lives here, and 'May import: ...')"
+    if init.parent.parent == PACKAGE:
+        if not (len(lines) == 2 and lines[1].startswith("May import")):
+            return f"{where}: two lines, what lives here and 'May import: ...'"
+        if init.parent.name not in ALLOWED:
+            return f"{where}: {init.parent.name} missing from the layer table"
+        return None
+    if not any(line.startswith("May import") for line in lines[1:]):
+        return f"{where}: no 'May import: ...' line after what lives here"
+    return None
+
+
 def test_every_subpackage_says_what_lives_there_and_what_it_may_import():
-    for init in sorted(PACKAGE.glob("*/__init__.py")):
-        if init.parent.name == "commands":
-            continue
-        doc = ast.get_docstring(ast.parse(init.read_text())) or ""
-        lines = [line for line in doc.splitlines() if line.strip()]
-        assert len(lines) == 2 and lines[1].startswith("May import"), (
-            f"{init.relative_to(ROOT)}: two lines, what lives here and 'May import: ...'")
-        assert init.parent.name in ALLOWED, f"{init.parent.name} missing from the layer table"
+    inits = subpackage_inits()
+    assert PACKAGE / "commands" / "__init__.py" in inits and ROOT / "sitl_plant" / "__init__.py" in inits
+    problems = [problem for init in inits if (problem := docstring_problem(init))]
+    assert not problems, "\n".join(problems)
+
+
+def test_a_subpackage_without_a_docstring_is_named():
+    layer, nested = PACKAGE / "x" / "__init__.py", PACKAGE / "live" / "x" / "__init__.py"
+    assert docstring_problem(layer, "from .a import b\n") == (
+        "companion/x/__init__.py: no docstring (what lives here, and 'May import: ...')")
+    assert "missing from the layer table" in docstring_problem(layer, '"""X.\nMay import: core."""')
+    assert docstring_problem(nested, '"""What lives here."""') == (
+        "companion/live/x/__init__.py: no 'May import: ...' line after what lives here")
+    assert docstring_problem(nested, '"""What lives here.\n\nMay import: core."""') is None
 
 
 def test_documented_python_names_still_work():

@@ -184,28 +184,28 @@ def test_tune_errors_are_one_line(argv, message):
 
 
 def test_gains_are_found_beside_their_vehicle_or_tuned_and_stored_there(tmp_path):
-    from companion.sim import vehicle_gains
+    from companion.app import vehicle as loader
     vpath = tmp_path / "vehicle.toml"
     vehicle_file.save(vehicle_file.VehicleFile(ROVER, name="rover"), vpath)
-    assert vehicle_gains.find_beside(vpath, 40.0) is None
+    assert loader.load(vpath).gains_at(40.0) is None
     logs = []
-    tuned = vehicle_gains.gains_for(vpath, 40.0, "test", log=logs.append, population=8,
-                                    rounds=1, neighbours=1)
+    tuned = loader.gains_for(loader.load(vpath), 40.0, "test", False, logs.append,
+                             population=8, rounds=1, neighbours=1)
     stored = tmp_path / "gains.toml"
     assert tuned.source == str(stored) and stored.exists()
-    again = vehicle_gains.find_beside(vpath, 40.0)
+    again = loader.load(vpath).gains_at(40.0)
     assert again is not None and again.vehicle_sha256 == tuned.vehicle_sha256
     assert again.filter == tuned.filter
-    assert vehicle_gains.find_beside(vpath, 20.0) is None            # another rate
+    assert loader.load(vpath).gains_at(20.0) is None            # another rate
     # a re-identified vehicle (other bytes) no longer matches the old gains
     vehicle_file.save(vehicle_file.VehicleFile(ROVER.with_(max_accel=0.5), name="rover"), vpath)
-    assert vehicle_gains.find_beside(vpath, 40.0) is None
-    assert vehicle_gains.path_beside(vpath, 40.0).name == "vehicle.gains-40hz.toml"
+    assert loader.load(vpath).gains_at(40.0) is None
+    assert loader.path_beside(loader.load(vpath), 40.0).name == "vehicle.gains-40hz.toml"
     assert any("tuning them now" in line for line in logs)
 
 
 def test_vehicle_limits_are_the_companions_ceiling():
-    from companion.sim.vehicle_gains import vehicle_limits
+    from companion.vehicle import vehicle_limits
     assert vehicle_limits(ROVER) == Limits(4.0, 2.0944)
     assert vehicle_limits(ROVER, max_speed=2.0) == Limits(2.0, 2.0944)
     assert vehicle_limits(RoverParams()) == Limits(6.0, 6.0)
@@ -301,8 +301,10 @@ def test_a_px4_tune_leaves_out_references_far_faster_than_the_rover():
     # PX4 SIH's rover (3 m/s): the 0.12 Hz ellipse's 4.77 m/s flew 1.4-1.9 m whatever the gains
     # and cost a quarter of the tune; the 0.08 Hz one (3.18 m/s) stays within 1.5 x, also for a
     # session that fits the top speed at 2.54 m/s
-    from companion.profiles import tune_settings
+    from companion.profiles import kinds_of_model
+    from companion.profiles import tune_settings as settings_of
     from companion.sim.robust.references import PAPER_F_R, ellipse_speed
+    tune_settings = lambda params: settings_of(*kinds_of_model(params))  # noqa: E731
     assert ellipse_speed(0.08) == pytest.approx(3.18, abs=0.01)
     assert ellipse_speed(0.12) == pytest.approx(4.77, abs=0.01)
     sih = ROVER.with_(course_gain=3.9, min_turn_radius=0.56, max_speed=3.0, max_yaw_rate=2.2,
@@ -336,9 +338,8 @@ def test_the_tuner_leaves_out_references_the_vehicle_cannot_turn_through():
 def test_a_cars_tune_leaves_out_references_it_cannot_accelerate_along(tmp_path):
     # The 0.12 Hz ellipse asks 1.80 m/s^2 along its path, ArduPilot's car has about 1.0: in
     # the objective it pulled the car's 0.08 Hz gains to 0.27-0.34 m in simulation (2026-12-03)
-    from companion.commands.flight import tune_search
+    from companion.app.vehicle import load, tuner_config
     from companion.sim.robust.references import PAPER_F_R, ellipse_path_accel
-    from companion.sim.vehicle_gains import config_for
     assert [round(ellipse_path_accel(f), 3) for f in PAPER_F_R] == [0.05, 0.2, 0.799, 1.798]
     # the closed form against the ellipse's own speed, differenced
     ellipse = Ellipse.paper(0.08)
@@ -371,14 +372,13 @@ def test_a_cars_tune_leaves_out_references_it_cannot_accelerate_along(tmp_path):
     slow_rover = tmp_path / "slow.toml"
     vehicle_file.save(vehicle_file.VehicleFile(ROVER.with_(max_accel=0.516, max_decel=1.99),
                                                name="slow"), slow_rover)
-    assert labels(config_for(car, 40.0, **tune_search(car))) == four[:3]
-    assert labels(config_for(rover, 40.0, **tune_search(rover))) == four
-    assert labels(config_for(slow_rover, 40.0, **tune_search(slow_rover))) == four[:3]
+    assert labels(tuner_config(load(car), 40.0)) == four[:3]
+    assert labels(tuner_config(load(rover), 40.0)) == four
+    assert labels(tuner_config(load(slow_rover), 40.0)) == four[:3]
 
 
 def test_references_a_vehicle_cannot_follow_count_at_the_reach_weight(tmp_path):
-    from companion.commands.flight import tune_search
-    from companion.sim.vehicle_gains import config_for
+    from companion.app.vehicle import load, tuner_config
     weights = lambda vehicle, **kw: list(RobustConfig(vehicle=vehicle, **kw).reference_weights())  # noqa: E731
     stock = RoverParams(max_yaw_rate=2.09, max_accel=1.01, max_decel=1.04, max_speed=3.1)
     # the 0.12 Hz ellipse asks 1.80 m/s^2: a stock skid rover keeps it, at half
@@ -397,7 +397,7 @@ def test_references_a_vehicle_cannot_follow_count_at_the_reach_weight(tmp_path):
     path = tmp_path / "slow.toml"
     vehicle_file.save(vehicle_file.VehicleFile(ROVER.with_(max_accel=0.516, max_decel=1.99),
                                                name="slow"), path)
-    assert list(config_for(path, 40.0, **tune_search(path)).reference_weights()) == [1.0, 1.0, 0.5]
+    assert list(tuner_config(load(path), 40.0).reference_weights()) == [1.0, 1.0, 0.5]
 
 
 def test_the_objective_weighs_each_reference_by_its_weight():
@@ -421,14 +421,13 @@ def test_a_px4_vehicles_neighbours_turn_up_to_two_samples_late(tmp_path):
     # PX4 SIH's course loop reverses later than its fitted model (gain sets tuned against one
     # sample swung across the path in five of nine sessions, 2026-12-03): its ensemble's slow
     # corner is two 25 ms samples late at 40 Hz; ArduPilot's (turn-rate setpoints) one.
-    from companion.commands.flight import tune_search
-    from companion.sim.vehicle_gains import config_for
+    from companion.app.vehicle import load, tuner_config
     px4, skid = tmp_path / "px4.toml", tmp_path / "skid.toml"
     vehicle_file.save(vehicle_file.VehicleFile(
         ROVER.with_(course_gain=3.9, min_turn_radius=0.56), name="px4"), px4)
     vehicle_file.save(vehicle_file.VehicleFile(ROVER, name="skid"), skid)
     for path, samples in ((px4, 2), (skid, 1)):
-        cfg = config_for(path, 40.0, **tune_search(path))
+        cfg = tuner_config(load(path), 40.0)
         vehicle = vehicle_file.load(path).params
         assert vehicle.velocity_vector == (path == px4)
         slow = ensemble(vehicle, 6, cfg.spread, 1 / 40.0, seed=1)[1]
@@ -440,8 +439,10 @@ def test_the_tuners_settings_come_from_the_profiles_that_fly_the_vehicle(tmp_pat
     """Each difference has one home: PX4's settings in its profile (velocity vectors), the
     course correction in ArduPilot's (turn-rate setpoints), a car's in the Ackermann profile,
     which counts only on turn-rate setpoints (on velocity vectors PX4's course loop steers)."""
-    from companion.profiles import ackermann, ardupilot, px4, tune_settings
+    from companion.profiles import ackermann, ardupilot, kinds_of_model, px4
     from companion.profiles import skid as skid_steer
+    from companion.profiles import tune_settings as settings_of
+    tune_settings = lambda params: settings_of(*kinds_of_model(params))  # noqa: E731
     skid = ROVER
     car = ROVER.with_(min_turn_radius=0.9)
     px4_car = ROVER.with_(course_gain=3.9, min_turn_radius=0.56)
@@ -485,21 +486,20 @@ def test_companion_tune_records_a_px4_vehicles_own_neighbours(tmp_path):
 
 
 def _car_and_skid() -> tuple[RobustConfig, RobustConfig]:
-    """The robust tuner's configurations, through the command's own path (commands.flight.
-    tune_search -> vehicle_gains.config_for), for SITL's car (benchmarks/vehicles) and the
+    """The robust tuner's configurations, through the command's own path (app.vehicle.
+    tuner_config -> vehicle_gains.config_for), for SITL's car (benchmarks/vehicles) and the
     bundled skid rover."""
-    from companion.commands.flight import tune_search
-    from companion.sim.vehicle_gains import config_for
+    from companion.app.vehicle import load, tuner_config
     root = Path(__file__).resolve().parents[1]
     files = (root / "benchmarks/vehicles/ardupilot_car_sitl.toml",
              root / "companion/sim/vehicles/ardupilot_skid.toml")
-    car, skid = (config_for(f, 40.0, **tune_search(f)) for f in files)
+    car, skid = (tuner_config(load(f), 40.0) for f in files)
     return car, skid
 
 
 def test_a_late_speed_loop_is_predicted_and_a_prompt_one_left_as_it_was():
     # The ArduPilot profile's predict_min_delay (0.25 s), through the command's own path
-    # (commands.flight.tune_search -> vehicle_gains.config_for): on SITL's car (speed delay
+    # (app.vehicle.tuner_config -> vehicle_gains.config_for): on SITL's car (speed delay
     # 0.5 s) the search may predict up to that delay; on the bundled skid rover (0.145 s), or
     # where the profile says nothing (PX4), no candidate predicts.
     from companion.sim.robust.candidates import PREDICT_SEED, candidate_gains, seeds, tracker

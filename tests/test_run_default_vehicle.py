@@ -7,13 +7,14 @@ from __future__ import annotations
 import pytest
 
 from companion import profiles
+from companion.app.vehicle import bundled
 from companion.live import presets
 from companion.sim import vehicle_file
 from companion_harness import Companion, ellipse_mission
 from sitl_plant.testing import PlantProcess
 
 ARDUPILOT = profiles.autopilot_named("ardupilot")
-RECORDED = presets.recorded(ARDUPILOT, "ardupilot-skid")
+RECORDED = presets.recorded(ARDUPILOT, bundled("ardupilot-skid"))
 SKID_SERVOS = {"SERVO1_FUNCTION": 73.0, "SERVO3_FUNCTION": 74.0}
 CAR_SERVOS = {"SERVO1_FUNCTION": 26.0, "SERVO3_FUNCTION": 70.0}
 

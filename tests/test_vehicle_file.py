@@ -87,9 +87,20 @@ def test_a_mission_names_its_vehicle_file(tmp_path):
     path.write_text(MISSION.format(vehicle='file = "rover.toml"\nd_cen = 0.25'))
     m = mission.load(path)
     assert m.vehicle_file == str(tmp_path / "rover.toml")
+    assert m.vehicle is None            # named, not read: the command loads it once
+    from companion.app.vehicle import for_flight
+    m, loaded = for_flight(None, m)
+    assert loaded is not None and loaded.path == m.vehicle_file
     assert m.vehicle.max_accel == pytest.approx(1.0) and m.vehicle.speed_delay == pytest.approx(0.06)
     assert m.vehicle.d_cen == pytest.approx(0.25)            # the mission's key wins
     path.write_text(MISSION.format(vehicle='file = "missing.toml"'))
     with pytest.raises(UserError) as err:
         mission.load(path)
     assert "vehicle.file" in str(err.value) and "no such vehicle file" in str(err.value)
+    # a file there but broken: one line naming the mission, the key and the file's own problem
+    (tmp_path / "broken.toml").write_text('schema = "pzc-rover/vehicle/1"\n[speed]\nlag_s = -1\n')
+    path.write_text(MISSION.format(vehicle='file = "broken.toml"'))
+    with pytest.raises(UserError) as err:
+        for_flight(None, mission.load(path))
+    assert str(err.value).startswith(f"{path}: [vehicle] file: ") and "lag_s" in str(err.value)
+    assert "\n" not in str(err.value)

@@ -81,35 +81,11 @@ def _refine_mission(space: float):
     return missions.loads(text, "<calibrate>")
 
 
-# The refining flight's gains: a quick robust search (the tuner's 21 seeds and 11 random sets,
-# one round; 48 x 2 took 11 s of CPU), enough to fly 30 s of the 0.08 Hz ellipse without a limit
-# cycle (the tuner rejects those on every neighbour); the gains kept are tuned once, at the end,
-# on the model kept (2026-12-02: the two full tunes were 457 of calibrate's 692 s).
-REFINE_SEARCH = {"population": 32, "rounds": 1}
-# The final search: 128 x 4 instead of the tuner's 256 x 6 (77 s of CPU; 128 x 3: 24 s); on the
-# bundled ardupilot-skid model 128 x 3 ended at 0.0021 / 0.054 m (0.04 / 0.08 Hz) in simulation
-# against 256 x 6's 0.0018 / 0.051 m. (2026-12-02, load 2.5: 128 x 4 took 15 s of CPU in one
-# process, 12 s of wall time on both cores: the same gains, robust.evaluation.evaluate.)
-FINAL_SEARCH = {"population": 128, "rounds": 4}
-MAX_WORKERS = 4             # processes for the final search: at most this many, one per core
-
-
 def _children_cpu() -> float:
     """CPU seconds of this process's ended children (the tune's spawned workers)."""
     import os
     t = os.times()
     return t.children_user + t.children_system
-
-
-def tune_workers() -> int:
-    """The final search's processes: one per core this process may use, up to MAX_WORKERS
-    (the gains do not depend on it)."""
-    import os
-    try:
-        cores = len(os.sched_getaffinity(0))
-    except AttributeError:        # not Linux
-        cores = os.cpu_count() or 1
-    return max(1, min(MAX_WORKERS, cores))
 
 
 NOTHING_ROBUST = ("calibrate: the tuner found no gains that hold on every neighbour of {vehicle} "
@@ -119,12 +95,12 @@ NOTHING_ROBUST = ("calibrate: the tuner found no gains that hold on every neighb
 
 
 def _tune(vehicle: Path, rate: float, command: str, args, log, pool=None):
-    from ..sim.vehicle_gains import NothingRobust
-    from .flight import gains_for_vehicle
+    from ..app.vehicle import gains_for, load
+    from ..sim.vehicle_gains import NothingRobust, tune_workers
     try:
-        return gains_for_vehicle(vehicle, rate, command, not args.quiet and not args.json, log,
-                                 pool, population=args.population, rounds=args.rounds,
-                                 workers=tune_workers())
+        return gains_for(load(vehicle), rate, command, not args.quiet and not args.json, log,
+                         pool, population=args.population, rounds=args.rounds,
+                         workers=tune_workers())
     except NothingRobust:
         raise UserError(NOTHING_ROBUST.format(vehicle=vehicle)) from None
 
@@ -132,17 +108,16 @@ def _tune(vehicle: Path, rate: float, command: str, args, log, pool=None):
 def _quick_gains(vehicle: Path, rate: float, command: str, log) -> Path:
     """Gains for the refining flight only (REFINE_SEARCH), in ``gains-refine.toml`` beside the
     vehicle file (removed before calibrate ends: ``run --vehicle`` must never find them)."""
-    from ..sim import vehicle_gains
-    from ..sim.robust.search import tune
-    from .flight import tune_search
-    cfg = vehicle_gains.config_for(vehicle, rate, (), **tune_search(vehicle, **REFINE_SEARCH))
+    from ..app.vehicle import load, tune_and_record
+    from ..sim.vehicle_gains import REFINE_SEARCH, NothingRobust
     try:
-        result = tune(cfg)
-    except RuntimeError:
+        gains = tune_and_record(load(vehicle), rate,
+                                command + " (the refining flight's quick search)",
+                                **REFINE_SEARCH)
+    except NothingRobust:
         raise UserError(NOTHING_ROBUST.format(vehicle=vehicle)) from None
     out = vehicle.with_name(REFINE_GAINS)
-    vehicle_gains.record(result, cfg, vehicle, command + " (the refining flight's quick search)"
-                         ).save(out)
+    gains.save(out)
     log(f"quick gains for the refining flight: {out}")
     return out
 
@@ -155,11 +130,11 @@ def _refine(options, args, vehicle: Path, report, log, gains_file: Path,
     """Fly the refining track with ``gains_file`` and fit one model to the manoeuvre and the
     track together (see the module docstring). Returns what happened; on success ``vehicle``
     holds the joint fit. ``options``: the manoeuvre's flight options."""
+    from ..app.flight import fly_mission
+    from ..app.options import OutputOptions
     from ..ident.fit import rms
     from ..live.policy import GainOptions
-    from .flight import fly_mission
     from .identify import FitOptions, identify_log
-    from .options import OutputOptions
     folder = vehicle.parent
     # The vehicle's own gains and limits (no manoeuvre limits), at the manoeuvre's rate.
     flown = replace(options, vehicle_file=str(vehicle),
@@ -250,10 +225,9 @@ CHANNEL_LIMITS = {"speed": ("max_speed", "max_accel"), "turn rate": ("max_yaw_ra
 
 
 def _overshoot(report, channel: str) -> str:
-    """What shows the vehicle overshooting its autopilot's own limits (measured 2026-12-02 on
-    ArduPilot SITL rover-skid with ATC_STR_RAT_FF 0.5: a turn rate of 3.6 rad/s identified
-    against ATC_STR_RAT_MAX's 2.09, RMS 0.27 rad/s: the feed-forward overdrives the rate
-    loop, which P and I then pull back; the model's channel has no overshoot), or ''."""
+    """What shows the vehicle overshooting its autopilot's own limits (a rate loop's
+    feed-forward that overdrives it, which P and I then pull back, as ArduPilot SITL's
+    rover-skid with ATC_STR_RAT_FF 0.5 does: docs/benchmarks-log.md), or ''."""
     f, priors = report.fit, report.priors
     for name in CHANNEL_LIMITS[channel]:
         fitted, prior = float(getattr(f.params, name)), getattr(priors.params, name)
@@ -265,11 +239,40 @@ def _overshoot(report, channel: str) -> str:
     return ""
 
 
-def run(args) -> int:
-    from ..live.policy import DEFAULT_RATE
-    from .flight import logger
-    from .identify import FitOptions, _print, fly_and_fit, live_options
+def _refine_and_tune(options, args, vehicle: Path, report, rate: float, command: str, log,
+                     timings: dict[str, float], cpu: dict[str, float]):
+    """Steps 2 and 3: the refining flight (unless --no-refine or --no-log), then the final
+    tune: (the gains, what the refining did, the children's CPU before the tune)."""
+    from ..sim.robust.pool import worker_pool
+    from ..sim.vehicle_gains import tune_workers
+    refined = {"refined": False, "why": "--no-refine" if not args.refine else "--no-log"}
+    # the final tune's other processes start now and load what they need (2-3 s each) while
+    # the refining tune and flight go on: they wait idle until the tune
+    with worker_pool(tune_workers()) as pool:
+        if args.refine and args.log:
+            t0, c0 = time.monotonic(), time.process_time()
+            quick = _quick_gains(vehicle, rate, command, log)
+            timings["refine_tune"] = time.monotonic() - t0
+            cpu["refine_tune"] = time.process_time() - c0
+            log(f"refining: {REFINE_S:g} s of the paper's ellipse at {REFINE_F_R:g} Hz")
+            try:
+                refined = _refine(options, args, vehicle, report, log, quick, timings, cpu)
+            finally:
+                quick.unlink(missing_ok=True)
+            log("refined: " + ("one model fitted to both flights" if refined["refined"]
+                               else f"kept the manoeuvre's model ({refined['why']})"))
+        t0, c0, w0 = time.monotonic(), time.process_time(), _children_cpu()
+        gains = _tune(vehicle, rate, command, args, log, pool)
+        timings["tune"] = time.monotonic() - t0
+        cpu["tune"] = time.process_time() - c0
+    return gains, refined, w0
 
+
+def run(args) -> int:
+    from ..app.flight import logger
+    from ..live.policy import DEFAULT_RATE
+    from ..sim.vehicle_gains import FINAL_SEARCH
+    from .identify import FitOptions, _print, fly_and_fit, live_options
     args.population = FINAL_SEARCH["population"] if args.population is None else args.population
     args.rounds = FINAL_SEARCH["rounds"] if args.rounds is None else args.rounds
     if args.population < 8 or args.rounds < 1:
@@ -298,27 +301,8 @@ def run(args) -> int:
     rate = args.rate or DEFAULT_RATE
     command = "companion " + shlex.join(sys.argv[1:]) if sys.argv[1:2] == ["calibrate"] \
         else f"companion calibrate --connect {args.connect} --out {args.out}"
-    refined = {"refined": False, "why": "--no-refine" if not args.refine else "--no-log"}
-    from ..sim.robust.pool import worker_pool
-    # the final tune's other processes start now and load what they need (2-3 s each) while
-    # the refining tune and flight go on: they wait idle until the tune
-    with worker_pool(tune_workers()) as pool:
-        if args.refine and args.log:
-            t0, c0 = time.monotonic(), time.process_time()
-            quick = _quick_gains(vehicle, rate, command, log)
-            timings["refine_tune"] = time.monotonic() - t0
-            cpu["refine_tune"] = time.process_time() - c0
-            log(f"refining: {REFINE_S:g} s of the paper's ellipse at {REFINE_F_R:g} Hz")
-            try:
-                refined = _refine(options, args, vehicle, report, log, quick, timings, cpu)
-            finally:
-                quick.unlink(missing_ok=True)
-            log("refined: " + ("one model fitted to both flights" if refined["refined"]
-                               else f"kept the manoeuvre's model ({refined['why']})"))
-        t0, c0, w0 = time.monotonic(), time.process_time(), _children_cpu()
-        gains = _tune(vehicle, rate, command, args, log, pool)
-        timings["tune"] = time.monotonic() - t0
-        cpu["tune"] = time.process_time() - c0
+    gains, refined, w0 = _refine_and_tune(options, args, vehicle, report, rate, command, log,
+                                          timings, cpu)
     cpu["tune_workers"] = _children_cpu() - w0     # the other cores' share (tune_workers())
     timings["total"] = time.monotonic() - t_start
     cpu["total"] = time.process_time() - cpu_start

@@ -14,9 +14,9 @@ import json
 import sys
 from pathlib import Path
 
+from ..app.arguments import add_zenoh_arguments, positive
+from ..app.options import bus_options
 from ..errors import UserError
-from .arguments import add_zenoh_arguments, positive
-from .options import bus_options
 
 VERBS = ("status", "start", "pause", "resume", "abort", "load-mission")
 

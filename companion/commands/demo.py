@@ -23,8 +23,14 @@ from dataclasses import replace
 from pathlib import Path
 
 from .. import profiles
+from ..app.arguments import (
+    add_gain_arguments,
+    add_safety_arguments,
+    add_zenoh_arguments,
+    non_negative,
+    positive,
+)
 from ..errors import UserError
-from .arguments import add_gain_arguments, add_safety_arguments, add_zenoh_arguments, non_negative, positive
 
 DEFAULT_D_CEN = 0.3
 
@@ -55,7 +61,7 @@ def register(subparsers) -> None:
     p.add_argument("--json", action="store_true", help="print one JSON result object")
     p.add_argument("-q", "--quiet", action="store_true", help="no log lines on stderr")
     add_zenoh_arguments(p)
-    from .config_file import add_config_arguments
+    from ..app.config_file import add_config_arguments
     add_config_arguments(p)
     p.set_defaults(func=run)
 
@@ -69,7 +75,7 @@ def _free_port() -> int:
 
 def _mission(args):
     from .. import mission as missions
-    from .flight import load_mission
+    from ..app.flight import load_mission
     mission = (load_mission(args.mission, None, "companion demo") if args.mission
                else missions.paper_ellipse(0.12, 60.0))
     if args.duration is not None:
@@ -110,27 +116,29 @@ def _stop(proc: subprocess.Popen) -> int | None:
 
 
 def run(args) -> int:
+    from ..app.flight import Flight, known_vehicle, logger, refuse_user_error
+    from ..app.options import FlightOptions, OutputOptions, bus_options, gain_options, log_options
+    from ..app.run_result import print_result
+    from ..app.vehicle import bundled, for_flight
+    from ..app.vehicle import load as load_vehicle
     from ..live.config import LinkConfig, RunnerConfig
-    from ..live.policy import KnownVehicle, requested_rate
+    from ..live.policy import requested_rate
     from ..progress import TraceSink
     from ..sim import vehicle_file
-    from ..sim.vehicle_gains import vehicle_limits
-    from .flight import Flight, known_vehicle, logger, refuse_user_error
-    from .options import FlightOptions, OutputOptions, bus_options, gain_options, log_options
-    from .run_result import print_result
+    from ..vehicle import vehicle_limits
 
-    mission = _mission(args)
-    params = vehicle_file.load(args.vehicle).params if args.vehicle else vehicle_file.preset(args.preset)
+    # the plant's vehicle: --vehicle, else the preset (a bundled file, or a built-in model)
+    own = load_vehicle(args.vehicle) if args.vehicle else bundled(args.preset)
+    mission, _ = for_flight(None, _mission(args))
+    params = own.params if own is not None else vehicle_file.preset(args.preset)
     log = logger("companion demo", args.quiet)
     # The plant is the vehicle: its w_c and d_cen pick shipped gains, its limits bound the
     # setpoints (so the anti-windup knows where it saturates).
     gains = replace(gain_options(args, vehicle=False), w_c=float(params.w_c), d_cen=args.d_cen)
     # An identified vehicle (--vehicle, or a preset made from one) flies the gains tuned for it,
     # as `companion run --vehicle` does: shipped beside the preset, else tuned now.
-    own_file = args.vehicle or vehicle_file.preset_path(args.preset)
-    vehicle = (known_vehicle(str(own_file), mission, gains, "companion demo",
-                             not args.quiet and not args.json, log, args.controller)
-               if own_file is not None else KnownVehicle())
+    vehicle = known_vehicle(own, mission, gains, "companion demo",
+                            not args.quiet and not args.json, log, args.controller)
     vehicle = replace(vehicle, limits=vehicle_limits(params))
     port = _free_port()
     options = FlightOptions(
@@ -141,7 +149,7 @@ def run(args) -> int:
                                                     quiet=args.quiet),
         bus=bus_options(args),
         # the flight record names the vehicle file flown (the demo has its own vehicle)
-        vehicle_file=str(own_file) if own_file is not None else None)
+        vehicle_file=own.path if own is not None else None)
     flight = Flight(options, "demo", log)          # a bad signing key fails here
     argv = plant_argv(args, port, requested_rate(mission, gains))
     if mission.geodetic:
@@ -156,7 +164,7 @@ def run(args) -> int:
     try:
         with flight:     # a bad --zenoh-* flag or file fails here: its own message says which
             try:
-                result = flight.fly(mission, vehicle, sinks=[trace])
+                result = flight.fly(mission, vehicle, sinks=[trace], loaded=own)
             except UserError as err:
                 if plant.poll() is not None:
                     plant_log.seek(0)

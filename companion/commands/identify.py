@@ -34,8 +34,7 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
-from ..errors import ExitCode, UserError
-from .arguments import (
+from ..app.arguments import (
     add_limit_arguments,
     add_link_arguments,
     add_output_arguments,
@@ -44,6 +43,7 @@ from .arguments import (
     add_zenoh_arguments,
     positive,
 )
+from ..errors import ExitCode, UserError
 
 EPILOG = """\
 exit codes: 0 done; 2 a user error (bad flag, a log that is malformed, too short or without
@@ -85,7 +85,7 @@ def add_live_arguments(p: argparse.ArgumentParser, title: str, required: bool = 
     add_safety_arguments(p)
     add_output_arguments(p, json_help="print one JSON object")
     add_zenoh_arguments(p)
-    from .config_file import add_config_arguments
+    from ..app.config_file import add_config_arguments
     add_config_arguments(p)
 
 
@@ -106,8 +106,15 @@ def fit_options(args: argparse.Namespace) -> FitOptions:
 def live_options(args: argparse.Namespace):
     """identify --connect's (and calibrate's) flight options: no gains, the manoeuvre's
     limits and rate."""
+    from ..app.options import (
+        FlightOptions,
+        bus_options,
+        link_config,
+        log_options,
+        output_options,
+        runner_config,
+    )
     from ..live.policy import GainOptions
-    from .options import FlightOptions, bus_options, link_config, log_options, output_options, runner_config
     return FlightOptions(
         link=link_config(args), runner=runner_config(args),
         gains=GainOptions(rate=args.rate, max_speed=args.max_speed,
@@ -281,10 +288,10 @@ def fly_and_fit(options, fit: FitOptions, space: float):
     """Fly the manoeuvre (within ``space`` m) through run's live loop with ``options`` (a
     FlightOptions), then fit its log: (exit code, report or None when stopped before the
     manoeuvre ended, the flight's summary)."""
+    from ..app.flight import Flight, logger, refuse_user_error
+    from ..app.options import LogOptions
     from ..ident.excite import Excitation, manoeuvre
     from ..live.params import read_values
-    from .flight import Flight, logger, refuse_user_error
-    from .options import LogOptions
 
     if fit.check:
         from ..ident.data import read_series

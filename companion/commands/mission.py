@@ -59,18 +59,17 @@ def _check_speed(speed: float | None) -> None:
 
 def run_check(args) -> int:
     from .. import mission as missions
-    from .arguments import parse_origin
-    from .flight import print_warnings
+    from ..app.arguments import parse_origin
+    from ..app.flight import print_warnings
     origin = parse_origin(args.origin)
     _check_speed(args.speed)
-    vehicle = None
-    if args.vehicle:
-        from ..sim.vehicle_file import load as load_vehicle
-        vehicle = load_vehicle(args.vehicle).params
+    from ..app.vehicle import for_flight
+    from ..app.vehicle import load as load_vehicle
+    vehicle = load_vehicle(args.vehicle).params if args.vehicle else None
     failed = out_of_reach = 0
     for name in args.files:
         try:
-            m = missions.load(name, origin=origin, speed=args.speed)
+            m, _ = for_flight(None, missions.load(name, origin=origin, speed=args.speed))
         except UserError as err:
             print(f"companion mission: error: {err}", file=sys.stderr)
             failed += 1
@@ -95,13 +94,14 @@ def run_show(args) -> int:
     import math
 
     from .. import mission as missions
-    from .arguments import parse_origin
-    from .flight import print_warnings
+    from ..app.arguments import parse_origin
+    from ..app.flight import print_warnings
     origin = parse_origin(args.origin)
     _check_speed(args.speed)
     if args.every is not None and not (math.isfinite(args.every) and args.every > 0):
         raise UserError(f"--every must be a positive number of seconds, not {args.every!r}")
-    m = missions.load(args.file, origin=origin, speed=args.speed)
+    from ..app.vehicle import for_flight
+    m, _ = for_flight(None, missions.load(args.file, origin=origin, speed=args.speed))
     print_warnings(m)
     for key, value in describe(m):
         print(f"{key:<12} {value}")

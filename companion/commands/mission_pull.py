@@ -9,7 +9,7 @@ import sys
 import time
 from pathlib import Path
 
-from .arguments import BAUD_HELP, CONNECT_HELP, at_least_one, baud_rate, mavlink_id, positive
+from ..app.arguments import BAUD_HELP, CONNECT_HELP, at_least_one, baud_rate, mavlink_id, positive
 
 VEHICLE = "vehicle"      # companion run --mission vehicle
 
@@ -51,8 +51,8 @@ def pull(url: str, sysid: int | None, baud: int | None, source_system: int | Non
 
 
 def run_pull(args) -> int:
+    from ..app.flight import logger, signing_key
     from ..live.vehicle_mission import write_plan
-    from .flight import logger, signing_key
     log = logger("companion mission pull", args.quiet)
     pulled = pull(args.connect, args.sysid, args.baud, args.source_system,
                   signing_key(args.signing_key), args.heartbeat_timeout, args.timeout,
@@ -75,8 +75,8 @@ def vehicle_mission_file(options, log):
     a temporary folder with --no-log): (its path, the Pulled mission)."""
     import tempfile
 
+    from ..app.flight import signing_key
     from ..live.vehicle_mission import write_plan
-    from .flight import signing_key
     link = options.link
     pulled = pull(link.url, link.sysid, link.baud, link.source_system,
                   signing_key(options.signing_key_file), link.heartbeat_timeout, 1.5, 5, log)

@@ -20,9 +20,9 @@ import time
 from dataclasses import asdict, dataclass
 from typing import Any, TextIO
 
+from ..app.arguments import add_zenoh_arguments, positive
+from ..app.options import bus_options
 from ..errors import UserError
-from .arguments import add_zenoh_arguments, positive
-from .options import bus_options
 
 SNAPSHOT_SCHEMA = "pzc-rover/monitor/1"
 

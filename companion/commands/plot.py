@@ -35,7 +35,7 @@ def run(args) -> int:
 
     mission = None
     if args.mission:
-        from .flight import load_mission
+        from ..app.flight import load_mission
         mission = load_mission(args.mission, args.origin)
     flight = read(args.log, mission)
     out = Path(args.out)

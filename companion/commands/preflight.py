@@ -15,10 +15,10 @@ import argparse
 import json
 import sys
 
+from ..app.arguments import BAUD_HELP, baud_rate, mavlink_id, positive
+from ..app.flight import logger, signing_key
 from ..errors import UserError
 from ..live.config import DEFAULT_RATE, LINK
-from .arguments import BAUD_HELP, baud_rate, mavlink_id, positive
-from .flight import logger, signing_key
 
 EPILOG = """\
 exit codes: 0 every check ok; 1 a warning or a failure; 2 could not check (no vehicle, no
@@ -54,7 +54,7 @@ def register(subparsers) -> None:
     p.add_argument("--json", action="store_true",
                    help='print {"checks": [{"name", "status", "value", "want", "why"}, ...]}')
     p.add_argument("-q", "--quiet", action="store_true", help="no progress lines on stderr")
-    from .config_file import add_config_arguments
+    from ..app.config_file import add_config_arguments
     add_config_arguments(p)
     p.set_defaults(func=run)
 
@@ -62,8 +62,8 @@ def register(subparsers) -> None:
 def _limits(path: str | None):
     if path is None:
         return None
+    from ..app.vehicle import load
     from ..preflight.checks import Limits
-    from ..sim.vehicle_file import load
     params = load(path).params
     return Limits(max_speed=float(params.max_speed), max_accel=float(params.max_accel),
                   max_decel=float(params.decel), max_yaw_rate=float(params.max_yaw_rate),

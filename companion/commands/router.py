@@ -13,8 +13,8 @@ from __future__ import annotations
 import argparse
 import sys
 
-from .arguments import add_zenoh_arguments
-from .options import bus_options
+from ..app.arguments import add_zenoh_arguments
+from ..app.options import bus_options
 
 DEFAULT_LISTEN = "tcp/[::]:7447"
 DEFAULT_TLS_LISTEN = "tls/[::]:7447"

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from .arguments import (
+from ..app.arguments import (
     add_gain_arguments,
     add_gcs_arguments,
     add_link_arguments,
@@ -58,15 +58,15 @@ def register(subparsers) -> None:
                         "CAP_SYS_NICE); for kHz loops on a busy board")
     add_output_arguments(p, progress=True)
     add_zenoh_arguments(p)
-    from .config_file import add_config_arguments
+    from ..app.config_file import add_config_arguments
     add_config_arguments(p)    # every flag above (and any added later) is a config key
     p.set_defaults(func=run)
 
 
 def run(args) -> int:
-    from .flight import fly_mission, load_mission
-    from .options import FlightOptions
-    from .run_result import print_result
+    from ..app.flight import fly_mission, load_mission
+    from ..app.options import FlightOptions
+    from ..app.run_result import print_result
     options = FlightOptions.from_args(args)
     path, handover = args.mission, None
     if args.handover and path != "vehicle":
@@ -74,7 +74,7 @@ def run(args) -> int:
         raise UserError(f"--handover flies the mission stored on the vehicle: give --mission "
                         f"vehicle, not {path!r}")
     if path == "vehicle" or args.handover:
-        from .flight import logger
+        from ..app.flight import logger
         from .mission_pull import handover_plan, vehicle_mission_file
         pulled_path, pulled = vehicle_mission_file(options, logger("companion run",
                                                                    options.output.quiet))

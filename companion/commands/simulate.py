@@ -17,10 +17,10 @@ import json
 import math
 import sys
 
+from ..app.arguments import add_controller_arguments
 from ..core.tracker import Tracker
 from ..errors import ExitCode, UserError, require_positive
 from ..live.config import DEFAULT_RATE
-from .arguments import add_controller_arguments
 
 
 def register(subparsers) -> None:
@@ -77,12 +77,12 @@ class _Recorder:
 
 def run(args) -> int:
     from .. import mission as missions
+    from ..app.arguments import parse_origin
+    from ..app.flight import known_vehicle, logger, print_warnings
+    from ..app.vehicle import for_flight
     from ..live import policy
-    from ..sim import vehicle_file
     from ..sim.batch import SimConfig, simulate
     from ..sim.plant import RoverParams
-    from .arguments import parse_origin
-    from .flight import known_vehicle, logger, print_warnings
 
     require_positive("--rate", args.rate)
     require_positive("--w-c", args.w_c)
@@ -99,13 +99,13 @@ def run(args) -> int:
 
     options = sim_gain_options(args)
     policy.check_controller(args.controller, options)
-    vehicle_path = args.vehicle or mission.vehicle_file
-    vehicle = known_vehicle(vehicle_path, mission, options, "companion simulate",
+    mission, loaded = for_flight(args.vehicle, mission)      # the vehicle file, read once
+    vehicle = known_vehicle(loaded, mission, options, "companion simulate",
                             not args.json, logger("companion simulate", args.json),
                             args.controller)
     resolved = policy.resolve(mission, options, vehicle)
     rate, limits = resolved.rate, resolved.limits
-    params = (vehicle_file.load(vehicle_path).params if vehicle_path
+    params = (loaded.params if loaded is not None
               else mission.vehicle or RoverParams.paper())
     if args.w_c is not None:
         params = params.with_(w_c=args.w_c)
@@ -146,8 +146,8 @@ def run(args) -> int:
 
 def sim_gain_options(args):
     """simulate's flags as the policy reads them (the same as run's for the same values)."""
+    from ..app.arguments import controller_gains
     from ..live.policy import GainOptions
-    from .arguments import controller_gains
     return GainOptions(rate=args.rate, gains_file=args.gains, max_speed=args.max_speed,
                        max_yaw_rate=args.max_yaw_rate, w_c=args.w_c, d_cen=args.d_cen,
                        controller_gains=controller_gains(args.controller, args.controller_gains))

@@ -244,8 +244,10 @@ def run_robust(args) -> int:
         raise UserError(f"--neighbours must be 0..64, not {args.neighbours}")
     if args.out and not Path(args.out).resolve().parent.is_dir():
         raise UserError(f"--out {args.out}: directory {Path(args.out).resolve().parent} does not exist")
+    from ..app.vehicle import load as load_vehicle
+    from ..app.vehicle import tuner_config
     from ..core.trajectory import Ellipse
-    from ..sim.vehicle_gains import config_for, record
+    from ..sim.vehicle_gains import record
     refs, duration = mission_references(args.mission)
     if args.f_r is not None:
         if args.mission:
@@ -254,10 +256,9 @@ def run_robust(args) -> int:
     if args.duration is not None:
         require_positive("--duration", args.duration)
         duration = args.duration
-    from .flight import tune_search
-    cfg = config_for(args.vehicle, rate, refs, duration, **tune_search(
-        args.vehicle, population=args.population, rounds=args.rounds,
-        neighbours=args.neighbours, seed=args.seed))
+    vehicle = load_vehicle(args.vehicle)           # read once
+    cfg = tuner_config(vehicle, rate, refs, duration, population=args.population,
+                       rounds=args.rounds, neighbours=args.neighbours, seed=args.seed)
     with progress_bar(f"robust tune {rate:g} Hz", not args.no_progress) as progress:
         try:
             result = robust_tune(cfg, progress)
@@ -265,7 +266,7 @@ def run_robust(args) -> int:
             raise UserError(str(exc)) from None
     command = "companion tune " + " ".join(sys.argv[2:]) if sys.argv[1:2] == ["tune"] else \
         f"companion tune --vehicle {args.vehicle}"
-    gains = record(result, cfg, args.vehicle, command)
+    gains = record(result, cfg, args.vehicle, vehicle.sha256, command)
     d = {**_describe_gains(gains), "vehicle": args.vehicle, "references": result.references,
          "steady_rms": result.nominal_steady_rms, "worst_steady_rms": result.worst_steady_rms,
          "f_cost": result.nominal_f_cost, "worst_yaw_at_limit": result.worst_yaw_at_limit,

@@ -19,8 +19,8 @@ import resource
 import sys
 import time
 
-from .arguments import add_zenoh_arguments, port_number, positive
-from .options import bus_options
+from ..app.arguments import add_zenoh_arguments, port_number, positive
+from ..app.options import bus_options
 
 
 def register(subparsers) -> None:

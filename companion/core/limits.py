@@ -25,8 +25,8 @@ class Limits:
     speed of the moment, so a setpoint above |v| / R leaves the steering at full lock while the
     rate loop's integrator winds up, and the target, accelerating at ATC_STR_ACC_MAX from far
     above, takes most of a second to come back through the turn rate flown when the setpoint
-    reverses (SITL ``rover``, 2026-12-02: 0.6 s at 0.59 rad/s after a full reversal at
-    0.5 m/s). Held to the command's own speed: the one the vehicle is asked to fly."""
+    reverses (measured on SITL's car: docs/calibrate-and-identify.md, "What the companion does
+    for a car"). Held to the command's own speed: the one the vehicle is asked to fly."""
 
     max_speed: float = math.inf
     max_yaw_rate: float = math.inf

@@ -37,8 +37,8 @@ class DelayPrediction:
         self._longest = float(max(_flat(horizon))) if self.active else 0.0
         # Lanes (batch) ordered by horizon, longest first: a command sent at t_k still acts in
         # lane i while t_(k+1) > t - horizon_i, so the lanes it acts in are a prefix of this
-        # order and the sum below visits only those (37 % of command x lane pairs in a car's
-        # robust tune; a loop over every lane was 40 % of that tune, 2026-12-05).
+        # order and the sum below visits only those: a loop over every lane dominated a car's
+        # robust tune (measured: docs/design/pzc-extensions.md).
         lanes = self.active and n is not None and np.ndim(horizon) == 1
         self._order = np.argsort(-np.asarray(horizon), kind="stable") if lanes else None
         if self._order is not None:

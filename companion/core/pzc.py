@@ -345,7 +345,7 @@ class PZCTracker:
         if self.law_ahead is not None:
             # The speed lands d late, the turn rate at once: each from the law that sees the
             # time it acts at (one law on the predicted pose steered the heading d early and
-            # cut the corners: SITL car, 0.08 Hz, 0.269 m against 0.193 m without).
+            # cut the corners: docs/design/pzc-extensions.md).
             ahead, ref_ahead = self.predict.step(t, steered, ref)
             fore = self.law_ahead.step(t, ahead, ref_ahead)
             rate = clip_yaw_rate(self._m, self.law.limits, fore.speed, cmd.yaw_rate)

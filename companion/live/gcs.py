@@ -137,8 +137,8 @@ class GcsReporter:
 
     def idle(self) -> None:
         """Called before each sleep of the loop: the next value when it is due. One value at a
-        time, spread over the period: a burst of four ahead of a setpoint on a 115200 baud
-        serial link delayed it enough to cost cycles (seen 2026-12-02)."""
+        time, spread over the period: a burst of four ahead of a setpoint on a slow serial link
+        delays the setpoint (seen: docs/benchmarks-log.md)."""
         now = self.clock()
         if now >= self.next_values:
             self.next_values = now + self.period / len(VALUE_NAMES)
@@ -172,8 +172,9 @@ class GcsReporter:
     @property
     def linger(self) -> float:
         """Wall s the link should stay open (and read) after the run: the last text and values
-        left just now, and ArduPilot SITL dropped a STATUSTEXT that arrived together with the
-        TCP close (seen 2026-12-02). The rover is already stopped by then."""
+        left just now, and an autopilot may drop a STATUSTEXT that arrives together with the
+        TCP close (ArduPilot SITL did: docs/benchmarks-log.md). The rover is already stopped by
+        then."""
         return LINGER_S if self.texts_sent else 0.0
 
 

@@ -91,6 +91,18 @@ def resolve(mission: Any, options: GainOptions, vehicle: KnownVehicle = KnownVeh
                     choose_gains(mission, options, vehicle, rate))
 
 
+def check(mission: Any, options: GainOptions, vehicle: KnownVehicle = KnownVehicle(),
+          controller: str = controllers.DEFAULT) -> float:
+    """Before anything connects: a bad ``--controller``, ``--gains`` file, rate or limit is a
+    user error now, not after the vehicle answered. The rate asked."""
+    check_controller(controller, options)
+    rate = requested_rate(mission, options)
+    choose_limits(mission, options, vehicle)
+    if options.gains_file is not None:
+        gains_mod.load(options.gains_file)
+    return rate
+
+
 def requested_rate(mission: Any, options: GainOptions) -> float:
     rate = options.rate or mission.rate_hz
     if rate is None and options.gains_file is not None:

@@ -12,8 +12,9 @@ match). Then ``run`` flies the preset's gains (the gains file shipped beside it,
 bytes at the rate flown) and its limits, and says so; otherwise it warns that the gains are not
 for this vehicle and names the ``companion calibrate`` command (docs/flying.md).
 
-:func:`match` is pure; :func:`recognise` reads the parameters (PARAM_REQUEST_READ) and the
-preset files: set-up only, before the control loop.
+:func:`match` is pure; :func:`recognise` reads the parameters (PARAM_REQUEST_READ): set-up
+only, before the control loop. The bundled vehicles come in loaded
+(:func:`companion.app.vehicle.bundled_for`): nothing here opens a file.
 """
 
 from __future__ import annotations
@@ -25,8 +26,7 @@ from typing import Any
 
 from .. import profiles
 from ..profiles.autopilot import AutopilotProfile
-from ..sim import vehicle_file
-from ..sim.vehicle_gains import find_beside, vehicle_limits
+from ..vehicle import Vehicle
 from .policy import KnownVehicle
 
 REL_TOL = 1e-3          # parameters travel as float32: 1 and 1.0000001 are the same setting
@@ -41,13 +41,9 @@ class Recognised:
     note: str                          # the line ``run`` logs (a warning when none matched)
 
 
-def recorded(profile: AutopilotProfile, preset: str) -> dict[str, float]:
+def recorded(profile: AutopilotProfile, preset: Vehicle) -> dict[str, float]:
     """The autopilot parameters the preset was identified with (its ``[source]``)."""
-    path = vehicle_file.preset_path(preset)
-    if path is None:
-        return {}
-    source = vehicle_file.load(path).source
-    return {k: float(v) for k, v in source.items()
+    return {k: float(v) for k, v in preset.file.source.items()
             if k in profile.ident.params and isinstance(v, (int, float))}
 
 
@@ -78,12 +74,15 @@ def match(profile: AutopilotProfile, values: Mapping[str, float],
 
 
 def recognise(link: Any, rate: float, calibrate_hint: str,
-              read: Callable[[Any, list[str]], dict[str, float]]) -> Recognised:
-    """Match the vehicle on ``link`` against its autopilot's presets; ``read(link, names)``
-    reads parameters (:func:`companion.live.params.read_values`); ``calibrate_hint`` the
-    command to name when none matches. The preset's gains must be tuned for ``rate``."""
+              read: Callable[[Any, list[str]], dict[str, float]],
+              bundled: Mapping[str, Vehicle]) -> Recognised:
+    """Match the vehicle on ``link`` against its autopilot's presets (``bundled``: the bundled
+    vehicles by name, loaded); ``read(link, names)`` reads parameters
+    (:func:`companion.live.params.read_values`); ``calibrate_hint`` the command to name when
+    none matches. The preset's gains must be tuned for ``rate``."""
     profile = link.vehicle.profile
-    presets = {name: recorded(profile, name) for name in profile.presets}
+    mine = {name: bundled[name] for name in profile.presets if name in bundled}
+    presets = {name: recorded(profile, v) for name, v in mine.items()}
     names = sorted({*profile.ident.params, *profiles.steering_params(profile)})
     values = read(link, names) if presets else {}
     name, why = match(profile, values, presets)
@@ -91,16 +90,15 @@ def recognise(link: Any, rate: float, calibrate_hint: str,
                f"{calibrate_hint}, then companion run --vehicle DIR/vehicle.toml")
     if name is None:
         return Recognised(None, KnownVehicle(), warning)
-    path = vehicle_file.preset_path(name)
-    assert path is not None
-    params = vehicle_file.load(path).params
-    gains = find_beside(path, rate)
+    preset = mine[name]
+    gains = preset.gains_at(rate)
     if gains is None:
         return Recognised(None, KnownVehicle(), warning.replace(
             f"({why})", f"(it is the bundled {name}, whose gains are tuned for other rates "
                         f"than {rate:g} Hz)"))
-    known = KnownVehicle(gains=gains, limits=vehicle_limits(params), w_c=float(params.w_c),
+    params = preset.params
+    known = KnownVehicle(gains=gains, limits=preset.limits, w_c=float(params.w_c),
                          d_cen=float(params.d_cen))
     shown = ", ".join(f"{k} {v:g}" for k, v in presets[name].items())
     return Recognised(name, known, f"the vehicle matches the bundled {name} ({shown}): flying "
-                                   f"its gains and limits (--vehicle {path})")
+                                   f"its gains and limits (--vehicle {preset.path})")

@@ -11,11 +11,10 @@ limits), run the loop
 
 from __future__ import annotations
 
-import math
 import os
 import time
-from collections.abc import Callable, Sequence
-from dataclasses import dataclass, replace
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 from ..core import controllers
@@ -27,21 +26,24 @@ from . import origin as origin_mod
 from .config import LinkConfig, OriginConfig, RunnerConfig
 from .events import ControlChannel, Sink
 from .policy import GainOptions, KnownVehicle
-from .runner import Runner, stop_cause
+from .result import RunResult, result_of
+from .runner import Runner
 from .runner.core import status_fields
 from .setup_answers import SETTING_UP, SetupAnswers
-from .stats import RunResult
 
 
 @dataclass(frozen=True)
 class RunSettings:
-    """Everything a session needs, built once per flight (``companion.commands.flight``)."""
+    """Everything a session needs, built once per flight (``companion.app.flight``)."""
 
     link: LinkConfig
     mission: Any                       # companion.mission.Mission
     runner: RunnerConfig = RunnerConfig()
     gains: GainOptions = GainOptions()     # what the flags ask (the policy's input)
     vehicle: KnownVehicle = KnownVehicle()  # its vehicle file's gains and limits, if any
+    bundled: Mapping[str, Any] = field(default_factory=dict)  # the bundled vehicles, loaded
+                                       # (companion.vehicle.Vehicle by preset name): what a
+                                       # vehicle flown without a file is matched against
     origin: OriginConfig = OriginConfig()
     realtime: bool = False             # --realtime: SCHED_FIFO for the loop
     controller: str = controllers.DEFAULT   # --controller: a name in companion.core.controllers
@@ -89,28 +91,109 @@ def watch_estimate(link: Any, facts: Any, log: Callable[[str], None]) -> None:
             "LOCAL_POSITION_NED steps")
 
 
+@dataclass
+class Connected:
+    """What the set-up learnt of the vehicle, before anything is resolved."""
+
+    vehicle: Any                       # link.VehicleInfo: its autopilot, ids, profile
+    mission: Any                       # placed around its EKF origin, if by lat / lon
+    origin: Any                        # origin.Origin, or None
+    accepted: float | None             # the telemetry rate it accepted (None: not confirmed)
+
+
+@dataclass
+class Flown:
+    """What the session flies, resolved once: limits, gains, the tracker."""
+
+    limits: Limits
+    tracker: Any
+    gains: dict[str, Any]              # the gains flown (the result's)
+    gains_source: str
+    preset: str | None = None          # the bundled vehicle recognised, if any
+    warning: str | None = None         # gains not for this vehicle (no preset matched)
+
+
+def connect(s: RunSettings, link: Any, answers: SetupAnswers, rate: float,
+            log: Callable[[str], None], stop: Callable[[], bool]) -> Connected:
+    """Wait for the vehicle, check its modes, place a lat / lon mission around its EKF origin,
+    agree the telemetry rate and ask for its estimator's report."""
+    answers.step = "waiting for the vehicle's heartbeat"
+    vehicle = link.wait_vehicle(stop)
+    log(f"{vehicle.autopilot} vehicle, system {vehicle.sysid} component {vehicle.compid}, "
+        f"mode {link.mode}, {'armed' if link.armed else 'disarmed'}")
+    for name in (vehicle.profile.track_mode, vehicle.profile.hold_mode):
+        if name not in link.mode_names():
+            raise UserError(f"the vehicle reports no {name} mode (MAV_TYPE {vehicle.mav_type})")
+    mission, origin = s.mission, None
+    if mission.geodetic:
+        # Placed by latitude / longitude: around the vehicle's own EKF origin, which its
+        # LOCAL_POSITION_NED is relative to (not the plan's home, nor a guess).
+        answers.step = "reading the vehicle's EKF origin"
+        mission, origin = origin_mod.place(mission, link, s.origin.expected, s.origin.timeout,
+                                           log, stop)
+    answers.step = "negotiating the telemetry rate"
+    accepted, notes = link.negotiate_rate(rate)
+    for note in notes:
+        log(note)
+    log(f"telemetry at {accepted:g} Hz" if accepted else "telemetry rate not confirmed")
+    watch_estimate(link, vehicle.profile.estimate, log)
+    return Connected(vehicle, mission, origin, accepted)
+
+
+def resolve(s: RunSettings, link: Any, found: Connected, rate: float, answers: SetupAnswers,
+            log: Callable[[str], None],
+            make_tracker: Callable[[Any, Limits], Any] | None) -> Flown:
+    """Limits, gains and the tracker, once, for the rate flown: from the settings' vehicle, or
+    (nothing saying what it is) the bundled vehicle it matches, or a warning that the gains
+    are not for it (:mod:`companion.live.presets`)."""
+    known, preset, warning = s.vehicle, None, None
+    rate = found.accepted or rate
+    if make_tracker is None and policy.wants_preset(found.mission, s.gains, s.vehicle):
+        answers.step = "reading the parameters a bundled vehicle is known by"
+        from .params import read_values
+        from .presets import recognise
+        match = recognise(link, rate, f"companion calibrate --connect {s.link.url} --out DIR "
+                                      "--arm", read_values, s.bundled)
+        log(match.note)
+        if match.preset is not None:
+            known, preset = match.vehicle, match.preset
+        else:
+            warning = match.note
+    answers.step = "building the controller"
+    chosen = policy.resolve(found.mission, s.gains, known, rate)
+    limits = chosen.limits
+    limits_text = (f"limits: speed {limits.max_speed:g} m/s, "
+                   f"yaw rate {limits.max_yaw_rate:g} rad/s")
+    if make_tracker is None:
+        tracker, gains, source = policy.build_tracker(s.controller, chosen.gains, limits,
+                                                      s.gains.controller_gains)
+        log(f"controller {tracker.name}; gains: {source}; {limits_text}")
+    else:
+        gains, source = policy.gains_dict(chosen.gains.filter, chosen.gains.pzc), \
+            chosen.gains.source
+        log(f"gains: {source}; {limits_text}")
+        tracker = make_tracker(link, limits)
+    return Flown(limits, tracker, gains, source, preset, warning)
+
+
 def fly(s: RunSettings, sinks: Sequence[Sink] = (), control: ControlChannel | None = None,
         log: Callable[[str], None] = lambda text: None,
         switch: StopSwitch | None = None,
         make_tracker: Callable[[Any, Limits], Any] | None = None) -> RunResult:
     """Run one session against a live vehicle; raises UserError for a user's problem.
 
-    ``make_tracker(link, limits)``, if given, builds the tracker instead of the PZC tracker
-    (``companion identify`` flies its excitation manoeuvre so); it runs once the vehicle is
-    known and its telemetry rate agreed, and may read from the link (parameters) meanwhile.
+    Set up (connect), resolve once (limits, gains, a bundled vehicle), fly (the loop), and
+    the result. ``make_tracker(link, limits)``, if given, builds the tracker instead of the
+    PZC tracker (``companion identify`` flies its excitation manoeuvre so); it runs once the
+    vehicle is known and its telemetry rate agreed, and may read from the link meanwhile.
     """
     from .link import Link
 
     wall0 = time.perf_counter()
-    vehicle_warning: str | None = None
-    policy.check_controller(s.controller, s.gains)
-    # Before anything connects: a bad --gains file or limit is a user error.
-    asked = policy.resolve(s.mission, s.gains, s.vehicle)
-    rate, limits = asked.rate, asked.limits
+    rate = policy.check(s.mission, s.gains, s.vehicle, s.controller)   # before connecting
     link = Link(s.link)
     link.log = log
     switch = switch or StopSwitch()
-    stop = (lambda: switch.reason is not None)
 
     def setup_status() -> dict[str, Any]:
         """What a ``status`` request gets while the setup runs (the loop's keys)."""
@@ -124,66 +207,9 @@ def fly(s: RunSettings, sinks: Sequence[Sink] = (), control: ControlChannel | No
     try:
         # the control channel is answered meanwhile: status, abort; the loop takes it after
         with SetupAnswers(control, setup_status, abort) as answers:
-            answers.step = "waiting for the vehicle's heartbeat"
-            vehicle = link.wait_vehicle(stop)
-            log(f"{vehicle.autopilot} vehicle, system {vehicle.sysid} component {vehicle.compid}, "
-                f"mode {link.mode}, {'armed' if link.armed else 'disarmed'}")
-            for name in (vehicle.profile.track_mode, vehicle.profile.hold_mode):
-                if name not in link.mode_names():
-                    raise UserError(f"the vehicle reports no {name} mode "
-                                    f"(MAV_TYPE {vehicle.mav_type})")
-            mission, origin = s.mission, None
-            if mission.geodetic:
-                # Placed by latitude / longitude: around the vehicle's own EKF origin, which its
-                # LOCAL_POSITION_NED is relative to (not the plan's home, nor a guess).
-                answers.step = "reading the vehicle's EKF origin"
-                mission, origin = origin_mod.place(mission, link, s.origin.expected,
-                                                   s.origin.timeout, log, stop)
-            answers.step = "negotiating the telemetry rate"
-            accepted, notes = link.negotiate_rate(rate)
-            for note in notes:
-                log(note)
-            log(f"telemetry at {accepted:g} Hz" if accepted else "telemetry rate not confirmed")
-            watch_estimate(link, vehicle.profile.estimate, log)
-            known, preset = s.vehicle, None
-            if make_tracker is None and policy.wants_preset(mission, s.gains, s.vehicle):
-                # no vehicle file, no gains: the bundled vehicle it is, or a warning (presets.py)
-                answers.step = "reading the parameters a bundled vehicle is known by"
-                from .params import read_values
-                from .presets import recognise
-                found = recognise(link, accepted or rate,
-                                  f"companion calibrate --connect {s.link.url} --out DIR --arm",
-                                  read_values)
-                log(found.note)
-                known, preset = found.vehicle, found.preset
-                if preset is not None:
-                    limits = policy.choose_limits(mission, s.gains, known)
-                else:
-                    vehicle_warning = found.note
-            answers.step = "building the controller"
-            limits_text = (f"limits: speed {limits.max_speed:g} m/s, "
-                           f"yaw rate {limits.max_yaw_rate:g} rad/s")
-            choice = policy.choose_gains(mission, s.gains, known, accepted or rate)
-            if make_tracker is None:
-                tracker, gains, gains_source = policy.build_tracker(s.controller, choice, limits,
-                                                                    s.gains.controller_gains)
-                log(f"controller {tracker.name}; gains: {gains_source}; {limits_text}")
-            else:
-                gains, gains_source = policy.gains_dict(choice.filter, choice.pzc), choice.source
-                log(f"gains: {gains_source}; {limits_text}")
-                tracker = make_tracker(link, limits)
-            config = replace(s.runner, period=1.0 / accepted if accepted else None)
-            reporter, commands = gcs.attach(link) if s.gcs_report else (None, None)
-            sinks = [*sinks, reporter] if reporter is not None else sinks
-            latlon = origin.latlon if origin is not None else None
-            handover = (None if s.handover is None
-                        else handover_mod.attach(s.handover, link, latlon, log))
-            runner = Runner(link, tracker, mission, config, limits, sinks, control, log,
-                            origin=latlon, gcs=commands, handover=handover)
-            if reporter is not None:
-                reporter.watch(runner.status)
-            # Sinks that write files (the flight-log CSV) flush when the loop is about to sleep.
-            link.on_idle.extend(idle for sink in sinks if (idle := getattr(sink, "idle", None)))
+            found = connect(s, link, answers, rate, log, lambda: switch.reason is not None)
+            flown = resolve(s, link, found, rate, answers, log, make_tracker)
+            runner, reporter, handover = build_runner(s, link, found, flown, sinks, control, log)
         switch.runner = runner
         if switch.reason is not None:        # a signal or an abort during the setup
             runner.request_stop(switch.reason)
@@ -194,31 +220,30 @@ def fly(s: RunSettings, sinks: Sequence[Sink] = (), control: ControlChannel | No
             link.linger(reporter.linger)
     finally:
         link.close()
-    st, t = runner.stats, runner.telemetry
-    lat = st.latency
-    return RunResult(
-        reason=outcome.reason, exit_code=outcome.exit_code,
-        f_cost=st.f_cost, steady_rms=st.steady_rms,
-        setpoints_sent=link.setpoints_sent, telemetry_received=t.received,
-        telemetry_rejected=dict(t.rejected), cycles=st.cycles, loop_rate_hz=st.loop_rate_hz,
-        latency_p50_ms=lat.percentile(50) * 1e3, latency_p99_ms=lat.percentile(99) * 1e3,
-        latency_max_ms=lat.max_s * 1e3 if lat.n else math.nan,
-        missed_cycles=st.gaps + st.overruns, overruns=st.overruns,
-        duration_s=runner.mission_time, wall_s=time.perf_counter() - wall0,
-        rate_requested_hz=rate, rate_accepted_hz=accepted,
-        autopilot=vehicle.autopilot, sysid=vehicle.sysid,
-        gains=gains, gains_source=gains_source,
-        limits=policy.limits_dict(limits),
-        failsafes=outcome.failsafes, hold_confirmed=outcome.hold_confirmed,
-        mission=runner.mission.name,
-        extra={"controller": tracker.name, "stop_cause": stop_cause(outcome.exit_code),
-               **({"vehicle_preset": preset} if preset is not None else {}),
-               **({"vehicle_warning": vehicle_warning} if vehicle_warning else {}),
-               **({"ekf_origin": origin.as_dict()} if origin is not None else {}),
-               "missed_gaps": st.gaps, "backlog": st.backlog,
-               "sink_errors": runner.sink_errors, "signing_rejected": link.signing_rejected,
-               "tracker_resets": runner.tracker_resets, "stalls": runner.stalls,
-               "udp_recv_buffer": link.recv_buffer,
-               "tcp_reconnects": link.reconnects,
-               **({"handovers": [r.as_dict() for r in handover.results]}
-                  if handover is not None else {})})
+    extra = {**({"vehicle_preset": flown.preset} if flown.preset is not None else {}),
+             **({"vehicle_warning": flown.warning} if flown.warning else {}),
+             **({"ekf_origin": found.origin.as_dict()} if found.origin is not None else {}),
+             **({"handovers": [r.as_dict() for r in handover.results]}
+                if handover is not None else {})}
+    return result_of(outcome, runner, link, found.vehicle, flown, rate, found.accepted,
+                     time.perf_counter() - wall0, extra)
+
+
+def build_runner(s: RunSettings, link: Any, found: Connected, flown: Flown,
+                 sinks: Sequence[Sink], control: ControlChannel | None,
+                 log: Callable[[str], None]) -> tuple[Runner, Any, Any]:
+    """The loop, with the ground station's reporter and the hand-over plan if asked: (the
+    runner, the reporter or None, the hand-over or None)."""
+    config = replace(s.runner, period=1.0 / found.accepted if found.accepted else None)
+    reporter, commands = gcs.attach(link) if s.gcs_report else (None, None)
+    sinks = [*sinks, reporter] if reporter is not None else sinks
+    latlon = found.origin.latlon if found.origin is not None else None
+    handover = (None if s.handover is None
+                else handover_mod.attach(s.handover, link, latlon, log))
+    runner = Runner(link, flown.tracker, found.mission, config, flown.limits, sinks, control,
+                    log, origin=latlon, gcs=commands, handover=handover)
+    if reporter is not None:
+        reporter.watch(runner.status)
+    # Sinks that write files (the flight-log CSV) flush when the loop is about to sleep.
+    link.on_idle.extend(idle for sink in sinks if (idle := getattr(sink, "idle", None)))
+    return runner, reporter, handover

@@ -42,8 +42,6 @@ or a failsafe counts nothing.
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass, field
-from typing import Any
 
 _BINS = 100_000   # 1 us bins: up to 100 ms, beyond goes in the last bin
 GAP_TOLERANCE = 0.05  # periods: rounding; lateness up to 0.95 period is not a loss
@@ -153,45 +151,3 @@ class TrackingStats:
     @property
     def loop_rate_hz(self) -> float:
         return self.intervals / self.span if self.span > 0 else math.nan
-
-
-@dataclass
-class RunResult:
-    """The result object ``companion run --json`` and ``companion demo --json`` print."""
-
-    reason: str                      # mission_done, signal, aborted, failsafe: ..., ...
-    exit_code: int
-    f_cost: float
-    steady_rms: float
-    setpoints_sent: int
-    telemetry_received: int          # LOCAL_POSITION_NED from the vehicle, refused ones included
-    telemetry_rejected: dict[str, int]
-    cycles: int                      # tracking cycles (one setpoint each)
-    loop_rate_hz: float              # tracking cycles per vehicle second
-    latency_p50_ms: float
-    latency_p99_ms: float
-    latency_max_ms: float
-    missed_cycles: int               # gaps + overruns
-    overruns: int
-    duration_s: float                # mission time tracked
-    wall_s: float                    # companion wall time from connect to exit
-    rate_requested_hz: float
-    rate_accepted_hz: float | None
-    autopilot: str
-    sysid: int
-    gains: dict[str, Any]
-    gains_source: str
-    limits: dict[str, float | None]   # None: no limit (JSON null)
-    failsafes: int
-    hold_confirmed: bool
-    mission: str
-    extra: dict[str, Any] = field(default_factory=dict)
-
-    def as_dict(self) -> dict[str, Any]:
-        d = asdict(self)
-        d.update(d.pop("extra"))
-        # JSON has no NaN/inf: say null instead.
-        for key, value in d.items():
-            if isinstance(value, float) and not math.isfinite(value):
-                d[key] = None
-        return d

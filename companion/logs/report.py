@@ -2,7 +2,7 @@
 
 A flight is the logs that share a stem in LOGDIR (``<stem>.csv`` preferred, else ``.tlog``;
 :mod:`companion.logs.logread` reads them) and the record ``<stem>.json`` the flight wrote when
-it ended (``companion.commands.flight.write_record``: command line, vehicle file, gains, limits,
+it ended (``companion.app.flight.write_record``: command line, vehicle file, gains, limits,
 result). A calibration is a folder with ``vehicle.toml`` and ``gains.toml`` (``companion
 calibrate --out DIR``). The page holds the paper's metrics (f_cost, steady RMS, max error:
 :meth:`~companion.logs.logread.Flight.metrics`), the figures of :mod:`companion.logs.plot`

@@ -1,5 +1,7 @@
 """Mission files: the reference trajectory a user asks for, checked before anything moves.
 
+Each kind of ``[trajectory]`` is built in :mod:`companion.mission.trajectory_table`.
+
 A mission is a TOML file (or a QGroundControl ``.plan`` / ``QGC WPL 110`` ``.waypoints`` file,
 imported by :mod:`companion.mission.plan_import`)::
 
@@ -25,6 +27,11 @@ imported by :mod:`companion.mission.plan_import`)::
     [vehicle]                # optional, for simulation: companion.sim.plant.RoverParams fields
     d_cen = 0.0
     w_c = 20.0
+    file = "rover.toml"      # optional: the identified vehicle; the keys above override it
+
+A ``[vehicle] file`` is named here, not read: the command flying the mission loads it once
+(:func:`companion.app.vehicle.for_mission`) and applies the keys over it (``Mission.vehicle``
+is None until then).
 
 Every problem is one :class:`~companion.errors.UserError` line naming the file, the key path and
 the bad value: unknown keys, missing or mistyped fields, non-finite numbers, non-increasing
@@ -50,23 +57,16 @@ from ..core.pzc import PZCGains
 from ..core.trajectory import Ellipse, Trajectory
 from ..errors import UserError
 from ..sim import gains as _gains
-from ..sim import vehicle_file as _vehicle_file
 from ..sim.plant import RoverParams
 from . import paths
 from .polyline import Polyline
 from .profile import MotionProfile, limit_problem, measure
-from .schema import Table, check_rows, short
+from .schema import Table, short
 from .spline import TimedWaypoints
+from .trajectory_table import MAX_DURATION, build, file_key, read_plan, waypoint_path
 
 FRAMES = ("start", "local", "geodetic")
-KINDS = ("ellipse", "circle", "figure8", "line", "polyline", "waypoints", "plan")
 SUFFIXES = (".toml", ".plan", ".waypoints")
-MAX_DURATION = 86400.0     # s: one day of tracking is plenty; bounds the checks' cost
-MAX_DISTANCE = 1e6         # m
-MAX_SPEED = 100.0          # m/s
-MIN_LENGTH = 1e-3          # m
-PLAN_CORNER_RADIUS = 2.0   # m: ArduPilot Rover's WP_RADIUS default, shrunk to fit short legs
-DEFAULT_ACCEL = 0.5        # m/s^2, peak along-path acceleration of line / polyline / plans
 
 
 @dataclass(frozen=True)
@@ -79,7 +79,8 @@ class Mission:
     filter_gains: FilterGains | None
     pzc_gains: PZCGains | None
     limits: Limits | None
-    vehicle: RoverParams | None       # for simulation (d_cen, w_c)
+    vehicle: RoverParams | None       # for simulation (d_cen, w_c); None with a [vehicle]
+                                      # file until the command loads it (with_vehicle_file)
     frame: str                        # "start" (relative to the start pose) or "local"
     source: str                       # the file it came from
     kind: str = ""                    # trajectory kind, e.g. "circle"
@@ -87,6 +88,7 @@ class Mission:
     profile: MotionProfile | None = None   # length and peaks over the mission
     warnings: tuple[str, ...] = ()    # one line per imported item that is not followed
     vehicle_file: str | None = None   # [vehicle] file: the identified vehicle (companion identify)
+    vehicle_keys: tuple[tuple[str, float], ...] = ()   # [vehicle]'s own keys (over the file's)
     # Placed by latitude / longitude (TOML frame "geodetic", kind "plan", .plan, .waypoints):
     # `datum` is the (lat, lon) of the trajectory's local (0, 0), the EKF origin it was loaded
     # for (else the plan's home or the TOML's own origin); `placer` reloads the same mission
@@ -94,6 +96,11 @@ class Mission:
     geodetic: bool = False
     datum: tuple[float, float] | None = None
     placer: Callable[..., Mission] | None = field(default=None, compare=False, repr=False)
+
+    def with_vehicle_file(self, params: RoverParams) -> Mission:
+        """The mission with its ``[vehicle] file``'s model (loaded by the command) under its
+        own ``[vehicle]`` keys."""
+        return replace(self, vehicle=params.with_(**dict(self.vehicle_keys)))
 
     def at_origin(self, origin: tuple[float, float]) -> Mission:
         """The same mission placed around the EKF origin ``origin`` = (lat, lon) (a local or
@@ -210,9 +217,9 @@ def _from_table(top: Table, base: Path, origin: tuple[float, float] | None) -> M
         raise top.error("laps", f"give duration or laps, not both (duration = {duration:g})")
     filter_gains, pzc_gains = _read_gains(top, base)
     limits = _read_limits(top.table("limits"))
-    vehicle, vehicle_file = _read_vehicle(top.table("vehicle"), base)
+    vehicle, vehicle_file, vehicle_keys = _read_vehicle(top.table("vehicle"), base)
     spec = top.table("trajectory", required=True)
-    traj, warnings, datum = _build_trajectory(spec, base, laps, origin)
+    traj, warnings, datum = build(spec, base, laps, origin)
     top.done()
 
     kind = spec.data["kind"]
@@ -242,7 +249,7 @@ def _from_table(top: Table, base: Path, origin: tuple[float, float] | None) -> M
                    limits=limits, vehicle=vehicle, frame=frame, source=src,
                    kind=_kind_name(traj), period=period, profile=profile,
                    warnings=tuple(warnings), vehicle_file=vehicle_file,
-                   geodetic=geodetic, datum=datum)
+                   vehicle_keys=vehicle_keys, geodetic=geodetic, datum=datum)
 
 
 def _latlon(table: Table, key: str, required: bool = False) -> tuple[float, float] | None:
@@ -262,7 +269,7 @@ def _read_gains(top: Table, base: Path) -> tuple[FilterGains | None, PZCGains | 
     if gains_file is not None and table is not None:
         raise top.error("gains_file", "give gains_file or a [gains] table, not both")
     if gains_file is not None:
-        path = _file_key(top, "gains_file", gains_file, base)
+        path = file_key(top, "gains_file", gains_file, base)
         try:
             tuned = _gains.load(path)
         except UserError as err:   # name the mission file and key too, still on one line
@@ -289,124 +296,28 @@ def _read_limits(table: Table | None) -> Limits | None:
     return limits
 
 
-def _read_vehicle(table: Table | None, base: Path) -> tuple[RoverParams | None, str | None]:
-    """``[vehicle]``: a vehicle file (``file = "rover.toml"``, from ``companion identify``)
-    and / or the simple model's keys, which override the file's values."""
+def _read_vehicle(table: Table | None, base: Path
+                  ) -> tuple[RoverParams | None, str | None, tuple[tuple[str, float], ...]]:
+    """``[vehicle]``: (the model of its keys, None when a vehicle file is named (the command
+    loads it: ``Mission.with_vehicle_file``); the file's path; the keys given). The file
+    (``file = "rover.toml"``, from ``companion identify``) is named relative to the mission."""
     if table is None:
-        return None, None
-    base_params, path = RoverParams(), None
+        return None, None, ()
+    path = None
     name = table.string("file")
     if name is not None:
-        path = _file_key(table, "file", name, base)
-        try:
-            base_params = _vehicle_file.load(path).params
-        except UserError as err:   # name the mission file and key too, still on one line
-            raise table.error("file", str(err)) from None
+        path = file_key(table, "file", name, base)
+        if not path.is_file():
+            raise table.error("file", f"{path}: no such vehicle file")
     keys: dict[str, dict[str, Any]] = {"d_cen": dict(minimum=0.0, maximum=100.0), "w_c": dict(positive=True, maximum=1e4),
             "w_c_yaw": dict(positive=True, maximum=1e4), "max_speed": dict(positive=True),
             "max_yaw_rate": dict(positive=True), "max_accel": dict(positive=True)}
     given = {k: table.number(k, None, **kw) for k, kw in keys.items()}
     table.done()
-    params = base_params.with_(**{k: v for k, v in given.items() if v is not None})
-    return params, (str(path) if path is not None else None)
-
-
-def _build_trajectory(spec: Table, base: Path, laps: float | None,
-                      origin: tuple[float, float] | None):
-    kind = spec.string("kind", required=True, choices=KINDS)
-    speed: dict[str, Any] = {"positive": True, "maximum": MAX_SPEED}
-    warnings: tuple[str, ...] = ()
-    traj: Trajectory
-    points: tuple[tuple[float, float], ...]
-    datum = None
-    try:
-        if kind == "ellipse":
-            traj = Ellipse(
-                f_r=spec.number("f_r", required=True, positive=True, maximum=100.0),
-                **{k: spec.number(k, getattr(Ellipse, k), maximum=MAX_DISTANCE,
-                                  minimum=-MAX_DISTANCE) for k in ("ax", "bx", "ay", "by", "cx", "cy")})
-        elif kind == "circle":
-            radius = spec.number("radius", required=True, minimum=MIN_LENGTH, maximum=MAX_DISTANCE)
-            v = _speed_or_period(spec, radius)
-            traj = paths.Circle(
-                center=_point(spec, "center", (0.0, 0.0)), radius=radius, speed=v,
-                clockwise=spec.string("direction", "cw", choices=("cw", "ccw")) == "cw",
-                start_bearing=math.radians(spec.number("start_bearing_deg", 0.0)))
-        elif kind == "figure8":
-            traj = paths.FigureEight(
-                center=_point(spec, "center", (0.0, 0.0)),
-                length=spec.number("length", required=True, minimum=MIN_LENGTH, maximum=MAX_DISTANCE),
-                width=spec.number("width", required=True, minimum=MIN_LENGTH, maximum=MAX_DISTANCE),
-                period=spec.number("period", required=True, minimum=0.01, maximum=MAX_DURATION),
-                heading=math.radians(spec.number("heading_deg", 0.0)))
-        elif kind in ("line", "polyline"):
-            if kind == "line":
-                points = (_point(spec, "start", (0.0, 0.0)), _point(spec, "end", required=True))
-                closed = False
-            else:
-                rows = check_rows(spec.require("points"), 2, spec.source, spec.key("points"),
-                                  "[north, east]", 2, 1000)
-                points = tuple(_bounded(spec, f"points[{i}]", p) for i, p in enumerate(rows))
-                closed = spec.boolean("closed", False)
-            traj = Polyline(
-                points=points, speed=spec.number("speed", required=True, **speed),
-                corner_radius=(spec.number("corner_radius", 1.0, minimum=MIN_LENGTH,
-                                           maximum=MAX_DISTANCE) if kind == "polyline" else 1.0),
-                accel=spec.number("accel", DEFAULT_ACCEL, positive=True, maximum=100.0),
-                closed=closed, laps=laps if closed else None)
-        elif kind == "waypoints":
-            rows = check_rows(spec.require("waypoints"), 3, spec.source, spec.key("waypoints"),
-                              "[t, north, east]", 2, TimedWaypoints.MAX_POINTS)
-            for i, row in enumerate(rows):
-                if not 0.0 <= row[0] <= MAX_DURATION:
-                    raise spec.error(f"waypoints[{i}][0]", f"time must be in [0, {MAX_DURATION:g}] "
-                                                           f"s, not {row[0]!r}")
-                _bounded(spec, f"waypoints[{i}]", row[1:])
-            traj = TimedWaypoints(tuple((t, n, e) for t, n, e in rows), closed=spec.boolean("closed", False))
-        else:  # plan
-            name = spec.string("file", required=True)
-            path = _file_key(spec, "file", name, base)
-            if path.suffix.lower() not in (".plan", ".waypoints"):
-                raise spec.error("file", f"must be a .plan or .waypoints file, not {short(name)}")
-            plan_speed = spec.number("speed", None, **speed)
-            corner = spec.number("corner_radius", None, minimum=MIN_LENGTH, maximum=MAX_DISTANCE)
-            try:
-                imported = _from_plan(path, origin=origin, speed=plan_speed, corner_radius=corner)
-            except UserError as err:   # name the mission file and key, then the plan's problem
-                raise spec.error("file", str(err)) from None
-            traj, warnings, datum = imported.trajectory, imported.warnings, imported.datum
-    except paths.PathError as exc:
-        raise spec.error(exc.key, str(exc)) from None
-    spec.done()
-    return traj, warnings, datum
-
-
-def _file_key(table: Table, key: str, name: str, base: Path) -> Path:
-    """A file named in the mission, relative to the mission file's directory."""
-    if not name or "\x00" in name:
-        raise table.error(key, f"is not a file name: {short(name)}")
-    path = Path(name)
-    return path if path.is_absolute() else base / path
-
-
-def _point(spec: Table, key: str, default=None, required: bool = False):
-    value = spec.point(key, default, required=required)
-    return value if value is None else _bounded(spec, key, value)
-
-
-def _bounded(spec: Table, key: str, point) -> tuple[float, float]:
-    if any(abs(v) > MAX_DISTANCE for v in point):
-        raise spec.error(key, f"{tuple(point)} is more than {MAX_DISTANCE:g} m away")
-    return (float(point[0]), float(point[1]))
-
-
-def _speed_or_period(spec: Table, radius: float) -> float:
-    if spec.has("speed") and spec.has("period"):
-        raise spec.error("period", "give speed or period, not both")
-    if spec.has("period"):
-        period = spec.number("period", required=True, minimum=0.01, maximum=MAX_DURATION)
-        return 2.0 * math.pi * radius / period
-    return spec.number("speed", required=True, positive=True, maximum=MAX_SPEED)
+    own = tuple((k, v) for k, v in given.items() if v is not None)
+    if path is not None:
+        return None, str(path), own
+    return RoverParams().with_(**dict(own)), None, own
 
 
 def _period(traj) -> float | None:
@@ -464,32 +375,11 @@ def _profile(top: Table, traj, duration: float, period: float | None,
     return profile
 
 
-# --------------------------------------------------------------------------- imported plans
-
-
-def _waypoint_path(points, speed: float, corner_radius: float | None, source: str):
-    """(trajectory, duration, profile) of a path through ``points`` (local north, east) at
-    ``speed``: corners rounded as a .plan's, raised-cosine ramps at both ends."""
-    try:
-        traj = Polyline(points, speed=speed, corner_radius=corner_radius or PLAN_CORNER_RADIUS,
-                        accel=DEFAULT_ACCEL, shrink_corners=True)
-    except paths.PathError as exc:
-        raise UserError(f"{source}: {exc}") from None
-    duration = traj.motion_end
-    assert duration is not None   # an open path (a plan's) comes to a stop
-    traj = replace(traj, duration=duration)
-    try:
-        profile = measure(traj, duration, motion_end=duration)
-    except (ArithmeticError, ValueError) as exc:
-        raise UserError(f"{source}: {exc}") from None
-    return traj, duration, profile
-
-
 def from_local_points(name: str, points, speed: float, source: str,
                       description: str = "") -> Mission:
     """A mission along ``points`` (local north, east metres around the EKF origin) at
     ``speed``, as a .plan's waypoints are flown (a hand-over segment: companion.live.handover)."""
-    traj, duration, profile = _waypoint_path(points, speed, None, source)
+    traj, duration, profile = waypoint_path(points, speed, None, source)
     return Mission(name=name, description=description, trajectory=traj, duration=duration,
                    rate_hz=None, filter_gains=None, pzc_gains=None, limits=None, vehicle=None,
                    frame="local", source=source, kind="plan", period=None, profile=profile)
@@ -497,21 +387,9 @@ def from_local_points(name: str, points, speed: float, source: str,
 
 def _from_plan(path: Path, *, origin: tuple[float, float] | None, speed: float | None,
                corner_radius: float | None) -> Mission:
-    from . import plan_import
-    plan = plan_import.read(path, origin=origin)
-    warnings = list(plan.warnings)
-    if speed is None:
-        speed = plan.speed
-        if speed is None:
-            speed = plan_import.DEFAULT_SPEED
-            warnings.append(f"{path}: the file gives no speed: using {speed:g} m/s")
-    traj, duration, profile = _waypoint_path(plan.points, speed, corner_radius, str(path))
-    where = "home" if plan.home is not None and plan.origin == plan.home else "the EKF origin"
+    plan = read_plan(path, origin=origin, speed=speed, corner_radius=corner_radius)
     return Mission(
-        name=path.stem,
-        description=(f"imported from {path.name}: {plan.waypoint_count} waypoints at {speed:g} "
-                     f"m/s, relative to {where} {plan.origin[0]:.7f}, {plan.origin[1]:.7f}"),
-        trajectory=traj, duration=duration, rate_hz=None, filter_gains=None, pzc_gains=None,
-        limits=None, vehicle=None, frame="local", source=str(path), kind="plan",
-        period=None, profile=profile, warnings=tuple(warnings), geodetic=True,
-        datum=plan.origin)
+        name=path.stem, description=plan.description, trajectory=plan.trajectory,
+        duration=plan.duration, rate_hz=None, filter_gains=None, pzc_gains=None, limits=None,
+        vehicle=None, frame="local", source=str(path), kind="plan", period=None,
+        profile=plan.profile, warnings=plan.warnings, geodetic=True, datum=plan.datum)

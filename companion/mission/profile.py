@@ -1,9 +1,9 @@
 """What a reference trajectory asks of the vehicle: distance, peak speed, peak turn rate.
 
 The turn rate is the rate of the reference's heading, d/dt atan2(vy, vx) = (vx ay - vy ax)/|v|^2,
-which a differential-drive rover following the reference exactly must turn at. It is measured
-only where the reference moves at least ``STANDSTILL`` m/s: at a standstill the heading is
-undefined and the rover may pivot in place.
+which a rover following the reference exactly must turn at. It is measured only where the
+reference moves at least ``STANDSTILL`` m/s: at a standstill the heading is undefined and the
+rover may pivot in place.
 
 Peaks come from the trajectory's own exact ``peaks()`` when it has one (circle, polyline), else
 from dense sampling over one lap (periodic kinds) or over the motion (open kinds).

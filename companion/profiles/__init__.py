@@ -95,13 +95,19 @@ __all__ = ["AUTOPILOTS", "STEERING", "DEFAULT_AUTOPILOT", "AutopilotProfile", "S
            "steering_from_params"]
 
 
-def tune_settings(params) -> dict[str, Any]:
-    """The robust tuner's settings for a vehicle model (``params``: a RoverParams), from the
-    profiles that fly it: the autopilot's whose setpoints it takes (``tune``), then, on speed /
-    turn-rate setpoints, its steering kind's (``tune_on_turn_rate``; the steering kind's win
-    where both say). Names are RobustConfig's (companion.sim.vehicle_gains.config_for)."""
-    profile = from_setpoints(bool(params.velocity_vector))
-    settings = dict(profile.tune)
-    if not profile.setpoint.velocity_vector:
-        settings.update(steering_of_model(params).tune_on_turn_rate)
+def kinds_of_model(params) -> tuple[AutopilotProfile, SteeringProfile]:
+    """(the autopilot, the steering kind) a vehicle model is flown by, for a vehicle file that
+    does not name them (written before files named them): the first autopilot whose setpoint
+    interface the model takes, the steering kind whose fields it sets."""
+    return from_setpoints(bool(params.velocity_vector)), steering_of_model(params)
+
+
+def tune_settings(autopilot: AutopilotProfile, steering_kind: SteeringProfile) -> dict[str, Any]:
+    """The robust tuner's settings for a vehicle flown by ``autopilot`` with ``steering_kind``:
+    the autopilot's (``tune``), then, on speed / turn-rate setpoints, the steering kind's
+    (``tune_on_turn_rate``; the steering kind's win where both say). Names are RobustConfig's
+    (companion.sim.vehicle_gains.config_for)."""
+    settings = dict(autopilot.tune)
+    if not autopilot.setpoint.velocity_vector:
+        settings.update(steering_kind.tune_on_turn_rate)
     return settings

@@ -5,6 +5,8 @@ A small TOML file, units in the key names, a header saying how it was made::
     # pzc-rover vehicle file, written by `companion identify sitl.tlog --out vehicle.toml`
     schema = "pzc-rover/vehicle/1"
     name = "ardupilot-skid"
+    autopilot = "ardupilot"       # the autopilot profile that flies it (companion.profiles)
+    steering = "skid"             # its steering kind (companion.profiles)
     d_cen_m = 0.0
 
     [speed]                       # the speed channel: delay -> clamp -> rate limit -> lag
@@ -41,6 +43,10 @@ A small TOML file, units in the key names, a header saying how it was made::
     [determined]                  # optional: per parameter, how it was set and how tightly
     speed_accel_max_m_s2 = "fitted 1.05, 1.01 to 1.09, by manoeuvre.tlog, track.tlog"
 
+``autopilot`` and ``steering`` name the profiles that fly the vehicle (checked against the
+registry where the vehicle is loaded, :mod:`companion.vehicle`); a file without them (written
+before they existed) has them inferred from its model and says so.
+
 ``[course]`` is written only when set; a gain there makes it a PX4 vehicle (a turning radius
 alone is a car driven by speed / turn-rate setpoints: ArduPilot's Ackermann rover): the
 companion's velocity vector u_p is the input, |u_p| through the speed channel and the course atan2(u_p) through PX4's
@@ -55,6 +61,7 @@ the simulation uses; :func:`to_params` / :func:`from_params` convert.
 from __future__ import annotations
 
 import math
+import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -100,6 +107,8 @@ class VehicleFile:
     source: dict[str, Any] = field(default_factory=dict)
     path: str = ""
     determined: dict[str, Any] = field(default_factory=dict)
+    autopilot: str = ""                                # a profile's name; "": not named
+    steering: str = ""                                 # a steering kind's name; "": not named
 
 
 def _value(where: str, key: str, value: Any, kind: str) -> float:
@@ -123,7 +132,7 @@ def parse(data: dict[str, Any], where: str) -> VehicleFile:
     """A parsed vehicle table to a :class:`VehicleFile`; one-line UserError naming the key."""
     if data.get("schema") != SCHEMA:
         raise UserError(f"{where}: schema: must be \"{SCHEMA}\", not {data.get('schema')!r}")
-    known = {"schema", "name", "d_cen_m", *_CHANNELS, *_RECORDS}
+    known = {"schema", "name", "autopilot", "steering", "d_cen_m", *_CHANNELS, *_RECORDS}
     for key in data:
         if key not in known:
             raise UserError(f"{where}: unknown key '{key}'")
@@ -143,17 +152,30 @@ def parse(data: dict[str, Any], where: str) -> VehicleFile:
     for section in _RECORDS:
         if not isinstance(data.get(section, {}), dict):
             raise UserError(f"{where}: '{section}' must be a table")
-    name = data.get("name", "")
-    if not isinstance(name, str):
-        raise UserError(f"{where}: name: must be a string, not {name!r}")
+    names = {}
+    for key in ("name", "autopilot", "steering"):
+        names[key] = data.get(key, "")
+        if not isinstance(names[key], str):
+            raise UserError(f"{where}: {key}: must be a string, not {names[key]!r}")
     defaults = RoverParams(w_c=1.0 / 0.05)
-    return VehicleFile(params=defaults.with_(**kwargs), name=name, fit=dict(data.get("fit", {})),
+    return VehicleFile(params=defaults.with_(**kwargs), fit=dict(data.get("fit", {})),
                        source=dict(data.get("source", {})), path=where,
-                       determined=dict(data.get("determined", {})))
+                       determined=dict(data.get("determined", {})), **names)
+
+
+def loads(text: str, where: str) -> VehicleFile:
+    """A vehicle file's text (read from ``where``); any problem is one line naming the file
+    and the key."""
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise UserError(f"{where}: not valid TOML: {exc}") from None
+    return parse(data, where)
 
 
 def load(path: str | Path) -> VehicleFile:
-    """Read a vehicle file; any problem is one line naming the file and the key."""
+    """Read a vehicle file; any problem is one line naming the file and the key. Commands
+    load a vehicle once (:func:`companion.app.vehicle.load`); the plant reads its own here."""
     return parse(read_toml(path, "no such vehicle file"), str(path))
 
 
@@ -170,7 +192,10 @@ def dumps(vehicle: VehicleFile) -> str:
     """The TOML text of a vehicle file (what :func:`load` reads back to the same parameters)."""
     p = vehicle.params
     lines = [f"# {line}" for line in (vehicle.header or "pzc-rover vehicle file").splitlines()]
-    lines += [f'schema = "{SCHEMA}"', f"name = {_fmt(vehicle.name)}", f"d_cen_m = {_fmt(p.d_cen)}"]
+    lines += [f'schema = "{SCHEMA}"', f"name = {_fmt(vehicle.name)}"]
+    lines += [f"{key} = {_fmt(value)}" for key, value in
+              (("autopilot", vehicle.autopilot), ("steering", vehicle.steering)) if value]
+    lines += [f"d_cen_m = {_fmt(p.d_cen)}"]
     values = {"speed_delay": p.speed_delay, "w_c": 1.0 / p.w_c, "max_speed": p.max_speed,
               "max_accel": p.max_accel, "max_decel": p.decel, "yaw_delay": p.yaw_delay,
               "w_c_yaw": 1.0 / p.yaw_bandwidth, "max_yaw_rate": p.max_yaw_rate,

@@ -89,15 +89,15 @@ class Runner(Failsafes, Requests):
         attitude = self.telemetry.attitude
         # The setup's waits (rate negotiation, parameters, ...) read the streams too: the
         # attitude they heard last is the one the first pose sample goes with. Otherwise a
-        # pose read right after its own ATTITUDE was consumed there is refused ("no_attitude"),
-        # as a loaded machine made the lockstep plant's first sample (2026-12-04). Its vehicle
-        # time is checked as any attitude's: a stale one serves no sample.
+        # pose read right after its own ATTITUDE was consumed there is refused ("no_attitude";
+        # seen: docs/benchmarks-log.md). Its vehicle time is checked as any attitude's: a stale
+        # one serves no sample.
         held = link.last_heard("ATTITUDE")
         if held is not None:
             attitude(held)
         # Everything alive now (modules, pymavlink's tables) moves out of the collector's
-        # reach, so a full collection during the loop scans only what the loop allocated
-        # (measured: ~37 ms for a full collection after the imports, 37 missed cycles at 1 kHz).
+        # reach, so a full collection during the loop scans only what the loop allocated, not
+        # the imports (what a full one cost: docs/benchmarks-log.md).
         gc.collect()
         gc.freeze()
         try:

@@ -40,4 +40,7 @@ candidate on every vehicle and reference, the objective and the rejections), :mo
 worker processes) and :mod:`.search` (:func:`~.search.tune`: the rounds and the confirmed winner).
 Each name is imported from the module that defines it; this one imports none of them, so a
 caller that needs only the configuration does not load the simulations.
+
+May import: ``core`` and the ``sim`` modules beneath it (plant, plant_lanes, batch, tuning,
+gains); imported by ``sim.vehicle_gains`` and the commands that tune.
 """

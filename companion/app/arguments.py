@@ -1,7 +1,7 @@
 """The flags several commands share, one function per group, and the value types they parse.
 
 Each group's defaults are the live loop's own (:mod:`companion.live.config`), read when the
-parser is built, so a default is stated once; :mod:`companion.commands.options` reads a group's
+parser is built, so a default is stated once; :mod:`companion.app.options` reads a group's
 values back into the typed options of a flight. Only light modules are imported here: building
 the parser (``companion --help``) must stay instant.
 """

@@ -4,7 +4,8 @@ around the live loop.
 :class:`Flight` owns a flight's lifecycle: SIGTERM / SIGINT turned into a stop request, the
 Zenoh bus, the flight-log sinks (the .tlog and the .csv), and their closing on every path out;
 the loop itself stops the rover (zero setpoint, then HOLD) however it ends. A command builds its
-:class:`~companion.commands.options.FlightOptions`, what is known of its vehicle
+:class:`~companion.app.options.FlightOptions`, loads its vehicle once
+(:func:`companion.app.vehicle.for_flight`), works out what the policy knows of it
 (:func:`known_vehicle`), and then, in a few lines::
 
     with Flight(options, "run", log) as flight:
@@ -28,6 +29,7 @@ from .options import FlightOptions, LogOptions
 if TYPE_CHECKING:   # for the hints only: the bus and the logs load when a flight opens them
     from ..bus import Bus
     from ..live.flightlog import LogPaths
+    from ..vehicle import Vehicle
 
 Log = Callable[[str], None]
 
@@ -64,46 +66,20 @@ def signing_key(path: str | None) -> bytes | None:
     return load_key(path)
 
 
-def tune_search(path, **search) -> dict[str, Any]:
-    """The robust tuner's settings for the vehicle file ``path``: its autopilot's and steering
-    kind's (companion.profiles.tune_settings), then ``search`` (population, rounds, ...) over
-    them. Every tune of a vehicle file goes through here: tune, calibrate, run and the rest."""
-    from ..profiles import tune_settings
-    from ..sim import vehicle_file
-    return {**tune_settings(vehicle_file.load(path).params), **search}
-
-
-def gains_for_vehicle(path, rate: float, command: str, show_bar: bool, log: Log, pool=None,
-                      **search):
-    """The gains tuned for a vehicle file (found beside it, else tuned now and stored there,
-    with a progress bar; ``pool``: robust.pool.worker_pool's): for run, demo, simulate and
-    calibrate."""
-    from ..progress import progress_bar
-    from ..sim.vehicle_gains import gains_for
-    with progress_bar(f"tuning for {Path(path).name}", show_bar) as progress:
-        return gains_for(path, rate, command, progress, log, pool,
-                         **tune_search(path, **search))
-
-
-def known_vehicle(path: str | None, mission: Any, gains: Any, command: str, show_bar: bool,
-                  log: Log, controller: str = controllers.DEFAULT):
-    """What the policy knows of the vehicle file ``path`` (None: the mission's [vehicle] file):
-    its limits, and its gains for the rate asked, unless a --gains file overrides them or the
+def known_vehicle(vehicle: Vehicle | None, mission: Any, gains: Any, command: str,
+                  show_bar: bool, log: Log, controller: str = controllers.DEFAULT):
+    """What the policy knows of ``vehicle`` (loaded once by the command; None: nothing): its
+    limits, and its gains for the rate asked, unless a --gains file overrides them or the
     ``controller`` flies gains of its own (then nothing is tuned)."""
     from ..live.policy import KnownVehicle, requested_rate
-    path = path or mission.vehicle_file
-    if path is None:
+    from .vehicle import gains_for, known
+    if vehicle is None:
         return KnownVehicle()
-    from ..sim import vehicle_file
-    from ..sim.vehicle_gains import vehicle_limits
-    params = vehicle_file.load(path).params
-    limits = vehicle_limits(params)
     if gains.gains_file or not controllers.get(controller).uses_pzc_gains:
-        return KnownVehicle(limits=limits, w_c=float(params.w_c), d_cen=float(params.d_cen))
-    tuned = gains_for_vehicle(path, requested_rate(mission, gains),
-                              f"{command} --vehicle {path} (tuned on first use)", show_bar, log)
-    return KnownVehicle(gains=tuned, limits=limits, w_c=float(params.w_c),
-                        d_cen=float(params.d_cen))
+        return known(vehicle)
+    tuned = gains_for(vehicle, requested_rate(mission, gains),
+                      f"{command} --vehicle {vehicle.path} (tuned on first use)", show_bar, log)
+    return known(vehicle, tuned)
 
 
 def install_signals(switch) -> Callable[[], None]:
@@ -187,19 +163,26 @@ class Flight:
 
     def settings(self, mission: Any, vehicle: Any = None):
         """The live session's settings for ``mission`` on ``vehicle`` (a KnownVehicle)."""
-        from ..live.policy import KnownVehicle
+        from ..live.policy import KnownVehicle, wants_preset
         from ..live.session import RunSettings
+        from .vehicle import bundled_all
         o = self.options
         link = replace(o.link, signing_key=self.key,
                        tlog=self.paths.tlog if self.paths is not None else None)
+        vehicle = vehicle if vehicle is not None else KnownVehicle()
         return RunSettings(link=link, mission=mission, runner=o.runner, gains=o.gains,
-                           vehicle=vehicle if vehicle is not None else KnownVehicle(),
+                           vehicle=vehicle,
+                           bundled=bundled_all() if wants_preset(mission, o.gains, vehicle)
+                           else {},
                            origin=o.origin, realtime=o.realtime, controller=o.controller,
                            gcs_report=o.gcs_report, handover=o.handover)
 
     def fly(self, mission: Any, vehicle: Any = None, sinks: Sequence[Any] = (),
-            make_tracker: Callable[[Any, Any], Any] | None = None):
-        """Fly ``mission``: the RunResult. ``sinks`` besides the flight log and the bus."""
+            make_tracker: Callable[[Any, Any], Any] | None = None,
+            loaded: Vehicle | None = None):
+        """Fly ``mission``: the RunResult. ``vehicle``: what the policy knows of it (a
+        KnownVehicle); ``loaded``: its vehicle file, for the flight record; ``sinks`` besides
+        the flight log and the bus."""
         from ..live.session import fly
         from ..progress import ProgressSink
         all_sinks = list(self.log_sinks) + list(sinks)
@@ -211,27 +194,21 @@ class Flight:
                      switch=self.switch, control=self.bus.control if self.bus else None,
                      make_tracker=make_tracker)
         if self.paths is not None:
-            write_record(self.paths, result, self.options.vehicle_file)
+            write_record(self.paths, result, loaded)
         return result
 
 
 RECORD_SCHEMA = "pzc-rover/flight-record/1"
 
 
-def write_record(paths: Any, result: Any, vehicle_file: str | None) -> None:
-    """``<log>.json`` beside the flight log: the command line, the vehicle file (its text) and
-    the result (gains, limits, metrics) -- what ``companion report`` shows. A run killed
-    before it ends has none; the report then says so."""
-    from pathlib import Path
-    vehicle_text = None
-    if vehicle_file:
-        try:
-            vehicle_text = Path(vehicle_file).read_text(encoding="utf-8", errors="replace")
-        except OSError:
-            vehicle_text = None
-    record = {"schema": RECORD_SCHEMA, "command": sys.argv, "vehicle_file": vehicle_file,
-              "vehicle": vehicle_text, "tlog": paths.tlog, "csv": paths.csv, "mcap": paths.mcap,
-              "result": result.as_dict()}
+def write_record(paths: Any, result: Any, vehicle: Vehicle | None) -> None:
+    """``<log>.json`` beside the flight log: the command line, the vehicle file (its path and
+    the text it was loaded from) and the result (gains, limits, metrics) -- what ``companion
+    report`` shows. A run killed before it ends has none; the report then says so."""
+    record = {"schema": RECORD_SCHEMA, "command": sys.argv,
+              "vehicle_file": vehicle.path if vehicle is not None else None,
+              "vehicle": vehicle.text if vehicle is not None else None, "tlog": paths.tlog,
+              "csv": paths.csv, "mcap": paths.mcap, "result": result.as_dict()}
     try:
         Path(paths.tlog).with_suffix(".json").write_text(
             json.dumps(record, indent=1, default=str) + "\n", encoding="utf-8")
@@ -248,13 +225,15 @@ def refuse_user_error(result) -> None:
 
 def fly_mission(options, mission, label: str = "run", command: str = "companion run"):
     """Fly ``mission`` with ``options`` (a FlightOptions): (the result, the flight log's paths
-    or None). Also ``calibrate``'s refining flight. A user's problem raises UserError."""
+    or None). Also ``calibrate``'s refining flight. The vehicle file (``--vehicle``, else the
+    mission's) is loaded here, once. A user's problem raises UserError."""
+    from .vehicle import for_flight
     log = logger(f"companion {label}", options.output.quiet)
     flight = Flight(options, label, log)          # a bad signing key fails here
-    vehicle = known_vehicle(options.vehicle_file, mission, options.gains, command,
-                            not options.output.quiet, log,
-                            options.controller)   # may tune for a minute
+    mission, loaded = for_flight(options.vehicle_file, mission)
+    vehicle = known_vehicle(loaded, mission, options.gains, command, not options.output.quiet,
+                            log, options.controller)   # may tune for a minute
     with flight:
-        result = flight.fly(mission, vehicle)
+        result = flight.fly(mission, vehicle, loaded=loaded)
     refuse_user_error(result)
     return result, flight.paths

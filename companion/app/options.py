@@ -1,7 +1,7 @@
 """A flight's options, typed, read once from the parsed flags (and the ``--config`` file, which
-fills the same flags: :mod:`companion.commands.config_file`).
+fills the same flags: :mod:`companion.app.config_file`).
 
-One reader per argument group of :mod:`companion.commands.arguments`; a command calls the
+One reader per argument group of :mod:`companion.app.arguments`; a command calls the
 readers of the groups it registered, and :meth:`FlightOptions.from_args` reads them all for
 ``companion run``. What the loop itself needs are the live layer's dataclasses
 (:mod:`companion.live.config`, :class:`companion.live.policy.GainOptions`); the rest (flight
@@ -83,7 +83,7 @@ class FlightOptions:
                    output=output_options(args), bus=bus_options(args))
 
 
-# --- one reader per group of companion.commands.arguments ------------------------------------
+# --- one reader per group of companion.app.arguments ------------------------------------
 
 def link_config(args: argparse.Namespace) -> LinkConfig:
     """add_link_arguments + add_timeout_arguments' --heartbeat-timeout."""
