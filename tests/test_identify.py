@@ -23,8 +23,10 @@ import pytest
 
 from companion.core.signals import Reference
 from companion.ident import channels
+from companion.ident.determinacy import BOUND, FITTED, PRIOR
 from companion.ident.excite import Excitation, Plan
-from companion.ident.fit import BOUND, FITTED, PRIOR, Series, fit, join, rms
+from companion.ident.fit import fit, rms
+from companion.ident.series import Series, join
 from companion.live.flightlog import CSV_FIELDS
 from companion.logs.logread import read_csv
 from companion.profiles import ardupilot
@@ -171,7 +173,7 @@ def test_fit_finds_an_overshoot_the_motors_cap_at_speed():
     """A feed-forward that over-drives (share 0.6) on a skid-steer rover whose mixer leaves
     half the turn rate at full speed: turning in place the rate overshoots whole, driving fast
     it stops at the clamp (SITL rover-skid with ATC_STR_RAT_FF 0.5, 2026-12-05). The model's
-    cap (plant.turn_rate_cap) is what the fit searches, so it finds the share, the slow time
+    cap (actuator.turn_rate_cap) is what the fit searches, so it finds the share, the slow time
     constant and the coupling, and explains the log to the noise."""
     truth = TRUE.with_(yaw_overshoot=0.6, yaw_overshoot_s=0.8, speed_turn_coupling=0.5)
     series = synthetic(truth, 60.0, speed_amp=4.5, rate_amp=2.6)

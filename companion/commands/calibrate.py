@@ -189,7 +189,7 @@ def check_identified(report, space: float, log=lambda text: None) -> None:
     import numpy as np
 
     from .. import profiles
-    from ..ident.fit import FITTED
+    from ..ident.determinacy import FITTED
     from ..ident.priors import SPEED_FIELDS, YAW_FIELDS
     f, series = report.fit, report.series
     ident = profiles.from_setpoints(series.vector).ident
@@ -243,7 +243,7 @@ def _refine_and_tune(options, args, vehicle: Path, report, rate: float, command:
                      timings: dict[str, float], cpu: dict[str, float]):
     """Steps 2 and 3: the refining flight (unless --no-refine or --no-log), then the final
     tune: (the gains, what the refining did, the children's CPU before the tune)."""
-    from ..sim.robust import worker_pool
+    from ..sim.robust.pool import worker_pool
     from ..sim.vehicle_gains import tune_workers
     refined = {"refined": False, "why": "--no-refine" if not args.refine else "--no-log"}
     # the final tune's other processes start now and load what they need (2-3 s each) while
