@@ -31,6 +31,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from .priors import Priors
+from .setpoint import SetpointEncoding
 
 # MAVLink numbers (common.xml), here so the profiles need no pymavlink.
 MAV_AUTOPILOT_ARDUPILOTMEGA = 3
@@ -70,21 +71,6 @@ class ModeTable:
 
     def names(self) -> frozenset[str]:
         return frozenset(m.name for m in self.modes)
-
-
-# --------------------------------------------------------------------------- setpoints
-
-@dataclass(frozen=True)
-class SetpointEncoding:
-    """How the tracker's command goes out as SET_POSITION_TARGET_LOCAL_NED.
-
-    ``velocity_vector`` False: (vx, vy, yaw_rate) = (v_ref, 0, omega_ref) in ``frame`` (the
-    paper's two inputs); True: (vx, vy) = u_p, the autopilot ignores yaw and yaw rate and steers
-    along the velocity itself (and a plant emulating it reads setpoints so)."""
-
-    frame: int
-    type_mask: int
-    velocity_vector: bool
 
 
 # --------------------------------------------------------------------------- preflight facts

@@ -28,6 +28,7 @@ import math
 from collections.abc import Mapping
 from typing import TYPE_CHECKING
 
+from ..core.signals import Command
 from . import skid
 from .autopilot import (
     FLAG_AUTO_ENABLED,
@@ -50,9 +51,28 @@ from .autopilot import (
     OffboardFailsafe,
     PlantFacts,
     PreflightFacts,
-    SetpointEncoding,
 )
 from .priors import Priors, defaults, finite
+from .setpoint import (
+    FRAME_BODY_NED,
+    FRAME_LOCAL_NED,
+    MAX_TARGET_POSITION,
+    MAX_TARGET_SPEED,
+    POS_IGNORE,
+    STOP,
+    VEL_IGNORE,
+    HeadingSpeed,
+    Pose,
+    PositionTarget,
+    Rejected,
+    Setpoint,
+    SetpointEncoding,
+    Target,
+    all_finite,
+    body_to_ne,
+    plausible,
+    used,
+)
 
 if TYPE_CHECKING:
     from ..sim.plant import RoverParams
@@ -115,6 +135,40 @@ def mode_name(table: ModeTable, base_mode: int, word: int) -> str:
     main, sub = _split(word)
     mode = table.by_number(custom_mode(main, sub if main == MAIN_AUTO else 0))
     return mode.name if mode is not None else "UNKNOWN"
+
+
+# --------------------------------------------------------------------------- setpoints
+
+FRAMES = (FRAME_LOCAL_NED, FRAME_BODY_NED)
+
+
+def encode_setpoint(cmd: Command) -> tuple[float, float, float]:
+    """(vx, vy) = u_p in LOCAL_NED; yaw and yaw rate ignored (PX4 steers along u_p)."""
+    return cmd.ux, cmd.uy, 0.0
+
+
+def decode_setpoint(sp: Setpoint, pose: Pose, max_speed: float) -> Target | Rejected:
+    """PX4 rover offboard: position (LOCAL_NED) or velocity vector; yaw and yaw rate ignored."""
+    if sp.frame not in FRAMES:
+        return Rejected("frame")
+    mask = sp.type_mask
+    pos, vel = used(mask, POS_IGNORE), used(mask, VEL_IGNORE)
+    if (pos and not all_finite(sp.x, sp.y)) or (vel and not all_finite(sp.vx, sp.vy)):
+        return Rejected("non-finite")
+    if ((pos and not plausible(sp.x, sp.y, limit=MAX_TARGET_POSITION))
+            or (vel and not plausible(sp.vx, sp.vy, limit=MAX_TARGET_SPEED))):
+        return Rejected("out of range")
+    if pos and sp.frame == FRAME_LOCAL_NED:
+        return PositionTarget(sp.x, sp.y)
+    if vel:
+        vx, vy = sp.vx, sp.vy
+        if sp.frame == FRAME_BODY_NED:
+            vx, vy = body_to_ne(vx, vy, pose.yaw)
+        speed = min(math.hypot(vx, vy), max_speed)
+        if speed == 0.0:
+            return STOP
+        return HeadingSpeed(math.atan2(vy, vx), speed)
+    return Rejected("nothing to do")
 
 
 # --------------------------------------------------------------------------- priors
@@ -217,7 +271,8 @@ PROFILE = AutopilotProfile(
     track_mode="OFFBOARD", hold_mode="LOITER",
     set_mode_params=set_mode_params, requested_mode=requested_mode, mode_name=mode_name,
     setpoint=SetpointEncoding(frame=MAV_FRAME_LOCAL_NED, type_mask=3559,   # 0x0DE7
-                              velocity_vector=True),
+                              velocity_vector=True, encode=encode_setpoint,
+                              decode=decode_setpoint),
     offboard_warmup=OFFBOARD_WARMUP,
     bytewise_params=True,
     preflight=PreflightFacts(
