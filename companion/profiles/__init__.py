@@ -8,7 +8,7 @@ from __future__ import annotations
 from typing import Any
 
 from . import ackermann, ardupilot, px4, skid, steering
-from .autopilot import AirframeFrame, AutopilotProfile, ServoFrame
+from .autopilot import AutopilotProfile
 from .steering import SteeringProfile
 
 # Adding one: a module beside these with its PROFILE, and one line here (docs/design/profiles.md).
@@ -72,21 +72,13 @@ def steering_by_servos(functions: set[int] | frozenset[int]) -> SteeringProfile 
 
 def steering_params(profile: AutopilotProfile) -> tuple[str, ...]:
     """The parameters that tell this autopilot's steering kind (its frame's)."""
-    frame = profile.preflight.frame
-    if isinstance(frame, ServoFrame):
-        return frame.function_params
-    return (frame.param,)
+    return profile.preflight.frame.params()
 
 
 def steering_from_params(profile: AutopilotProfile,
                          values: dict[str, float]) -> SteeringProfile | None:
     """The steering kind the parameters ``values`` (``{name: value}``) show, None if none."""
-    frame = profile.preflight.frame
-    if isinstance(frame, AirframeFrame):
-        value = values.get(frame.param)
-        return steering_by_airframe(int(value)) if value is not None else None
-    functions = {int(v) for k, v in values.items() if k in frame.function_params and v == v}
-    return steering_by_servos(functions)
+    return profile.preflight.frame.steering(values)
 
 
 __all__ = ["AUTOPILOTS", "STEERING", "DEFAULT_AUTOPILOT", "AutopilotProfile", "SteeringProfile",

@@ -29,6 +29,7 @@ from typing import TYPE_CHECKING
 from ..core.angles import wrap
 from ..core.signals import Command
 from . import skid
+from .ardupilot_preflight import GcsFailsafe, ServoFrame
 from .autopilot import (
     FLAG_CUSTOM_MODE_ENABLED,
     FLAG_GUIDED_ENABLED,
@@ -44,14 +45,12 @@ from .autopilot import (
     AutopilotProfile,
     EstimateFacts,
     FailsafeFacts,
-    GcsFailsafe,
     IdentFacts,
     LimitParam,
     Mode,
     ModeTable,
     PlantFacts,
     PreflightFacts,
-    ServoFrame,
     TopSpeedParams,
 )
 from .priors import Priors, defaults, finite

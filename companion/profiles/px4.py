@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping
+from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 from ..core.signals import Command
@@ -41,17 +42,16 @@ from .autopilot import (
     MAV_RESULT_DENIED,
     PARAM_INT32,
     PARAM_REAL32,
-    AirframeFrame,
     AutopilotProfile,
     EstimateFacts,
     FailsafeFacts,
     IdentFacts,
     Mode,
     ModeTable,
-    OffboardFailsafe,
     PlantFacts,
     PreflightFacts,
 )
+from .observed import FAIL, OK, WARN, Check, Observed, missing
 from .priors import Priors, defaults, finite
 from .setpoint import (
     FRAME_BODY_NED,
@@ -76,6 +76,7 @@ from .setpoint import (
 
 if TYPE_CHECKING:
     from ..sim.plant import RoverParams
+    from .steering import SteeringProfile
 
 MAIN_AUTO = 4
 OFFBOARD_WARMUP = 1.2      # vehicle s of setpoints before asking for OFFBOARD
@@ -169,6 +170,93 @@ def decode_setpoint(sp: Setpoint, pose: Pose, max_speed: float) -> Target | Reje
             return STOP
         return HeadingSpeed(math.atan2(vy, vx), speed)
     return Rejected("nothing to do")
+
+
+# --------------------------------------------------------------------------- preflight
+
+@dataclass(frozen=True)
+class AirframeFrame:
+    """The steering kind is one airframe parameter (PX4's CA_AIRFRAME): a steering kind's
+    :attr:`~companion.profiles.steering.SteeringProfile.airframe`, or one of ``other_rovers``."""
+
+    param: str
+    other_rovers: Mapping[int, str]     # rover airframes no steering profile describes
+
+    def params(self) -> tuple[str, ...]:
+        """The parameters that tell the steering kind."""
+        return (self.param,)
+
+    def steering(self, values: Mapping[str, float]) -> SteeringProfile | None:
+        """The steering kind the airframe in ``values`` is, None if none."""
+        from . import steering_by_airframe  # the registry imports the profiles
+        value = values.get(self.param)
+        return steering_by_airframe(int(value)) if value is not None else None
+
+    def check(self, obs: Observed) -> list[Check]:
+        """Skid-steer or Ackermann (a steering profile), from the airframe (the paper's model
+        is a differential-drive rover)."""
+        from . import model_steering, steering_by_airframe
+        model, name = model_steering(), self.param
+        want = f"{model.airframe} ({model.airframe_label})"
+        absent = missing(name, obs, want, "the frame tells skid steering from Ackermann")
+        if absent:
+            return [absent]
+        airframe = int(obs.params[name])
+        kind = steering_by_airframe(airframe)
+        label = (f"{kind.label} ({kind.airframe_label})" if kind is not None
+                 else self.other_rovers.get(airframe, "not a rover"))
+        value = f"{label} ({name} {airframe})"
+        if kind is model:
+            return [Check(name, OK, value, f"{model.airframe}", model.why)]
+        if kind is not None:
+            return [Check(name, kind.verdict, value, want, kind.why)]
+        if airframe in self.other_rovers:
+            return [Check(name, WARN, value, want, "the companion's model is a "
+                          "differential-drive rover")]
+        return [Check(name, FAIL, value, want, "the airframe is not a rover")]
+
+
+@dataclass(frozen=True)
+class OffboardFailsafe:
+    """A failsafe on the setpoint stream itself (PX4's offboard loss): how long the last
+    setpoint is followed, and what the vehicle then does."""
+
+    loss_timeout: str
+    loss_timeout_max: float             # s
+    action: str
+    action_hold: int
+    action_names: Mapping[int, str]
+
+    def check(self, obs: Observed) -> list[Check]:
+        """The failsafe for a companion that falls silent: the offboard-loss timeout, then
+        Hold."""
+        p, out = obs.params, []
+        who = obs.profile.label
+        t_max = self.loss_timeout_max
+        absent = missing(self.loss_timeout, obs, f"{t_max:g} s or less",
+                         f"how long {who} follows a lost stream")
+        if absent:
+            out.append(absent)
+        else:
+            t = p[self.loss_timeout]
+            ok = 0.0 < t <= t_max
+            out.append(Check(self.loss_timeout, OK if ok else WARN, f"{t:g} s",
+                             f"0 < t <= {t_max:g} s",
+                             f"{who} holds the last setpoint this long after the companion falls "
+                             "silent" + ("" if ok else ": the rover drives blind meanwhile"),
+                             {} if ok else {self.loss_timeout: t_max}))
+        hold = f"{self.action_hold} ({self.action_names[self.action_hold]})"
+        absent = missing(self.action, obs, hold, f"what {who} does when offboard is lost")
+        if absent:
+            return out + [absent]
+        act = int(p[self.action])
+        value = f"{act} ({self.action_names.get(act, '?')})"
+        if act == self.action_hold:
+            return out + [Check(self.action, OK, value, hold,
+                                "a lost companion leaves the rover stopped")]
+        return out + [Check(self.action, WARN, value, hold,
+                            "on offboard loss the rover should stop where it is, not wait for "
+                            "a pilot's sticks or drive away", {self.action: float(self.action_hold)})]
 
 
 # --------------------------------------------------------------------------- priors
