@@ -17,7 +17,8 @@ import pytest
 from companion import profiles
 from companion.core.limits import Limits
 from companion.core.signals import Reference
-from companion.ident.excite import CarExcitation, Excitation, Plan, manoeuvre
+from companion.ident.excite import Excitation, Plan, manoeuvre
+from companion.ident.excite_car import CarExcitation
 from companion.ident.fit import FITTED, Series, fit
 from companion.mission.feasibility import check
 from companion.mission.paths import Circle

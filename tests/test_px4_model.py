@@ -21,7 +21,8 @@ from companion.core.pzc import PZCGains, PZCLaw, PZCTracker
 from companion.core.signals import Estimate, Measurement, Reference
 from companion.core.trajectory import Ellipse
 from companion.errors import UserError
-from companion.ident.excite import Home, Plan, VectorExcitation
+from companion.ident.excite import Home, Plan
+from companion.ident.excite_vector import VectorExcitation
 from companion.ident.fit import FITTED, Series, fit, rms
 from companion.mission.feasibility import check
 from companion.profiles import px4

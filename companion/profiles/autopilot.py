@@ -148,8 +148,7 @@ class PreflightFacts:
 
 @dataclass(frozen=True)
 class IdentFacts:
-    """What identification reads and assumes. The manoeuvre follows the setpoint encoding:
-    speed / turn-rate steps (with turns in place) or velocity vectors (no turn in place)."""
+    """What identification reads and assumes, and the manoeuvre it flies."""
 
     params: tuple[str, ...]                         # read with PARAM_REQUEST_READ (or a .tlog)
     priors: Callable[[Mapping[str, float]], Priors]  # {name: value} (any subset) -> priors
@@ -161,6 +160,9 @@ class IdentFacts:
     # (speed m/s, turn rate rad/s): the RMS up to which the model is taken to explain a flight
     # (companion calibrate stops above it; issue 11's held-out standard on ArduPilot)
     explain_limit: tuple[float, float] = (0.15, 0.15)
+    # the excitation manoeuvre this autopilot flies whatever steers the rover (a name of
+    # companion.ident.excite.manoeuvres: PX4's "velocity vectors"); None: the steering kind's
+    manoeuvre: str | None = None
 
 
 # --------------------------------------------------------------------------- the plant

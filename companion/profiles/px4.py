@@ -386,7 +386,10 @@ PROFILE = AutopilotProfile(
                      # turn rate 0.26 rad/s through the course loop); calibrated on such a
                      # model it tracked at a fifth to a half of PX4's own following
                      # (docs/benchmarks.md), so calibrate goes on up to these
-                     explain_limit=(0.5, 0.35)),
+                     explain_limit=(0.5, 0.35),
+                     # its own speed and course loops steer: speeds and course steps, nothing
+                     # on the spot, whatever the steering kind
+                     manoeuvre="velocity vectors"),
     plant=PlantFacts(
         modes=("MANUAL", "POSCTL", "LOITER", "OFFBOARD"),
         unsettable=(),
