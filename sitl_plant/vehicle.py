@@ -185,20 +185,14 @@ class Vehicle:
             else:
                 self._guided_timeout()
         speed, rate = self.commands()
-        p = self.config.params
-        if p.velocity_vector:
-            # A vehicle file with PX4's course loop ([course]): the velocity vector goes to the
-            # model as PX4 gets it (no pivot: an Ackermann rover drives its turning circle);
-            # other targets (a stop, a position) as the vector that asks for that turn rate.
-            target = self.target
-            if self.armed and self.takes_setpoints and isinstance(target, HeadingSpeed):
-                speed, heading = target.speed, target.heading
-            else:
-                heading = self.state.yaw + rate / p.course_gain
-            s = self.model.step_vector(self.state, speed * math.cos(heading),
-                                       speed * math.sin(heading), dt)
-        else:
-            s = self.model.step(self.state, speed, rate, dt)
+        # A vehicle model with PX4's course loop takes the velocity vector as PX4 gets it (no
+        # pivot: an Ackermann rover drives its turning circle); other targets (a stop, a
+        # position) as the vector that asks for that turn rate (RoverModel.step_command).
+        target, vector = self.target, None
+        if self.armed and self.takes_setpoints and isinstance(target, HeadingSpeed):
+            vector = (target.speed * math.cos(target.heading),
+                      target.speed * math.sin(target.heading))
+        s = self.model.step_command(self.state, speed, rate, dt, vector)
         if not -math.pi < s.yaw <= math.pi:
             s.yaw = wrap(s.yaw)
         self.state = s
