@@ -151,9 +151,11 @@ def test_registry_names_ids_and_lookups():
     assert profiles.from_heartbeat(3) is ardupilot.PROFILE
     assert profiles.from_heartbeat(12) is px4.PROFILE
     assert profiles.from_heartbeat(0) is None and profiles.from_heartbeat(8) is None
-    assert profiles.from_setpoints(False) is ardupilot.PROFILE
-    assert profiles.from_setpoints(True) is px4.PROFILE
     assert profiles.DEFAULT_AUTOPILOT == "ardupilot"
+    assert profiles.default_autopilot() is ardupilot.PROFILE
+    # a vehicle model known by itself: PX4's course loop (its model field) says PX4
+    assert profiles.autopilot_of_model(RoverParams()) is ardupilot.PROFILE
+    assert profiles.autopilot_of_model(RoverParams(course_gain=2.0)) is px4.PROFILE
     params = profiles.prior_params()
     assert set(params) == set(ardupilot.PRIOR_PARAMS) | set(px4.PRIOR_PARAMS)
     assert len(params) == len(set(params))

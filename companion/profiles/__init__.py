@@ -34,10 +34,20 @@ def from_heartbeat(mav_autopilot: int) -> AutopilotProfile | None:
     return next((p for p in AUTOPILOTS.values() if mav_autopilot in p.mav_autopilot), None)
 
 
-def from_setpoints(velocity_vector: bool) -> AutopilotProfile:
-    """The first profile whose setpoints are velocity vectors (or speed / yaw rate): which
-    autopilot a log's setpoints were written for, when nothing else says."""
-    return next(p for p in AUTOPILOTS.values() if p.setpoint.velocity_vector == velocity_vector)
+def default_autopilot() -> AutopilotProfile:
+    """The profile of a vehicle that says nothing else (the plant's and the demo's default; a
+    log without a heartbeat)."""
+    return AUTOPILOTS[DEFAULT_AUTOPILOT]
+
+
+def autopilot_of_model(params) -> AutopilotProfile:
+    """The autopilot a vehicle model was identified on (``params``: a RoverParams): the first
+    whose own fields (``model_fields``: PX4's course loop) are set in it, else the default.
+    For a vehicle known only by its model (a vehicle file); one that names its autopilot
+    passes the profile instead."""
+    return next((p for p in AUTOPILOTS.values()
+                 if any(float(getattr(params, f)) > 0 for f in p.model_fields)),
+                default_autopilot())
 
 
 def prior_params() -> tuple[str, ...]:
@@ -82,18 +92,21 @@ def steering_from_params(profile: AutopilotProfile,
 
 
 __all__ = ["AUTOPILOTS", "STEERING", "DEFAULT_AUTOPILOT", "AutopilotProfile", "SteeringProfile",
-           "autopilot_named", "from_heartbeat", "from_setpoints", "prior_params", "model_steering",
+           "autopilot_named", "from_heartbeat", "default_autopilot", "autopilot_of_model",
+           "prior_params", "model_steering",
            "steering_of_model", "steering_by_airframe", "steering_by_servos", "steering_params",
            "steering_from_params"]
 
 
-def tune_settings(params) -> dict[str, Any]:
+def tune_settings(params, autopilot: AutopilotProfile | None = None,
+                  steering: SteeringProfile | None = None) -> dict[str, Any]:
     """The robust tuner's settings for a vehicle model (``params``: a RoverParams), from the
-    profiles that fly it: the autopilot's whose setpoints it takes (``tune``), then, on speed /
-    turn-rate setpoints, its steering kind's (``tune_on_turn_rate``; the steering kind's win
-    where both say). Names are RobustConfig's (companion.sim.vehicle_gains.config_for)."""
-    profile = from_setpoints(bool(params.velocity_vector))
-    settings = dict(profile.tune)
-    if not profile.setpoint.velocity_vector:
-        settings.update(steering_of_model(params).tune_on_turn_rate)
+    profiles that fly it (given, else found from the model: :func:`autopilot_of_model`,
+    :func:`steering_of_model`): the autopilot's (``tune``), then, on speed / turn-rate
+    setpoints, its steering kind's (``tune_on_turn_rate``; the steering kind's win where both
+    say). Names are RobustConfig's (companion.sim.vehicle_gains.config_for)."""
+    autopilot = autopilot or autopilot_of_model(params)
+    settings = dict(autopilot.tune)
+    if not autopilot.setpoint.velocity_vector:     # velocity vectors: its course loop steers
+        settings.update((steering or steering_of_model(params)).tune_on_turn_rate)
     return settings

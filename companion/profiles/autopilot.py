@@ -270,6 +270,10 @@ class AutopilotProfile:
     # mapping of Spread's) for a vehicle flown by these setpoints: what the identified model
     # leaves out of how this autopilot drives (companion.profiles.tune_settings).
     tune: Mapping[str, Any] = field(default_factory=dict)
+    # RoverParams fields of the inner loops only this autopilot has (PX4's course loop,
+    # ``course_gain``): a vehicle model with one set was identified on it
+    # (companion.profiles.autopilot_of_model, the vehicle file's [course])
+    model_fields: tuple[str, ...] = ()
     # modes the autopilot reports while it starts and leaves on its own (ArduPilot's
     # INITIALISING, then its INITIAL_MODE): nobody's choice (companion.live.runner)
     boot_modes: frozenset[str] = frozenset()

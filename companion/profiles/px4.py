@@ -400,6 +400,7 @@ PROFILE = AutopilotProfile(
         params=plant_params),
     failsafe=FAILSAFE,
     estimate=ESTIMATE,
+    model_fields=("course_gain",),
     tune={
         # the law's progress floor: the share of the reference speed u_p keeps along it, so an
         # Ackermann rover does not turn round when it gets ahead (core.pzc, min_progress). PX4
