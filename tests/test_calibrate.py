@@ -93,9 +93,10 @@ def _report(status: dict, speed_rms: float = 0.05, yaw_rate_rms: float = 0.04,
             turn_setpoints: float = 1.0):
     import numpy as np
 
-    from companion.ident.fit import Fit, Series
+    from companion.ident.fit import Fit
     from companion.ident.priors import Priors
     from companion.ident.record import Report
+    from companion.ident.series import Series
     from companion.profiles.priors import defaults
     t = np.linspace(0.0, 1.0, 11)
     series = Series(t, t, turn_setpoints * t, t, t)
@@ -156,8 +157,9 @@ def test_a_vehicle_overshooting_its_autopilots_limit_is_named_as_such():
 
     from companion.commands.calibrate import check_identified
     from companion.errors import UserError
-    from companion.ident.fit import Fit, Series
+    from companion.ident.fit import Fit
     from companion.ident.record import Report
+    from companion.ident.series import Series
     from companion.profiles import ardupilot
     priors = ardupilot.priors({"ATC_STR_RAT_MAX": 120.0, "ATC_STR_ACC_MAX": 120.0})
     t = np.linspace(0.0, 1.0, 11)

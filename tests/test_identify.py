@@ -23,8 +23,10 @@ import pytest
 
 from companion.core.signals import Reference
 from companion.ident import channels
+from companion.ident.determinacy import BOUND, FITTED, PRIOR
 from companion.ident.excite import Excitation, Plan
-from companion.ident.fit import BOUND, FITTED, PRIOR, Series, fit, join, rms
+from companion.ident.fit import fit, rms
+from companion.ident.series import Series, join
 from companion.live.flightlog import CSV_FIELDS
 from companion.logs.logread import read_csv
 from companion.profiles import ardupilot

@@ -89,7 +89,7 @@ REFINE_SEARCH = {"population": 32, "rounds": 1}
 # The final search: 128 x 4 instead of the tuner's 256 x 6 (77 s of CPU; 128 x 3: 24 s); on the
 # bundled ardupilot-skid model 128 x 3 ended at 0.0021 / 0.054 m (0.04 / 0.08 Hz) in simulation
 # against 256 x 6's 0.0018 / 0.051 m. (2026-12-02, load 2.5: 128 x 4 took 15 s of CPU in one
-# process, 12 s of wall time on both cores: the same gains, robust.evaluate.)
+# process, 12 s of wall time on both cores: the same gains, robust.evaluation.evaluate.)
 FINAL_SEARCH = {"population": 128, "rounds": 4}
 MAX_WORKERS = 4             # processes for the final search: at most this many, one per core
 
@@ -133,7 +133,7 @@ def _quick_gains(vehicle: Path, rate: float, command: str, log) -> Path:
     """Gains for the refining flight only (REFINE_SEARCH), in ``gains-refine.toml`` beside the
     vehicle file (removed before calibrate ends: ``run --vehicle`` must never find them)."""
     from ..sim import vehicle_gains
-    from ..sim.robust import tune
+    from ..sim.robust.search import tune
     from .flight import tune_search
     cfg = vehicle_gains.config_for(vehicle, rate, (), **tune_search(vehicle, **REFINE_SEARCH))
     try:
@@ -212,7 +212,7 @@ def check_identified(report, space: float, log=lambda text: None) -> None:
     explained, but whose parameters the log does not pin, keeps its priors and says so."""
     import numpy as np
 
-    from ..ident.fit import FITTED
+    from ..ident.determinacy import FITTED
     from ..ident.priors import SPEED_FIELDS, YAW_FIELDS
     f, series = report.fit, report.series
     ident = report.profile.ident
@@ -297,7 +297,7 @@ def run(args) -> int:
     command = "companion " + shlex.join(sys.argv[1:]) if sys.argv[1:2] == ["calibrate"] \
         else f"companion calibrate --connect {args.connect} --out {args.out}"
     refined = {"refined": False, "why": "--no-refine" if not args.refine else "--no-log"}
-    from ..sim.robust import worker_pool
+    from ..sim.robust.pool import worker_pool
     # the final tune's other processes start now and load what they need (2-3 s each) while
     # the refining tune and flight go on: they wait idle until the tune
     with worker_pool(tune_workers()) as pool:

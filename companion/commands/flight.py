@@ -76,7 +76,7 @@ def tune_search(path, **search) -> dict[str, Any]:
 def gains_for_vehicle(path, rate: float, command: str, show_bar: bool, log: Log, pool=None,
                       **search):
     """The gains tuned for a vehicle file (found beside it, else tuned now and stored there,
-    with a progress bar; ``pool``: robust.worker_pool's): for run, demo, simulate and
+    with a progress bar; ``pool``: robust.pool.worker_pool's): for run, demo, simulate and
     calibrate."""
     from ..progress import progress_bar
     from ..sim.vehicle_gains import gains_for

@@ -143,12 +143,13 @@ def run(args) -> int:
 def identify_log(paths: str | list[str], fit_opts: FitOptions, autopilot: dict[str, float],
                  log=lambda text: None, label: str | None = None, prior=None):
     """Read, fit, check, write, plot: the offline half (the live half ends here too).
-    Several ``paths`` are fitted together (:func:`companion.ident.fit.join`). ``label`` names
+    Several ``paths`` are fitted together (:func:`companion.ident.series.join`). ``label`` names
     the log in the file when the path is not worth keeping (``--no-log``)."""
     from .. import profiles
     from ..ident.data import autopilot_params, log_autopilot, read_series
-    from ..ident.fit import fit, join, rms
+    from ..ident.fit import fit, rms
     from ..ident.record import Report, vehicle_file
+    from ..ident.series import join
     from ..sim.vehicle_file import save
 
     paths = [paths] if isinstance(paths, str) else list(paths)

@@ -23,7 +23,7 @@ import numpy as np
 from .. import profiles
 from ..errors import UserError
 from ..profiles.autopilot import AutopilotProfile
-from .fit import Series
+from .series import Series
 
 LEAD_IN = 1.0          # s of log kept before the first moving setpoint
 LEAD_OUT = 3.0         # s after the last one: the stop is data too
@@ -47,7 +47,7 @@ def series_from_flight(flight) -> Series:
                         "the .tlog, where the vectors' course is")
     if vector:
         # PX4: speed |u_p| and the course atan2(u_p); the turn rate PX4's course loop makes of
-        # it is derived in the fit (fit.with_course_loop) on the measured heading
+        # it is derived in the fit (series.with_course_loop) on the measured heading
         yaw_cmd = np.asarray(course, dtype=float)
     cmd_t = np.asarray(flight.cmd_t, dtype=float)
     good = np.isfinite(cmd_t) & np.isfinite(speed_cmd) & np.isfinite(yaw_cmd)

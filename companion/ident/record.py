@@ -18,8 +18,9 @@ from .. import profiles
 from ..profiles.autopilot import AutopilotProfile
 from ..sim.plant import RoverParams
 from ..sim.vehicle_file import VehicleFile
-from .fit import Fit, Series
+from .fit import Fit
 from .priors import COURSE_FIELDS, FILE_NAMES, SPEED_FIELDS, YAW_FIELDS, Priors
+from .series import Series
 
 
 @dataclass

@@ -266,7 +266,7 @@ class AutopilotProfile:
     # one whose recorded parameters (its ``[source]`` values of ``ident.params``) and steering
     # kind the vehicle has (companion.live.presets); () : none.
     presets: Mapping[str, str] = field(default_factory=dict)
-    # The robust tuner's settings (companion.sim.robust.RobustConfig fields; ``spread`` as a
+    # The robust tuner's settings (companion.sim.robust.config.RobustConfig fields; ``spread`` as a
     # mapping of Spread's) for a vehicle flown by these setpoints: what the identified model
     # leaves out of how this autopilot drives (companion.profiles.tune_settings).
     tune: Mapping[str, Any] = field(default_factory=dict)

@@ -3,7 +3,7 @@
 ``companion tune --vehicle V.toml`` writes a gains file that names the vehicle file and the
 SHA-256 of its bytes; ``companion run --vehicle V.toml`` looks in V's folder for a gains file
 tuned for exactly those bytes at the loop rate it flies, and when there is none tunes one on the
-spot (:func:`companion.sim.robust.tune`) and stores it there for next time. A vehicle file that
+spot (:func:`companion.sim.robust.search.tune`) and stores it there for next time. A vehicle file that
 changes (re-identified) no longer matches its old gains, so they are never applied by mistake.
 """
 
@@ -23,7 +23,8 @@ from . import gains as gains_mod
 from . import vehicle_file
 from .gains import TunedGains
 from .plant import RoverParams
-from .robust import RobustConfig, RobustResult, Spread, tune
+from .robust.config import RobustConfig, Spread
+from .robust.search import RobustResult, tune
 
 
 class NothingRobust(UserError):
@@ -128,7 +129,7 @@ def gains_for(vehicle_path: str | Path, rate: float, command: str,
               log: Callable[[str], None] = lambda text: None, pool: Any = None,
               **search: Any) -> TunedGains:
     """The vehicle's gains at ``rate``: found beside it, else tuned now (``search``: the
-    tuner's population, rounds, ...; ``pool``: robust.worker_pool's) and stored there."""
+    tuner's population, rounds, ...; ``pool``: robust.pool.worker_pool's) and stored there."""
     found = find_beside(vehicle_path, rate)
     if found is not None:
         log(f"gains tuned for {vehicle_path}: {found.source}")
