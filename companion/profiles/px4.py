@@ -402,6 +402,9 @@ PROFILE = AutopilotProfile(
     estimate=ESTIMATE,
     model_fields=("course_gain",),
     tune={
+        # PX4 steers by u_p and ignores the turn-rate setpoint: one at its limit is no limit
+        # cycle of the vehicle's
+        "limit_cycles": False,
         # the law's progress floor: the share of the reference speed u_p keeps along it, so an
         # Ackermann rover does not turn round when it gets ahead (core.pzc, min_progress). PX4
         # steers its own course from u_p, which the course correction leaves be: none here.
