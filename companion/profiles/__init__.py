@@ -93,9 +93,15 @@ def steering_from_params(profile: AutopilotProfile,
 
 __all__ = ["AUTOPILOTS", "STEERING", "DEFAULT_AUTOPILOT", "AutopilotProfile", "SteeringProfile",
            "autopilot_named", "from_heartbeat", "default_autopilot", "autopilot_of_model",
-           "prior_params", "model_steering",
-           "steering_of_model", "steering_by_airframe", "steering_by_servos", "steering_params",
+           "kinds_of_model", "prior_params", "model_steering", "steering_of_model", "steering_by_airframe", "steering_by_servos", "steering_params",
            "steering_from_params"]
+
+
+def kinds_of_model(params) -> tuple[AutopilotProfile, SteeringProfile]:
+    """(the autopilot, the steering kind) a vehicle model is flown by, for a vehicle file that
+    does not name them: the autopilot whose fields it sets (:func:`autopilot_of_model`), the
+    steering kind whose fields it sets (:func:`steering_of_model`)."""
+    return autopilot_of_model(params), steering_of_model(params)
 
 
 def tune_settings(params, autopilot: AutopilotProfile | None = None,
@@ -106,7 +112,8 @@ def tune_settings(params, autopilot: AutopilotProfile | None = None,
     setpoints, its steering kind's (``tune_on_turn_rate``; the steering kind's win where both
     say). Names are RobustConfig's (companion.sim.vehicle_gains.config_for)."""
     autopilot = autopilot or autopilot_of_model(params)
+    steering = steering or steering_of_model(params)
     settings = dict(autopilot.tune)
     if not autopilot.setpoint.velocity_vector:     # velocity vectors: its course loop steers
-        settings.update((steering or steering_of_model(params)).tune_on_turn_rate)
+        settings.update(steering.tune_on_turn_rate)
     return settings
