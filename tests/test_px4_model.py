@@ -22,7 +22,8 @@ from companion.core.signals import Estimate, Measurement, Reference
 from companion.core.trajectory import Ellipse
 from companion.errors import UserError
 from companion.ident.determinacy import FITTED
-from companion.ident.excite import Home, Plan, VectorExcitation
+from companion.ident.excite import Home, Plan
+from companion.ident.excite_vector import VectorExcitation
 from companion.ident.fit import fit, rms
 from companion.ident.series import Series
 from companion.mission.feasibility import check

@@ -31,6 +31,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from .. import profiles
 from ..sim.plant import RoverParams
 from ..sim.response import respond
 from . import channels
@@ -221,10 +222,11 @@ def _fit_channels(series: Series, prior: RoverParams, search: Search,
     rng = np.random.default_rng(search.seed)
     progress("turn-rate channel")
     yaw_fields: tuple[str, ...] = YAW_FIELDS[:-2]
-    car = not series.vector and float(np.max(prior.min_turn_radius)) > 0
+    car = not series.vector and not profiles.steering_of_model(prior).turns_in_place
     if car:
-        # A car driven by turn-rate setpoints (ArduPilot's Ackermann rover): its turning radius
-        # clamps the turn rate by the measured speed, so the turn-rate channel fits it.
+        # A car driven by turn-rate setpoints (ArduPilot's Ackermann rover, the steering kind
+        # its prior describes): its turning radius clamps the turn rate by the measured speed,
+        # so the turn-rate channel fits it.
         yaw_fields = yaw_fields + (TURN_RADIUS,)
     # The rate loop's two time scales (a feed-forward that over- or under-drives the steering,
     # the integrator doing the rest): searched after the usual fields, for turn-rate setpoints

@@ -217,6 +217,7 @@ class RoverModel:
         self.n = n
         self._m = _ops.for_size(n)
         self._paper = params.is_paper
+        self._course_loop = params.velocity_vector         # u_p in (step_command)
         self._coupled = _any_positive(params.turn_speed_coupling)
         self._turn_coupled = _any_positive(params.speed_turn_coupling)
         self._curvature = _any_positive(params.min_turn_radius)
@@ -310,6 +311,19 @@ class RoverModel:
         m = self._m
         course_err = m.wrap(m.atan2(uy, ux) - s.yaw)
         return self.step(s, m.hypot(ux, uy), self.params.course_gain * course_err, dt)
+
+    def step_command(self, s: RoverState, speed_cmd: Num, yaw_rate_cmd: Num, dt: float,
+                     vector: tuple[Num, Num] | None = None) -> RoverState:
+        """Advance ``dt`` seconds on a command as this vehicle takes it: (v_ref, omega_ref)
+        (:meth:`step`), or, where the model has PX4's course loop, u_p = ``vector``
+        (:meth:`step_vector`; None: the vector of that speed whose course asks the loop for
+        that turn rate)."""
+        if not self._course_loop:
+            return self.step(s, speed_cmd, yaw_rate_cmd, dt)
+        if vector is None:
+            heading = s.yaw + yaw_rate_cmd / self.params.course_gain
+            vector = (speed_cmd * self._m.cos(heading), speed_cmd * self._m.sin(heading))
+        return self.step_vector(s, vector[0], vector[1], dt)
 
     def step(self, s: RoverState, speed_cmd: Num, yaw_rate_cmd: Num, dt: float) -> RoverState:
         """Advance ``dt`` seconds with the commands (v_ref, omega_ref) held (after the delay)."""

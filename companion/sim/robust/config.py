@@ -55,6 +55,9 @@ class RobustConfig:
     plant_dt: float = 0.02             # s: one exact step per ArduPilot tick (within 3 % of 1 ms)
     seed: int = 1
     min_progress: float = 0.0          # the law's progress floor for every candidate (PX4, a car)
+    # a candidate whose turn-rate setpoints sit at their limit is a limit cycle, rejected (False:
+    # the vehicle's autopilot ignores the turn-rate setpoint, its profile says: PX4's u_p)
+    limit_cycles: bool = True
     speed_law: str = "projected"       # every candidate's (a car: "paper", it turns only moving)
     course_tau: float = 0.0            # s, every candidate's course correction (core.course)
     # every candidate's integration zone past the braking curve's knee, in knees (core.pzc;

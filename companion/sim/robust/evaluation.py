@@ -91,8 +91,8 @@ def evaluate(cands: Candidates, cfg: RobustConfig, vehicles: Sequence[RoverParam
                  + cfg.chatter_weight * np.where(finite, chatter, np.inf).mean(axis=(1, 2)))
     rejected = np.full(n_c, "", dtype=object)
     cycling = (at_limit > LIMIT_CYCLE_SHARE).any(axis=(1, 2))
-    if cfg.vehicle.velocity_vector:
-        # PX4 is sent u_p and ignores the yaw-rate setpoint: its limit says nothing there
+    if not cfg.limit_cycles:
+        # the autopilot ignores the yaw-rate setpoint (PX4's u_p): its limit says nothing there
         cycling = np.zeros(n_c, dtype=bool)
     diverged = ~finite.all(axis=(1, 2))
     rejected[cycling] = "limit cycle"
