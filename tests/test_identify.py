@@ -455,6 +455,8 @@ def test_live_identify_stays_within_space_ends_in_hold_and_writes_the_file(vehic
     assert written.params.max_yaw_accel == pytest.approx(
         r["params"]["turn_rate"]["accel_max_rad_s2"], rel=1e-5)
     assert "--connect" in written.source["command"] and written.source["log"] == flight["tlog"]
+    # the file names the profiles that fly it: the heartbeat's autopilot, the frame's kind
+    assert (written.autopilot, written.steering) == ("ardupilot", "skid")
 
 
 def test_live_identify_ends_when_the_manoeuvre_script_does(tmp_path):
@@ -478,6 +480,7 @@ def test_live_identify_ends_when_the_manoeuvre_script_does(tmp_path):
     events = [row["event"] for row in csv.DictReader(open(flight["csv"])) if row["event"]]
     assert any("the script is over" in e for e in events), events
     assert load(out).params.velocity_vector
+    assert load(out).autopilot == "px4"            # from the log's heartbeat, named in the file
 
 
 def _stop_identify_mid_manoeuvre(plant_port: int, args: list[str], stop) -> str:

@@ -197,5 +197,9 @@ def vehicle_file(report: Report, name: str) -> VehicleFile:
     source.update(report.autopilot)
     record = {key.replace(".", "_"): _determined_line(entry)
               for key, entry in determined(report).items()}
+    # the profiles that fly it, named in the file: the log's autopilot, the steering kind its
+    # parameters show (else the fitted model's)
+    steering = report.priors.steering or profiles.steering_of_model(f.params)
     return VehicleFile(params=f.params, name=name, header="\n".join(header), fit=fit_record,
-                       source=source, determined=record)
+                       source=source, determined=record, autopilot=report.profile.name,
+                       steering=steering.name)
