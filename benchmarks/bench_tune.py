@@ -8,7 +8,7 @@ Prints, per vehicle file, in one run with the two interleaved (the machine is sh
 speed moves 20-30 % between minutes):
   * the plant step (RoverModel.step / step_vector) per vehicle at 1,344 vehicles (64 candidates
     on 7 neighbours and 3 references: one process's share of calibrate's final search), in ns;
-  * one robust evaluation of those 64 candidates (robust.evaluate, one process), in s, and
+  * one robust evaluation of those 64 candidates (robust.evaluation.evaluate, one process), in s, and
     whether the two gave the same objective for every candidate;
   * ``--tune``: calibrate's final search (128 x 4, its worker count) with the compiled step.
 Asserts nothing.
@@ -25,8 +25,9 @@ from pathlib import Path
 import numpy as np
 
 from companion.app.vehicle import load, tuner_config
-from companion.sim import plant_lanes, robust
+from companion.sim import plant_lanes
 from companion.sim.plant import RoverState
+from companion.sim.robust import candidates, config, ensemble, evaluation, search
 from companion.sim.vehicle_gains import FINAL_SEARCH, tune_workers
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -46,10 +47,11 @@ def plant(compiled: bool):
         plant_lanes._compiled = saved
 
 
-def step_ns(cfg: robust.RobustConfig, n: int, steps: int = 1000) -> float:
+def step_ns(cfg: config.RobustConfig, n: int, steps: int = 1000) -> float:
     """ns per vehicle per plant step on the ensemble's parameters, moving commands."""
-    vehicles = robust.ensemble(cfg.vehicle, cfg.neighbours, cfg.spread, 1 / cfg.rate_hz, cfg.seed)
-    params = robust._stack_params(vehicles, 1, -(-n // len(vehicles)))
+    vehicles = ensemble.ensemble(cfg.vehicle, cfg.neighbours, cfg.spread, 1 / cfg.rate_hz,
+                                 cfg.seed)
+    params = ensemble.stack_params(vehicles, 1, -(-n // len(vehicles)))
     n = len(np.atleast_1d(params.w_c))
     model = plant_lanes.batch_model(params, n)
     zero = np.zeros(n)
@@ -73,12 +75,12 @@ def main() -> None:
     print(f"numba compiled the plant step: {plant_lanes.available()}")
     for path in args.vehicle:
         cfg = tuner_config(load(path), 40.0, (), **FINAL_SEARCH)
-        vehicles = robust.ensemble(cfg.vehicle, cfg.neighbours, cfg.spread, 1 / cfg.rate_hz,
-                                   cfg.seed)
+        vehicles = ensemble.ensemble(cfg.vehicle, cfg.neighbours, cfg.spread, 1 / cfg.rate_hz,
+                                     cfg.seed)
         refs = len(cfg.reference_list())
         rng = np.random.default_rng(1)
-        start = robust.seeds(cfg.vehicle)
-        cands = robust.Candidates.concat([start, robust._random(rng, 64 - len(start))])
+        start = candidates.seeds(cfg.vehicle)
+        cands = candidates.Candidates.concat([start, candidates.drawn(rng, 64 - len(start))])
         lanes = 64 * len(vehicles) * refs
         with plant(True):                      # compile (or load numba's cache) outside the timing
             step_ns(cfg, 64, steps=5)
@@ -90,7 +92,7 @@ def main() -> None:
                 with plant(compiled):
                     steps[compiled].append(step_ns(cfg, lanes))
                     t0 = time.perf_counter()
-                    objective[compiled] = robust.evaluate(cands, cfg, vehicles).objective
+                    objective[compiled] = evaluation.evaluate(cands, cfg, vehicles).objective
                     times[compiled].append(time.perf_counter() - t0)
         same = np.array_equal(objective[True], objective[False])
         print(f"\n{path.name}: {len(vehicles)} vehicles x {refs} references x 64 candidates "
@@ -105,7 +107,7 @@ def main() -> None:
         if args.tune:
             cfg = tuner_config(load(path), 40.0, (), **FINAL_SEARCH, workers=tune_workers())
             t0 = time.perf_counter()
-            result = robust.tune(cfg)
+            result = search.tune(cfg)
             print(f"  calibrate's final search {FINAL_SEARCH['population']} x "
                   f"{FINAL_SEARCH['rounds']} on {tune_workers()} processes: "
                   f"{time.perf_counter() - t0:.1f} s (objective {result.objective:.4f})")

@@ -43,7 +43,10 @@ from pathlib import Path
 
 import zenoh
 
-from companion.bus import Bus, BusOptions, decode, prepare
+from companion.bus.codec import decode
+from companion.bus.config import BusOptions
+from companion.bus.session import prepare
+from companion.bus.vehicle import Bus
 from companion.live.events import LoopRecord, StatusEvent
 from testbed.missions import mission_file
 from testbed.process import ROOT

@@ -19,11 +19,11 @@ import math
 from dataclasses import dataclass, field, replace
 
 from companion.mission import geo
+from companion.profiles.setpoint import PositionTarget
 from companion.sim.plant import RoverParams, RoverState
 
 from . import guidance
 from .mission import MissionStore
-from .setpoint import PositionTarget
 
 NAV_WAYPOINT, NAV_GUIDED_ENABLE, DO_CHANGE_SPEED = 16, 92, 178
 SEVERITY_INFO = 6

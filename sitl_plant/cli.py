@@ -106,6 +106,17 @@ def build_parser() -> argparse.ArgumentParser:
         "A skid-steer or Ackermann rover (companion.sim.plant) behind a MAVLink 2 autopilot "
         "that behaves like ArduPilot Rover (or PX4): heartbeat, modes, arming, message rates, "
         "SET_POSITION_TARGET_LOCAL_NED, the guided timeout."))
+    _link_arguments(p)
+    _clock_arguments(p)
+    _vehicle_arguments(p)
+    _earth_arguments(p)
+    _telemetry_arguments(p)
+    _fault_arguments(p)
+    return p
+
+
+def _link_arguments(p: argparse.ArgumentParser) -> None:
+    """The link: where, who, which autopilot, how its scheduler sends."""
     link = p.add_argument_group("link")
     link.add_argument("--connect", metavar="URL", default=DEFAULT_URL,
                       help=f"any pymavlink connection string (default {DEFAULT_URL})")
@@ -124,6 +135,10 @@ def build_parser() -> argparse.ArgumentParser:
                            "50 Hz: 20/20/20/40 ms); default on with --preset ardupilot-skid")
     link.add_argument("--arm-delay", type=_non_negative, default=0.0, metavar="S",
                       help="arming refused for the first S s of vehicle time (default 0)")
+
+
+def _clock_arguments(p: argparse.ArgumentParser) -> None:
+    """Vehicle time against wall time, and the integration step."""
     clock = p.add_argument_group("clock")
     clock.add_argument("--speedup", type=_positive, default=1.0, metavar="N",
                        help="vehicle time runs N x wall time (default 1)")
@@ -135,6 +150,10 @@ def build_parser() -> argparse.ArgumentParser:
                        help="integration step, vehicle s (default 0.001)")
     clock.add_argument("--duration", type=_positive, default=None, metavar="S",
                        help="exit after S s of vehicle time (default: run until a signal)")
+
+
+def _vehicle_arguments(p: argparse.ArgumentParser) -> None:
+    """The vehicle model: a preset or a vehicle file, and flags that override it."""
     veh = p.add_argument_group("vehicle")
     veh.add_argument("--preset", choices=PRESETS, default="paper",
                      help="paper: the paper's plant; stock: a stock ArduPilot skid-steer rover "
@@ -158,6 +177,10 @@ def build_parser() -> argparse.ArgumentParser:
                      help="share of the turn rate lost at top speed (skid-steer mixing)")
     veh.add_argument("--start", type=_finite, nargs=3, metavar=("X", "Y", "YAW"),
                      default=(0.0, 0.0, 0.0), help="start pose: north m, east m, yaw rad")
+
+
+def _earth_arguments(p: argparse.ArgumentParser) -> None:
+    """Where the rover is on the earth, and when the autopilot says so."""
     earth = p.add_argument_group("position on the earth")
     earth.add_argument("--origin", type=_origin, default=CMAC, metavar="LAT,LON[,ALT]",
                        help="EKF origin, sent as GPS_GLOBAL_ORIGIN on MAV_CMD_REQUEST_MESSAGE; "
@@ -169,6 +192,10 @@ def build_parser() -> argparse.ArgumentParser:
     earth.add_argument("--global-position-rate", type=_non_negative, default=0.0, metavar="HZ",
                        help="stream GLOBAL_POSITION_INT at HZ from boot (default 0: only when "
                             "asked with MAV_CMD_SET_MESSAGE_INTERVAL)")
+
+
+def _telemetry_arguments(p: argparse.ArgumentParser) -> None:
+    """What the link does to the telemetry: noise, latency, loss, duplicates, reordering, bursts."""
     tel = p.add_argument_group("telemetry")
     tel.add_argument("--noise-pos", type=_non_negative, default=0.0, metavar="M")
     tel.add_argument("--noise-yaw", type=_non_negative, default=0.0, metavar="RAD")
@@ -184,6 +211,10 @@ def build_parser() -> argparse.ArgumentParser:
     tel.add_argument("--burst", type=_probability, default=0.0, metavar="P",
                      help="with probability P per pose message the link stalls 100 ms, "
                           "then delivers everything at once")
+
+
+def _fault_arguments(p: argparse.ArgumentParser) -> None:
+    """Faults to inject, and MAVLink signing."""
     flt = p.add_argument_group("faults and security")
     flt.add_argument("--takeover-at", type=_positive, metavar="S", dest="takeover_at",
                      help="a pilot switches to HOLD at S s of vehicle time (SIGUSR1: now)")
@@ -215,7 +246,6 @@ def build_parser() -> argparse.ArgumentParser:
     flt.add_argument("--signing-key", metavar="FILE", dest="signing_key",
                      help="MAVLink 2 signing: 32-byte secret (raw or 64 hex digits, mode 600); "
                           "unsigned commands and setpoints are ignored")
-    return p
 
 
 def _gps_fault(kind: str):

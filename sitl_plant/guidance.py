@@ -13,9 +13,8 @@ import math
 from dataclasses import dataclass
 
 from companion.core.angles import wrap
+from companion.profiles.setpoint import HeadingSpeed, PositionTarget, Target, TurnRateSpeed
 from companion.sim.plant import RoverParams, RoverState
-
-from .setpoint import HeadingSpeed, PositionTarget, Target, TurnRateSpeed
 
 
 @dataclass(frozen=True)

@@ -21,6 +21,8 @@ import time
 from collections.abc import Callable
 from typing import Any
 
+from companion.profiles.setpoint import Setpoint
+
 from . import params, status, streams
 from .auto import Auto
 from .clock import LockstepGate, Pacer
@@ -29,7 +31,6 @@ from .earth import Earth, e7
 from .link import Link
 from .mission import MissionStore
 from .modes import hold_mode
-from .setpoint import Setpoint
 from .telemetry import TelemetryPipe
 from .vehicle import Result, Vehicle
 

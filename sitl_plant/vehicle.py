@@ -11,8 +11,8 @@ track mode after proof of life, watches the setpoint stream in any mode and leav
 for its hold mode when the stream stops for COM_OF_LOSS_T; one without (ArduPilot) takes targets
 only in GUIDED and armed, forgets them on a mode change or disarming, and drops a speed /
 turn-rate or heading target 3 s after the last one arrived (Rover/mode_guided.cpp). Setpoints
-are read as the profile's encoding implies (velocity vectors: PX4's reading; else ArduPilot's),
-refusals, ACK results and texts are the profile's.
+are read as the profile reads them (``setpoint.decode``); refusals, ACK results and texts are
+the profile's.
 """
 
 from __future__ import annotations
@@ -25,10 +25,7 @@ from typing import Any
 import companion.profiles as profiles
 from companion.core.angles import wrap
 from companion.profiles.autopilot import AutopilotProfile
-from companion.sim.plant import RoverModel, RoverParams, RoverState
-
-from . import guidance, modes
-from .setpoint import (
+from companion.profiles.setpoint import (
     STOP,
     HeadingSpeed,
     Pose,
@@ -36,9 +33,10 @@ from .setpoint import (
     Rejected,
     Setpoint,
     Target,
-    decode_ardupilot,
-    decode_px4,
 )
+from companion.sim.plant import RoverModel, RoverParams, RoverState
+
+from . import guidance, modes
 
 GUIDED_TIMEOUT_TEXT = "target not received last 3secs, stopping"
 ARM_REFUSED_TEXT = "Arm: AHRS: not using configured AHRS type"
@@ -166,8 +164,7 @@ class Vehicle:
         elif not (self.armed and self.takes_setpoints):
             return self._ignored("not guided and armed")
         pose = Pose(self.state.x, self.state.y, self.state.yaw)
-        decode = decode_px4 if self.autopilot.setpoint.velocity_vector else decode_ardupilot
-        target = decode(sp, pose, self.config.params.max_speed)
+        target = self.autopilot.setpoint.decode(sp, pose, self.config.params.max_speed)
         if isinstance(target, Rejected):
             return self._ignored(target.reason)
         self.target, self._target_time, self._target_fresh = target, self.t, True
@@ -188,20 +185,14 @@ class Vehicle:
             else:
                 self._guided_timeout()
         speed, rate = self.commands()
-        p = self.config.params
-        if p.velocity_vector:
-            # A vehicle file with PX4's course loop ([course]): the velocity vector goes to the
-            # model as PX4 gets it (no pivot: an Ackermann rover drives its turning circle);
-            # other targets (a stop, a position) as the vector that asks for that turn rate.
-            target = self.target
-            if self.armed and self.takes_setpoints and isinstance(target, HeadingSpeed):
-                speed, heading = target.speed, target.heading
-            else:
-                heading = self.state.yaw + rate / p.course_gain
-            s = self.model.step_vector(self.state, speed * math.cos(heading),
-                                       speed * math.sin(heading), dt)
-        else:
-            s = self.model.step(self.state, speed, rate, dt)
+        # A vehicle model with PX4's course loop takes the velocity vector as PX4 gets it (no
+        # pivot: an Ackermann rover drives its turning circle); other targets (a stop, a
+        # position) as the vector that asks for that turn rate (RoverModel.step_command).
+        target, vector = self.target, None
+        if self.armed and self.takes_setpoints and isinstance(target, HeadingSpeed):
+            vector = (target.speed * math.cos(target.heading),
+                      target.speed * math.sin(target.heading))
+        s = self.model.step_command(self.state, speed, rate, dt, vector)
         if not -math.pi < s.yaw <= math.pi:
             s.yaw = wrap(s.yaw)
         self.state = s

@@ -23,7 +23,7 @@ from typing import Any
 
 import zenoh
 
-from companion.bus import decode
+from companion.bus.codec import decode
 from sitl_plant.testing import free_port
 from testbed.missions import mission_file
 from testbed.process import ROOT, with_log_dir

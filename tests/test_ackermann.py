@@ -17,8 +17,11 @@ import pytest
 from companion import profiles
 from companion.core.limits import Limits
 from companion.core.signals import Reference
-from companion.ident.excite import CarExcitation, Excitation, Plan, manoeuvre
-from companion.ident.fit import FITTED, Series, fit
+from companion.ident.determinacy import FITTED
+from companion.ident.excite import Excitation, Plan, manoeuvre
+from companion.ident.excite_car import CarExcitation
+from companion.ident.fit import fit
+from companion.ident.series import Series
 from companion.mission.feasibility import check
 from companion.mission.paths import Circle
 from companion.profiles import ackermann, ardupilot, skid

@@ -93,9 +93,10 @@ def _report(status: dict, speed_rms: float = 0.05, yaw_rate_rms: float = 0.04,
             turn_setpoints: float = 1.0):
     import numpy as np
 
-    from companion.ident.fit import Fit, Series
+    from companion.ident.fit import Fit
     from companion.ident.priors import Priors
     from companion.ident.record import Report
+    from companion.ident.series import Series
     from companion.profiles.priors import defaults
     t = np.linspace(0.0, 1.0, 11)
     series = Series(t, t, turn_setpoints * t, t, t)
@@ -156,8 +157,9 @@ def test_a_vehicle_overshooting_its_autopilots_limit_is_named_as_such():
 
     from companion.commands.calibrate import check_identified
     from companion.errors import UserError
-    from companion.ident.fit import Fit, Series
+    from companion.ident.fit import Fit
     from companion.ident.record import Report
+    from companion.ident.series import Series
     from companion.profiles import ardupilot
     priors = ardupilot.priors({"ATC_STR_RAT_MAX": 120.0, "ATC_STR_ACC_MAX": 120.0})
     t = np.linspace(0.0, 1.0, 11)
@@ -183,12 +185,14 @@ def test_each_autopilot_holds_the_model_to_its_own_explain_limit():
     report = _report(fitted, speed_rms=0.40, yaw_rate_rms=0.26)
     with pytest.raises(UserError, match=r"manoeuvre's speed \(RMS 0\.400 m/s, more than 0\.15\)"):
         check_identified(report, 10.0)
+    from companion.profiles import px4
     t = report.series.t
     vector = dataclasses.replace(report.series, course_cmd=np.linspace(0.0, 3.0, len(t)),
                                  yaw=np.zeros(len(t)))
-    check_identified(dataclasses.replace(report, series=vector), 10.0)
+    on_px4 = dataclasses.replace(report, series=vector, profile=px4.PROFILE)
+    check_identified(on_px4, 10.0)
     with pytest.raises(UserError, match=r"manoeuvre's speed \(RMS 0\.600 m/s, more than 0\.5\)"
                                         r".*RO_SPEED_P"):
-        check_identified(dataclasses.replace(report, series=vector,
-                                             fit=dataclasses.replace(report.fit, speed_rms=0.6)),
+        check_identified(dataclasses.replace(on_px4, fit=dataclasses.replace(report.fit,
+                                                                            speed_rms=0.6)),
                          10.0)

@@ -18,10 +18,10 @@ from companion.core.pzc import PZCTracker
 from companion.live.link import Link, LinkConfig
 from companion.live.runner import Runner, RunnerConfig
 from companion.mission import paper_ellipse
+from companion.profiles.setpoint import MAX_TARGET_RATE, MAX_TARGET_SPEED
 from sitl_plant.config import PlantConfig
 from sitl_plant.link import Link as PlantLink
 from sitl_plant.server import PlantServer
-from sitl_plant.setpoint import MAX_TARGET_RATE, MAX_TARGET_SPEED
 from sitl_plant.testing import MASK_SPEED_TURN_RATE, PlantProcess, free_udp_port
 from testbed.fuzz import Fuzzer, wild
 from testbed.missions import ellipse_mission

@@ -1,5 +1,5 @@
 """The overshoot cancellation (companion.core.overshoot): the speed it sends, passed through the
-vehicle model's own overshoot (companion.sim.plant.overshoot_step), comes out as the law asked."""
+vehicle model's own overshoot (companion.sim.actuator.overshoot_step), comes out as the law asked."""
 
 from __future__ import annotations
 
@@ -12,7 +12,7 @@ from companion.core import ops
 from companion.core.limits import Limits
 from companion.core.overshoot import OvershootCancel
 from companion.core.signals import Command
-from companion.sim.plant import overshoot_step
+from companion.sim.actuator import overshoot_step
 
 DT = 0.025
 

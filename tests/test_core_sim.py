@@ -126,7 +126,8 @@ def test_skid_steer_coupling_takes_turn_rate_at_speed():
 def test_robust_ensemble_perturbs_and_stacks_the_turn_rate_coupling():
     # The robust tuner's neighbours carry c_w (+- the coupling spread, within [0, 1]) into the
     # stacked batch parameters, per vehicle.
-    from companion.sim.robust import Spread, _stack_params, ensemble
+    from companion.sim.robust.config import Spread
+    from companion.sim.robust.ensemble import ensemble, stack_params
     vehicle = RoverParams(w_c=3.0, max_speed=3.0, max_yaw_rate=2.1, max_accel=1.0,
                           turn_speed_coupling=0.3, speed_turn_coupling=0.1)
     members = ensemble(vehicle, 8, Spread(coupling=0.15), 0.025, seed=2)
@@ -134,7 +135,7 @@ def test_robust_ensemble_perturbs_and_stacks_the_turn_rate_coupling():
     assert shares[0] == 0.1 and shares[2] == 0.0                # the fixed corner: -0.15, clipped
     assert all(0.0 <= c <= 0.25 + 1e-12 for c in shares) and len(set(shares[3:])) == 6
     assert max(shares) > 0.1 and min(shares[3:]) < 0.1
-    stacked = _stack_params(members, 2, 1)
+    stacked = stack_params(members, 2, 1)
     assert list(stacked.speed_turn_coupling) == [c for c in shares for _ in range(2)]
 
 

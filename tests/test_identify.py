@@ -24,8 +24,10 @@ from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 
 from companion.core.signals import Reference
 from companion.ident import channels
+from companion.ident.determinacy import BOUND, FITTED, PRIOR
 from companion.ident.excite import Excitation, Plan
-from companion.ident.fit import BOUND, FITTED, PRIOR, Series, fit, join, rms
+from companion.ident.fit import fit, rms
+from companion.ident.series import Series, join
 from companion.live.flightlog import CSV_FIELDS
 from companion.logs.logread import read_csv
 from companion.profiles import ardupilot
@@ -173,7 +175,7 @@ def test_fit_finds_an_overshoot_the_motors_cap_at_speed():
     """A feed-forward that over-drives (share 0.6) on a skid-steer rover whose mixer leaves
     half the turn rate at full speed: turning in place the rate overshoots whole, driving fast
     it stops at the clamp (SITL rover-skid with ATC_STR_RAT_FF 0.5, 2026-12-05). The model's
-    cap (plant.turn_rate_cap) is what the fit searches, so it finds the share, the slow time
+    cap (actuator.turn_rate_cap) is what the fit searches, so it finds the share, the slow time
     constant and the coupling, and explains the log to the noise."""
     truth = TRUE.with_(yaw_overshoot=0.6, yaw_overshoot_s=0.8, speed_turn_coupling=0.5)
     series = synthetic(truth, 60.0, speed_amp=4.5, rate_amp=2.6)
@@ -455,6 +457,8 @@ def test_live_identify_stays_within_space_ends_in_hold_and_writes_the_file(vehic
     assert written.params.max_yaw_accel == pytest.approx(
         r["params"]["turn_rate"]["accel_max_rad_s2"], rel=1e-5)
     assert "--connect" in written.source["command"] and written.source["log"] == flight["tlog"]
+    # the file names the profiles that fly it: the heartbeat's autopilot, the frame's kind
+    assert (written.autopilot, written.steering) == ("ardupilot", "skid")
 
 
 def test_live_identify_ends_when_the_manoeuvre_script_does(tmp_path):
@@ -478,6 +482,7 @@ def test_live_identify_ends_when_the_manoeuvre_script_does(tmp_path):
     events = [row["event"] for row in csv.DictReader(open(flight["csv"])) if row["event"]]
     assert any("the script is over" in e for e in events), events
     assert load(out).params.velocity_vector
+    assert load(out).autopilot == "px4"            # from the log's heartbeat, named in the file
 
 
 def _stop_identify_mid_manoeuvre(plant_port: int, args: list[str], stop) -> str:
@@ -523,7 +528,7 @@ def test_an_abort_from_the_control_channel_stops_the_manoeuvre_and_fits_nothing(
                                                                              tmp_path):
     """``abort`` over Zenoh mid-manoeuvre is a stop asked for, as SIGTERM is: HOLD, exit 0,
     said as an abort request, and half a manoeuvre is not fitted into a vehicle file."""
-    from companion.bus import control_request
+    from companion.bus.control_client import control_request
     from testbed.zenoh_fleet import ISOLATED, endpoint, free_tcp_port, secret_file, session
     out, port = tmp_path / "v.toml", free_tcp_port()
     key = secret_file(tmp_path / "secret")

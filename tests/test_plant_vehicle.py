@@ -9,9 +9,9 @@ import pytest
 
 from companion.profiles import ardupilot
 from companion.profiles import px4 as px4_profile
+from companion.profiles import setpoint as sp
 from companion.sim.plant import RoverParams
 from sitl_plant import modes
-from sitl_plant import setpoint as sp
 from sitl_plant.clock import LockstepGate, Pacer
 from sitl_plant.streams import ATTITUDE, LOCAL_POSITION_NED, StreamSchedule
 from sitl_plant.telemetry import TelemetryConfig, TelemetryPipe
@@ -155,7 +155,7 @@ POSE = sp.Pose(1.0, 2.0, math.pi / 2)
     (4095 & ~512, 1, dict(), sp.Rejected("nothing to do")),
 ])
 def test_ardupilot_decoding(mask, frame, fields, expected):
-    got = sp.decode_ardupilot(sp.Setpoint(frame, mask, **fields), POSE, max_speed=math.inf)
+    got = ardupilot.decode_setpoint(sp.Setpoint(frame, mask, **fields), POSE, max_speed=math.inf)
     if isinstance(expected, sp.HeadingSpeed):
         assert isinstance(got, sp.HeadingSpeed)
         assert got.heading == pytest.approx(expected.heading) and got.speed == expected.speed
@@ -166,7 +166,7 @@ def test_ardupilot_decoding(mask, frame, fields, expected):
 
 
 def test_velocity_speed_clamped_to_vehicle_limit():
-    got = sp.decode_ardupilot(sp.Setpoint(1, 3559, vx=10.0), POSE, max_speed=4.0)
+    got = ardupilot.decode_setpoint(sp.Setpoint(1, 3559, vx=10.0), POSE, max_speed=4.0)
     assert got.speed == 4.0
 
 

@@ -151,9 +151,11 @@ def test_registry_names_ids_and_lookups():
     assert profiles.from_heartbeat(3) is ardupilot.PROFILE
     assert profiles.from_heartbeat(12) is px4.PROFILE
     assert profiles.from_heartbeat(0) is None and profiles.from_heartbeat(8) is None
-    assert profiles.from_setpoints(False) is ardupilot.PROFILE
-    assert profiles.from_setpoints(True) is px4.PROFILE
     assert profiles.DEFAULT_AUTOPILOT == "ardupilot"
+    assert profiles.default_autopilot() is ardupilot.PROFILE
+    # a vehicle model known by itself: PX4's course loop (its model field) says PX4
+    assert profiles.autopilot_of_model(RoverParams()) is ardupilot.PROFILE
+    assert profiles.autopilot_of_model(RoverParams(course_gain=2.0)) is px4.PROFILE
     params = profiles.prior_params()
     assert set(params) == set(ardupilot.PRIOR_PARAMS) | set(px4.PRIOR_PARAMS)
     assert len(params) == len(set(params))
@@ -211,10 +213,11 @@ def test_every_autopilot_profile_fills_the_interface(p):
     # bit 11 ignores the yaw rate: set exactly when the autopilot gets the velocity vector
     assert bool(sp.type_mask & (1 << 11)) == sp.velocity_vector
     assert sp.type_mask & 0b111 == 0b111 and not sp.type_mask & (0b11 << 3)   # vx, vy only
-    # preflight facts: one of the families the checks know, names that are parameters
+    # preflight facts: the autopilot's own checks of its frame and failsafe, names that are
+    # parameters
     pf = p.preflight
-    assert isinstance(pf.frame, (iface.ServoFrame, iface.AirframeFrame))
-    assert isinstance(pf.failsafe, (iface.GcsFailsafe, iface.OffboardFailsafe))
+    assert pf.frame.params() and callable(pf.frame.check) and callable(pf.failsafe.check)
+    assert pf.frame.steering({}) is None
     assert pf.limits or pf.limits_unread
     from companion.preflight.checks import Limits
     limit_fields = {f.name for f in dataclasses.fields(Limits)}

@@ -21,8 +21,11 @@ from companion.core.pzc import PZCGains, PZCLaw, PZCTracker
 from companion.core.signals import Estimate, Measurement, Reference
 from companion.core.trajectory import Ellipse
 from companion.errors import UserError
-from companion.ident.excite import Home, Plan, VectorExcitation
-from companion.ident.fit import FITTED, Series, fit, rms
+from companion.ident.determinacy import FITTED
+from companion.ident.excite import Home, Plan
+from companion.ident.excite_vector import VectorExcitation
+from companion.ident.fit import fit, rms
+from companion.ident.series import Series
 from companion.mission.feasibility import check
 from companion.profiles import px4
 from companion.sim import vehicle_file

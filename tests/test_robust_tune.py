@@ -19,7 +19,10 @@ from companion.core.trajectory import Ellipse
 from companion.sim import gains as gains_mod
 from companion.sim import vehicle_file
 from companion.sim.plant import RoverParams
-from companion.sim.robust import RobustConfig, Spread, ensemble, evaluate, tune
+from companion.sim.robust.config import RobustConfig, Spread
+from companion.sim.robust.ensemble import ensemble
+from companion.sim.robust.evaluation import evaluate
+from companion.sim.robust.search import tune
 from companion.sim.tuning import Candidates
 from testbed.process import companion_cli
 
@@ -120,9 +123,9 @@ def test_a_search_split_over_processes_finds_the_very_gains_of_one_process():
     split = tune(replace(cfg, workers=2))
     assert split.gains == one.gains and split.objective == one.objective
     assert split.nominal_steady_rms == one.nominal_steady_rms and split.evaluated == one.evaluated
-    # calibrate starts the processes ahead (robust.worker_pool: warmed during its refining
+    # calibrate starts the processes ahead (robust.pool.worker_pool: warmed during its refining
     # flight) and hands them to the tune: the same gains again, and they are its processes
-    from companion.sim.robust import worker_pool
+    from companion.sim.robust.pool import worker_pool
     with worker_pool(2) as pool:
         assert pool is not None
         ahead = tune(replace(cfg, workers=2), pool=pool)
@@ -225,7 +228,7 @@ def _with_extensions(c: Candidates, split, brake, brake_yaw, accel_ff=None) -> C
 
 
 def test_seeds_start_from_the_vehicles_own_delays_and_limits():
-    from companion.sim.robust import EXTRA_FLAGS, brake_scales, candidate_gains, seeds
+    from companion.sim.robust.candidates import EXTRA_FLAGS, brake_scales, candidate_gains, seeds
     s = seeds(ROVER)
     on = s.flags["split_accel_ff"] > 0.5
     assert on.any() and (~on).any()
@@ -252,7 +255,7 @@ def test_yaw_braking_rescues_gains_that_limit_cycle_and_the_split_preview_tighte
     # HAND limit-cycles on the slow corner (test_the_worst_neighbour_decides). With the yaw
     # braking curve at the vehicle's turn-rate deceleration it holds there; adding the speed
     # preview at delay + lag (0.35 s) with the turning part split off tightens 0.08 Hz by ~9x.
-    from companion.sim.robust import LIMIT_CYCLE_SHARE
+    from companion.sim.robust.evaluation import LIMIT_CYCLE_SHARE
     cfg = RobustConfig(vehicle=ROVER, limits=Limits(4.0, 2.0944), neighbours=1, duration=60.0)
     vehicles = ensemble(ROVER, 1, cfg.spread, 0.025, 1)
     cands = _with_extensions(_candidates(HAND, HAND, HAND), split=[0, 0, 1], brake=[0, 0, 1],
@@ -300,7 +303,7 @@ def test_a_px4_tune_leaves_out_references_far_faster_than_the_rover():
     # session that fits the top speed at 2.54 m/s
     from companion.profiles import kinds_of_model
     from companion.profiles import tune_settings as settings_of
-    from companion.sim.robust import PAPER_F_R, RobustConfig, ellipse_speed
+    from companion.sim.robust.references import PAPER_F_R, ellipse_speed
     tune_settings = lambda params: settings_of(*kinds_of_model(params))  # noqa: E731
     assert ellipse_speed(0.08) == pytest.approx(3.18, abs=0.01)
     assert ellipse_speed(0.12) == pytest.approx(4.77, abs=0.01)
@@ -319,7 +322,7 @@ def test_the_tuner_leaves_out_references_the_vehicle_cannot_turn_through():
     # ATC_STR_RAT_MAX 60 deg/s (SITL rover-skid, 2026-12-02): the 0.12 Hz ellipse's 1.51 rad/s
     # held every candidate that followed it at the limit, the limit-cycle rule rejected them
     # all and the tuner kept gains that followed nothing (1.15 m at 0.08 Hz on SITL)
-    from companion.sim.robust import PAPER_F_R, RobustConfig, ellipse_turn_rate
+    from companion.sim.robust.references import PAPER_F_R, ellipse_turn_rate
     assert ellipse_turn_rate(0.08) == pytest.approx(1.005, abs=0.002)
     assert ellipse_turn_rate(0.12) == pytest.approx(1.508, abs=0.003)
     stock = RoverParams(max_yaw_rate=2.09)
@@ -336,7 +339,7 @@ def test_a_cars_tune_leaves_out_references_it_cannot_accelerate_along(tmp_path):
     # The 0.12 Hz ellipse asks 1.80 m/s^2 along its path, ArduPilot's car has about 1.0: in
     # the objective it pulled the car's 0.08 Hz gains to 0.27-0.34 m in simulation (2026-12-03)
     from companion.app.vehicle import load, tuner_config
-    from companion.sim.robust import PAPER_F_R, RobustConfig, ellipse_path_accel
+    from companion.sim.robust.references import PAPER_F_R, ellipse_path_accel
     assert [round(ellipse_path_accel(f), 3) for f in PAPER_F_R] == [0.05, 0.2, 0.799, 1.798]
     # the closed form against the ellipse's own speed, differenced
     ellipse = Ellipse.paper(0.08)
@@ -499,7 +502,7 @@ def test_a_late_speed_loop_is_predicted_and_a_prompt_one_left_as_it_was():
     # (app.vehicle.tuner_config -> vehicle_gains.config_for): on SITL's car (speed delay
     # 0.5 s) the search may predict up to that delay; on the bundled skid rover (0.145 s), or
     # where the profile says nothing (PX4), no candidate predicts.
-    from companion.sim.robust import PREDICT_SEED, _tracker, candidate_gains, seeds
+    from companion.sim.robust.candidates import PREDICT_SEED, candidate_gains, seeds, tracker
     car, skid = _car_and_skid()
     assert car.predict_delay == pytest.approx(0.5)
     assert skid.predict_delay == 0.0
@@ -510,8 +513,8 @@ def test_a_late_speed_loop_is_predicted_and_a_prompt_one_left_as_it_was():
     s.flags["use_predict"] = (np.arange(len(s)) % 2).astype(float)
     got = [candidate_gains(s, i, predict_delay=0.5)[1].predict_s for i in range(2)]
     assert got == [0.0, pytest.approx(0.25)]
-    tracker = _tracker(s, 1, car.limits, predict_delay=0.5)
-    assert list(tracker.predict.horizon[:2]) == [0.0, pytest.approx(0.25)]
+    flown = tracker(s, 1, car.limits, predict_delay=0.5)
+    assert list(flown.predict.horizon[:2]) == [0.0, pytest.approx(0.25)]
 
 
 def test_an_overshooting_speed_loop_is_cancelled_and_a_plain_one_left_as_it_was():
@@ -519,7 +522,7 @@ def test_an_overshooting_speed_loop_is_cancelled_and_a_plain_one_left_as_it_was(
     # car (its speed overshoots 0.25, taken back over 1.9 s) has every candidate send its speed
     # through the inverse, and the tuned gains carry it; the bundled skid rover (no overshoot)
     # and a profile that says nothing (PX4) leave the law as it was.
-    from companion.sim.robust import _tracker, seeds
+    from companion.sim.robust.candidates import seeds, tracker
     car, skid = _car_and_skid()
     want = {"cancel_overshoot": pytest.approx(0.248743), "cancel_overshoot_s": pytest.approx(1.91763)}
     assert car.overshoot_cancel() == want
@@ -529,8 +532,8 @@ def test_an_overshooting_speed_loop_is_cancelled_and_a_plain_one_left_as_it_was(
     # a taken-back overshoot only: one that never is (PX4's over-drive neighbours) has no inverse
     held = replace(car, vehicle=car.vehicle.with_(speed_overshoot_s=math.inf))
     assert held.overshoot_cancel() == {}
-    tracker = _tracker(seeds(car.vehicle), 1, car.limits, law=car.law_settings())
-    assert tracker.cancel.active and float(tracker.cancel.share) == pytest.approx(0.248743)
+    flown = tracker(seeds(car.vehicle), 1, car.limits, law=car.law_settings())
+    assert flown.cancel.active and float(flown.cancel.share) == pytest.approx(0.248743)
 
 
 def test_the_rms_floor_is_what_each_references_log_counts_from():
@@ -549,8 +552,10 @@ def test_the_winner_is_the_best_of_the_elite_that_holds_again_alone(monkeypatch)
     # Each vehicle draws the noise of its batch, so a gain set at a limit cycle's edge can hold
     # in its round and not alone (the mixed matrix rover, 2026-12-05): the next of the elite,
     # in order, that holds on its own is taken; the round's rejects are not tried.
-    from companion.sim import robust
-    elite = robust.seeds(ROVER).take(np.arange(4))
+    from companion.sim.robust import search
+    from companion.sim.robust.candidates import seeds
+    from companion.sim.robust.evaluation import Evaluation
+    elite = seeds(ROVER).take(np.arange(4))
     elite.params["k_dc"] = np.array([1.0, 2.0, 3.0, 4.0])      # tells them apart
     alone = {0: math.inf, 1: math.inf, 2: -1.5, 3: -1.7}
     tried = []
@@ -558,16 +563,16 @@ def test_the_winner_is_the_best_of_the_elite_that_holds_again_alone(monkeypatch)
     def evaluate_alone(cands, cfg, vehicles, progress=None, *rest):
         i = int(np.flatnonzero(elite.params["k_dc"] == cands.params["k_dc"][0])[0])
         tried.append(i)
-        return robust.Evaluation(np.array([alone[i]]), *([None] * 4), np.array([""]))
+        return Evaluation(np.array([alone[i]]), *([None] * 4), np.array([""]))
 
-    monkeypatch.setattr(robust, "evaluate", evaluate_alone)
+    monkeypatch.setattr(search, "evaluate", evaluate_alone)
     round_objective = np.array([-2.0, math.inf, -1.9, -1.8])   # 1 was rejected in its round
-    winner, ev = robust._confirmed(elite, round_objective, None, (), None)
+    winner, ev = search.confirmed(elite, round_objective, None, (), None)
     assert tried == [0, 2] and float(ev.objective[0]) == -1.5
     assert winner.params["k_dc"][0] == elite.params["k_dc"][2]
     # none holds alone: the first one's failed evaluation, for tune() to refuse
     alone[2] = alone[3] = math.inf
     tried.clear()
-    winner, ev = robust._confirmed(elite, round_objective, None, (), None)
+    winner, ev = search.confirmed(elite, round_objective, None, (), None)
     assert tried == [0, 2, 3] and not math.isfinite(float(ev.objective[0]))
     assert winner.params["k_dc"][0] == elite.params["k_dc"][0]

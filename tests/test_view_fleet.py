@@ -4,7 +4,7 @@ is not ours is counted, not drawn."""
 
 from __future__ import annotations
 
-from companion import bus
+from companion.bus import codec
 from companion.live.events import LoopRecord, StatusEvent
 from companion.view import fleet as fl
 from companion.view.draw import label, table
@@ -21,11 +21,11 @@ class Clock:
 def _state(vid: str, seq: int, x: float, y: float) -> bytes:
     rec = LoopRecord(seq * 0.025, seq * 0.025, x, y, 0.1, x, y, 0.1, x + 0.1, y, 0.1, 0.0,
                      1.0, 0.0, 1.2, 0.3, "GUIDED", True)
-    return bus.encode(bus.state_payload(vid, seq, 1, rec, 1.7e9 + seq * 0.025))
+    return codec.encode(codec.state_payload(vid, seq, 1, rec, 1.7e9 + seq * 0.025))
 
 
 def _status(vid: str, kind: str, reason: str = "") -> bytes:
-    return bus.encode(bus.status_payload(vid, 1, StatusEvent(kind, reason), 1.7e9))
+    return codec.encode(codec.status_payload(vid, 1, StatusEvent(kind, reason), 1.7e9))
 
 
 def test_paths_states_failsafes_and_staleness():

@@ -10,7 +10,8 @@ from pathlib import Path
 
 import pytest
 
-from companion.bus import STATE_SCHEMA, STATUS_SCHEMA, control_request
+from companion.bus.codec import STATE_SCHEMA, STATUS_SCHEMA
+from companion.bus.control_client import control_request
 from companion.cli import main
 from sitl_plant.testing import PlantProcess
 from testbed.missions import mission_file

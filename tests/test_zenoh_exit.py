@@ -8,7 +8,7 @@ import time
 
 import pytest
 
-from companion.bus import encode, status_payload
+from companion.bus.codec import encode, status_payload
 from companion.live.events import StatusEvent
 from sitl_plant.testing import PlantProcess, free_udp_port
 from testbed.missions import mission_file

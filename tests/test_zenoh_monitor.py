@@ -40,7 +40,7 @@ class _Sample:
     """What the monitor reads of a Zenoh sample: its key expression and payload bytes."""
 
     def __init__(self, key: str, payload: dict):
-        from companion.bus import encode
+        from companion.bus.codec import encode
         self.key_expr, self._data = key, encode(payload)
         self.payload = self
 

@@ -20,7 +20,10 @@ from pathlib import Path
 import pytest
 import zenoh
 
-from companion.bus import BusOptions, control_request, encode, prepare, state_payload
+from companion.bus.codec import encode, state_payload
+from companion.bus.config import BusOptions
+from companion.bus.control_client import control_request
+from companion.bus.session import prepare
 from companion.cli import main
 from companion.live.events import LoopRecord
 from companion.security import pki
@@ -255,6 +258,68 @@ def test_a_rovers_own_session_cannot_publish_under_another_name(tmp_path):
             heard.wait(lambda: heard.of("state", "rover2"), 3.0, "rover2's own state")
             time.sleep(0.3)
         assert [h.key for h in heard.heard] == ["rover/rover2/state"]
+
+
+@pytest.mark.slow
+def test_a_fleet_given_only_the_router_and_tls_hears_itself_in_the_default_mode(tmp_path):
+    """Issue 43, item 9: a rover, a monitor and an operator, each given only its certificate and
+    the router's endpoint (no --zenoh-mode): they reach each other. A peer over mutual TLS
+    listens nowhere, and Zenoh's router relays nothing between two peers, so without a listener
+    each is made a client (and says so)."""
+    d = make_pki(tmp_path / "pki", FLEET)
+    secret = secret_file(tmp_path / "secret", SECRET)
+    cfg = tls_isolated(tmp_path)
+    router_ep = tls_endpoint(free_tcp_port())
+
+    def who(name: str) -> list[str]:
+        return ["--zenoh-tls", str(d / name), "--zenoh-config", str(cfg),
+                "--zenoh-connect", router_ep]
+
+    # A client needs its router: with none yet, one line and exit 2, not a silent wait.
+    early = _companion("monitor", *who("mon"), "--once", "--json", "--wait", "1")
+    assert early.returncode == 2 and len(early.stderr.splitlines()) == 1, early
+    assert "cannot open the Zenoh session" in early.stderr and "Traceback" not in early.stderr
+    with Proc("router", "--zenoh-tls", str(d / "router"), "--zenoh-listen", router_ep,
+              "--zenoh-config", str(cfg), tmp=tmp_path, name="router") as router:
+        router.wait_line("routing", 15.0)
+        with _demo(d, "rover1", cfg, router_ep, secret, tmp_path) as rover1:
+            rover1.wait_line("mode client over mutual TLS", 20.0)
+            rover1.wait_line("publishing rover/rover1/state", 40.0)
+            out = _companion("monitor", *who("mon"), "--once", "--json", "--wait", "2")
+            assert out.returncode == 0, out
+            snap = json.loads(out.stdout)
+            assert [v["vehicle_id"] for v in snap["vehicles"]] == ["rover1"], snap
+            assert snap["vehicles"][0]["state_msgs"] > 10, snap
+            out = _companion("control", "rover1", "status", "--secret", str(secret), *who("op"))
+            assert out.returncode == 0 and json.loads(out.stdout)["ok"], out
+            assert rover1.stop(within=5.0)[0] == 0
+        assert router.stop()[0] == 0
+
+
+def test_only_a_session_with_nowhere_to_listen_and_no_chosen_mode_becomes_a_client(tmp_path):
+    """Over mutual TLS, a peer that connects somewhere and listens nowhere would be heard by no
+    other peer: it becomes a client. A mode the flags or the file chose is kept, so is a peer
+    that listens, and a plain session is left as it was."""
+    d = make_pki(tmp_path / "pki", FLEET)
+    iso = str(tls_isolated(tmp_path))
+    peer_file = tmp_path / "peer.json5"
+    peer_file.write_text('{ mode: "peer", scouting: { multicast: { enabled: false } }, '
+                         'listen: { endpoints: [] } }')
+    router, own = (tls_endpoint(free_tcp_port()) for _ in range(2))
+    tls = {"tls": str(d / "rover1"), "roles": ("rover",)}
+    cases = [
+        (dict(connect=(router,), config_file=iso, **tls), "client"),
+        (dict(connect=(router,), config_file=iso, mode="peer", **tls), "peer"),
+        (dict(connect=(router,), config_file=str(peer_file), **tls), "peer"),
+        (dict(connect=(router,), listen=(own,), config_file=iso, **tls), "peer"),
+        (dict(config_file=iso, **tls), "peer"),
+        (dict(connect=(endpoint(free_tcp_port()),), config_file=iso), "peer"),
+    ]
+    for kwargs, mode in cases:
+        prepared = prepare(BusOptions(**kwargs))
+        # null: Zenoh's default, a peer
+        assert (json.loads(prepared.config.get_json("mode")) or "peer") == mode, kwargs
+        assert (prepared.note is not None) == (mode == "client"), kwargs
 
 
 # --------------------------------------------------------------------------- pki and errors

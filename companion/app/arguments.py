@@ -319,7 +319,8 @@ def add_zenoh_arguments(p: argparse.ArgumentParser, vehicle: bool = True,
     if len(modes) > 1:
         g.add_argument("--zenoh-mode", choices=modes, default=None,
                        help="peer (default) or client (all traffic through the router "
-                            "given with --zenoh-connect)")
+                            "given with --zenoh-connect); with --zenoh-tls, a --zenoh-connect "
+                            "and no --zenoh-listen the default is client")
     g.add_argument("--zenoh-scouting", action=argparse.BooleanOptionalAction, default=None,
                    help="multicast scouting (finding peers on the LAN); default: Zenoh's (on)")
     g.add_argument("--zenoh-tls", metavar="DIR/NAME",

@@ -27,7 +27,7 @@ from ..errors import UserError
 from .options import FlightOptions, LogOptions
 
 if TYPE_CHECKING:   # for the hints only: the bus and the logs load when a flight opens them
-    from ..bus import Bus
+    from ..bus.vehicle import Bus
     from ..live.flightlog import LogPaths
     from ..vehicle import Vehicle
 
@@ -132,7 +132,7 @@ class Flight:
         self.switch = StopSwitch()
 
     def __enter__(self) -> Flight:
-        from ..bus import open_bus
+        from ..bus.vehicle import open_bus
         self._restore = install_signals(self.switch)
         try:
             self.bus = open_bus(self.options.bus, self.log)
@@ -143,7 +143,7 @@ class Flight:
         return self
 
     def __exit__(self, *exc_info) -> None:
-        from ..bus import shut
+        from ..bus.vehicle import shut
         shut(self.bus)
         self.bus = None
         if self._restore is not None:

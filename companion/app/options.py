@@ -39,7 +39,7 @@ class OutputOptions:
 
 
 def _no_bus() -> Any:
-    from ..bus import BusOptions
+    from ..bus.config import BusOptions
     return BusOptions(enabled=False)
 
 
@@ -57,7 +57,7 @@ class FlightOptions:
     signing_key_file: str | None = None
     log: LogOptions = LogOptions()
     output: OutputOptions = OutputOptions()
-    bus: Any = field(default_factory=_no_bus)   # companion.bus.BusOptions
+    bus: Any = field(default_factory=_no_bus)   # companion.bus.config.BusOptions
     gcs_report: bool = True            # --no-gcs-report turns it off (companion.live.gcs)
     handover: Any = None               # --handover: a companion.live.handover.HandoverPlan
 
@@ -138,8 +138,8 @@ def output_options(args: argparse.Namespace, progress: bool = True) -> OutputOpt
 
 
 def bus_options(args: argparse.Namespace, mode: str | None = None) -> Any:
-    """add_zenoh_arguments: a companion.bus.BusOptions."""
-    from ..bus import BusOptions
+    """add_zenoh_arguments: a companion.bus.config.BusOptions."""
+    from ..bus.config import BusOptions
     common = dict(mode=mode or args.zenoh_mode, connect=tuple(args.zenoh_connect),
                   listen=tuple(args.zenoh_listen), config_file=args.zenoh_config,
                   scouting=args.zenoh_scouting, tls=args.zenoh_tls,

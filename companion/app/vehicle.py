@@ -110,7 +110,7 @@ def tune_and_record(vehicle: Vehicle, rate: float, command: str, progress: Any =
 def gains_for(vehicle: Vehicle, rate: float, command: str, show_bar: bool, log: Log,
               pool: Any = None, **search: Any) -> TunedGains:
     """The vehicle's gains at ``rate``: found beside it, else tuned now (with a progress bar;
-    ``search``: the tuner's population, rounds, ...; ``pool``: robust.worker_pool's) and stored
+    ``search``: the tuner's population, rounds, ...; ``pool``: robust.pool.worker_pool's) and stored
     there."""
     found = vehicle.gains_at(rate)
     if found is not None:

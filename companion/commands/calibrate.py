@@ -164,8 +164,7 @@ def _refine(options, args, vehicle: Path, report, log, gains_file: Path,
            "fit_yaw_rate_rms_rad_s": joint.fit.yaw_rate_rms}
     why = None
     # each flight explained as well as the profile asks of a manoeuvre (explain_limit)
-    from .. import profiles
-    limit = profiles.from_setpoints(report.series.vector).ident.explain_limit
+    limit = report.profile.ident.explain_limit
     if max(on_manoeuvre[0], on_track[0]) > limit[0] or \
             max(on_manoeuvre[1], on_track[1]) > limit[1]:
         why = "the joint fit does not explain both flights"
@@ -188,11 +187,10 @@ def check_identified(report, space: float, log=lambda text: None) -> None:
     explained, but whose parameters the log does not pin, keeps its priors and says so."""
     import numpy as np
 
-    from .. import profiles
-    from ..ident.fit import FITTED
+    from ..ident.determinacy import FITTED
     from ..ident.priors import SPEED_FIELDS, YAW_FIELDS
     f, series = report.fit, report.series
-    ident = profiles.from_setpoints(series.vector).ident
+    ident = report.profile.ident
     hints, limits = ident.model_hints, ident.explain_limit
     commands = {"turn rate": series.yaw_rate_cmd, "speed": series.speed_cmd}
     if series.vector:       # PX4: the course loop makes the turn-rate setpoints of the heading
@@ -243,7 +241,7 @@ def _refine_and_tune(options, args, vehicle: Path, report, rate: float, command:
                      timings: dict[str, float], cpu: dict[str, float]):
     """Steps 2 and 3: the refining flight (unless --no-refine or --no-log), then the final
     tune: (the gains, what the refining did, the children's CPU before the tune)."""
-    from ..sim.robust import worker_pool
+    from ..sim.robust.pool import worker_pool
     from ..sim.vehicle_gains import tune_workers
     refined = {"refined": False, "why": "--no-refine" if not args.refine else "--no-log"}
     # the final tune's other processes start now and load what they need (2-3 s each) while

@@ -36,7 +36,9 @@ def register(subparsers) -> None:
 
 
 def run(args) -> int:
-    from ..bus import close_all, close_session, control_request, open_session, read_secret
+    from ..bus.control import read_secret
+    from ..bus.control_client import control_request
+    from ..bus.session import close_all, close_session, open_session
 
     secret = read_secret(args.secret, "--secret")
     payload = None

@@ -150,12 +150,13 @@ def run(args) -> int:
 def identify_log(paths: str | list[str], fit_opts: FitOptions, autopilot: dict[str, float],
                  log=lambda text: None, label: str | None = None, prior=None):
     """Read, fit, check, write, plot: the offline half (the live half ends here too).
-    Several ``paths`` are fitted together (:func:`companion.ident.fit.join`). ``label`` names
+    Several ``paths`` are fitted together (:func:`companion.ident.series.join`). ``label`` names
     the log in the file when the path is not worth keeping (``--no-log``)."""
     from .. import profiles
-    from ..ident.data import autopilot_params, read_series
-    from ..ident.fit import fit, join, rms
+    from ..ident.data import autopilot_params, log_autopilot, read_series
+    from ..ident.fit import fit, rms
     from ..ident.record import Report, vehicle_file
+    from ..ident.series import join
     from ..sim.vehicle_file import save
 
     paths = [paths] if isinstance(paths, str) else list(paths)
@@ -167,8 +168,9 @@ def identify_log(paths: str | list[str], fit_opts: FitOptions, autopilot: dict[s
     check = read_series(fit_opts.check)[0] if fit_opts.check else None   # a bad one fails before the fit
     for path in paths:              # what was read live, then the first log's, win
         autopilot = {**autopilot_params(path, profiles.prior_params()), **autopilot}
-    # the autopilot such setpoints are for (velocity vectors: PX4's rover parameters, its course loop)
-    priors = profiles.from_setpoints(series.vector).priors_from(autopilot)
+    # the autopilot the logs were recorded with (their heartbeat): its parameters, its course loop
+    profile = next(filter(None, map(log_autopilot, paths)), profiles.default_autopilot())
+    priors = profile.priors_from(autopilot)
     if prior is not None:       # an earlier fit of this vehicle: what this log leaves open
         from dataclasses import fields
 
@@ -180,7 +182,7 @@ def identify_log(paths: str | list[str], fit_opts: FitOptions, autopilot: dict[s
     report = Report(result, priors, series, label or " + ".join(map(str, paths)),
                     time.perf_counter() - t0, out=fit_opts.out, parts=parts,
                     autopilot=autopilot, command=_command_line(),
-                    fit_cpu_s=time.process_time() - c0)
+                    fit_cpu_s=time.process_time() - c0, profile=profile)
     if check is not None:
         report.check_log, report.check_rms = str(fit_opts.check), rms(result.params, check)
     save(vehicle_file(report, fit_opts.name or Path(path).stem), fit_opts.out)
@@ -216,7 +218,7 @@ def _print(report, as_json: bool, flight: dict[str, Any] | None = None) -> None:
         print(json.dumps(d), flush=True)
         return
     f = report.fit
-    table = parameter_table(f.params)
+    table = parameter_table(f.params, report.profile)
 
     def num(value, unit):
         return "none" if value is None else f"{value:.3g} {unit}"

@@ -87,7 +87,7 @@ class Fleet:
         self.frozen = False     # after the last snapshot: the record holds what it counted
 
     def on_sample(self, sample) -> None:
-        from ..bus import decode
+        from ..bus.codec import decode
         rx_wall, rx = time.time(), time.monotonic()
         key = str(sample.key_expr)
         parts = key.split("/")
@@ -166,7 +166,7 @@ def table(snap: dict[str, Any]) -> str:
 def run(args) -> int:
     import zenoh  # noqa: F401  (fail here, not inside a callback, if it is missing)
 
-    from ..bus import session_until_signal
+    from ..bus.session import session_until_signal
 
     record = None
     if args.record:

@@ -29,7 +29,7 @@ def register(subparsers) -> None:
 
 
 def run(args) -> int:
-    from ..bus import session_until_signal
+    from ..bus.session import session_until_signal
 
     if not args.zenoh_listen and not args.zenoh_config:
         args.zenoh_listen = [DEFAULT_TLS_LISTEN if args.zenoh_tls else DEFAULT_LISTEN]

@@ -1,7 +1,7 @@
 """``companion tune``: search filter and PZC gains for a loop rate, actuator and limits.
 
 With ``--vehicle FILE`` (a vehicle file from ``companion identify``) the search is robust
-(:func:`companion.sim.robust.tune`): the identified inner loops and an ensemble of neighbours, the
+(:func:`companion.sim.robust.search.tune`): the identified inner loops and an ensemble of neighbours, the
 autopilot's telemetry timing, the missions given (``--mission``, repeatable) or the paper's
 ellipse at four speeds; a gain set whose worst neighbour limit-cycles is rejected. The gains file
 records the vehicle file (name and SHA-256), the ensemble and the command line.
@@ -226,8 +226,8 @@ def mission_references(paths: list[str]) -> tuple[list[tuple[str, Trajectory]], 
 
 
 def run_robust(args) -> int:
-    from ..sim.robust import RobustConfig
-    from ..sim.robust import tune as robust_tune
+    from ..sim.robust.config import RobustConfig
+    from ..sim.robust.search import tune as robust_tune
     args.population = RobustConfig.population if args.population is None else args.population
     args.rounds = RobustConfig.rounds if args.rounds is None else args.rounds
     rate = 40.0 if args.rate is None else args.rate

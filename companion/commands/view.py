@@ -48,7 +48,7 @@ def register(subparsers) -> None:
 def run(args) -> int:
     import zenoh  # noqa: F401  (fail here, not inside a callback, if it is missing)
 
-    from ..bus import session_until_signal
+    from ..bus.session import session_until_signal
     from ..view.draw import Drawing, _require
     from ..view.fleet import Fleet
 

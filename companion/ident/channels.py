@@ -10,10 +10,10 @@ step loop itself (compiled where numba is installed).
 The model is respond's, step for step: the same grid (``dt`` from ``t[0]``, the setpoint in
 force at each grid point, each sample read at the grid point at or just before it), a pure delay
 of ``round(delay / dt)`` steps with zeros before the first setpoint (as
-:class:`companion.sim.plant.CommandDelay`), the clamps with the couplings evaluated on the
+:class:`companion.sim.command_delay.CommandDelay`), the clamps with the couplings evaluated on the
 other channel's output at the start of the step (as :meth:`RoverModel.clamp_command`: the speed
 clamp on the turn rate, the turn-rate clamp on the speed, as the turning radius and the lateral-acceleration limit do), and the exact rate-limited lag of
-:func:`companion.sim.plant._channel`. Each channel takes the other's output on the grid as
+:func:`companion.sim.actuator.channel`. Each channel takes the other's output on the grid as
 given (the fit gives the turn-rate channel the measured speed, the speed channel the fitted
 turn-rate model's output); given respond's own, each is respond's. ``tests/test_identify.py``
 holds the two to each other.
@@ -67,7 +67,7 @@ def turn_rate(t: np.ndarray, yaw_rate_cmd: np.ndarray, n: int, dt: float, omega0
     at most ``|v| / R`` and with ``lat_accel`` a at most ``a / max(|v|, 1 m/s)``, as
     :meth:`companion.sim.plant.RoverModel.clamp_command`; with ``overshoot`` (the rate loop's
     two time scales, may be negative) the channel's output passes
-    :func:`companion.sim.plant.overshoot_step` and is capped at the clamp, as respond's."""
+    :func:`companion.sim.actuator.overshoot_step` and is capped at the clamp, as respond's."""
     g = Grid.of(t, dt)
     padded, offset = _delayed(np.asarray(yaw_rate_cmd, dtype=float)[g.held], delay, n, dt)
     coupled = bool(np.any(np.asarray(coupling) > 0))
@@ -101,7 +101,7 @@ def speed(t: np.ndarray, speed_cmd: np.ndarray, omega_grid: np.ndarray, n: int, 
     """The speed of ``n`` models at the samples ``t``, given the turn rate on the grid (one
     column, the fitted turn-rate model's, or one per model), which the coupling (the speed
     clamp lost while turning) reads; with ``overshoot`` the channel's output passes
-    :func:`companion.sim.plant.overshoot_step` (the coupling reads the speed itself)."""
+    :func:`companion.sim.actuator.overshoot_step` (the coupling reads the speed itself)."""
     g = Grid.of(t, dt)
     padded, offset = _delayed(np.asarray(speed_cmd, dtype=float)[g.held], delay, n, dt)
     top = np.broadcast_to(np.asarray(max_speed, dtype=float), (n,))[None, :]

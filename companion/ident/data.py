@@ -1,5 +1,5 @@
 """From a flight log to what the fit sees: setpoints held on the measurement times, the measured
-response, and the autopilot parameters the log recorded.
+response, and the autopilot (and its parameters) the log recorded.
 
 The log is read by :func:`companion.logs.logread.read` (the companion's CSV or any .tlog). The
 response is the signed speed along the heading (``Flight.speed_along``: LOCAL_POSITION_NED
@@ -20,8 +20,10 @@ from pathlib import Path
 
 import numpy as np
 
+from .. import profiles
 from ..errors import UserError
-from .fit import Series
+from ..profiles.autopilot import AutopilotProfile
+from .series import Series
 
 LEAD_IN = 1.0          # s of log kept before the first moving setpoint
 LEAD_OUT = 3.0         # s after the last one: the stop is data too
@@ -45,7 +47,7 @@ def series_from_flight(flight) -> Series:
                         "the .tlog, where the vectors' course is")
     if vector:
         # PX4: speed |u_p| and the course atan2(u_p); the turn rate PX4's course loop makes of
-        # it is derived in the fit (fit.with_course_loop) on the measured heading
+        # it is derived in the fit (series.with_course_loop) on the measured heading
         yaw_cmd = np.asarray(course, dtype=float)
     cmd_t = np.asarray(flight.cmd_t, dtype=float)
     good = np.isfinite(cmd_t) & np.isfinite(speed_cmd) & np.isfinite(yaw_cmd)
@@ -110,3 +112,28 @@ def autopilot_params(path: str, names: tuple[str, ...]) -> dict[str, float]:
     finally:
         conn.close()
     return found
+
+
+def log_autopilot(path: str) -> AutopilotProfile | None:
+    """The autopilot a .tlog was recorded with: its first vehicle HEARTBEAT's ``autopilot``
+    (:func:`companion.profiles.from_heartbeat`); None for a CSV, a log without one, or an
+    autopilot not driven here."""
+    if Path(path).suffix.lower() not in (".tlog", ".log", ".mav"):
+        return None
+    from ..live.link import mavutil  # MAVLink 2 set up before pymavlink is imported
+    try:
+        conn = mavutil.mavlink_connection(str(path), dialect="ardupilotmega")
+    except Exception:  # noqa: BLE001 - read() has already said what is wrong with the file
+        return None
+    try:
+        while True:
+            try:
+                msg = conn.recv_match(type="HEARTBEAT")
+            except Exception:  # noqa: BLE001 - a torn last frame
+                return None
+            if msg is None:
+                return None
+            if conn.probably_vehicle_heartbeat(msg):
+                return profiles.from_heartbeat(msg.autopilot)
+    finally:
+        conn.close()

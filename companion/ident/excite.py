@@ -28,23 +28,28 @@ deceleration, along the arc of its current turn: braking keeps the turn) and whe
 turn to face home, drive back to within 40 % of the radius; the script then resumes at its next
 segment. Turning and returning are data too: the fit uses whatever was commanded.
 
-Which manoeuvre, and how far above the autopilot's limits it asks, is the autopilot profile's
-(:func:`manoeuvre`): speed / turn-rate steps for an autopilot that takes them, the velocity-vector
-manoeuvre (:class:`VectorExcitation`, nothing on the spot) for one steered by velocity vectors;
-and the steering profile's: a rover that cannot turn in place (a car) flies
-:class:`CarExcitation` (:func:`car_script`, every turn at speed) instead of the script above.
+Which manoeuvre, and how far above the autopilot's limits it asks, the profiles say
+(:func:`manoeuvre`): an autopilot steered by velocity vectors names its own (PX4's,
+:mod:`companion.ident.excite_vector`, nothing on the spot); otherwise the steering kind's: the
+script above for one that turns in place, :mod:`companion.ident.excite_car` (every turn at
+speed) for a car. Each is a module, found by the name its profile gives (:func:`manoeuvres`).
 """
 
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 from ..core.limits import Limits
 from ..core.signals import Command, Estimate, Measurement, Reference
+from ..profiles import model_steering
 from ..profiles.autopilot import AutopilotProfile
 from ..profiles.steering import SteeringProfile
 from ..sim.plant import RoverParams
+
+if TYPE_CHECKING:
+    from .excite_vector import VectorExcitation
 
 REACTION = 0.5          # s at the current speed before braking bites (delay + lag), for the guard
 STOP_STEP = 0.05        # s, the guard's integration step for the stopping arc
@@ -148,7 +153,7 @@ class Home:
         return Reference(0.0, 0.0)
 
 
-def _wrap(angle: float) -> float:
+def wrap(angle: float) -> float:
     return math.remainder(angle, math.tau)
 
 
@@ -264,7 +269,7 @@ class Excitation:
                 self._guard, self._guard_t0 = "turn", t
             return 0.0, self._brake_rate
         if self._guard == "turn":
-            err = _wrap(math.atan2(-dy, -dx) - yaw)
+            err = wrap(math.atan2(-dy, -dx) - yaw)
             if abs(err) < 0.2 or elapsed > 5.0:
                 self._guard, self._guard_t0 = "drive", t
             return 0.0, self._turn_toward(err, 0.5 * self.plan.max_yaw_rate)
@@ -277,7 +282,7 @@ class Excitation:
         return max(-rate, min(rate, 2.0 * err))
 
     def _drive_home(self, yaw: float, dx: float, dy: float, dist: float) -> tuple[float, float]:
-        err = _wrap(math.atan2(-dy, -dx) - yaw)
+        err = wrap(math.atan2(-dy, -dx) - yaw)
         speed = min(HOME_SPEED, self.plan.max_speed, 0.7 * dist) * max(0.0, math.cos(err))
         return speed, self._turn_toward(err, 0.5 * self.plan.max_yaw_rate)
 
@@ -298,7 +303,7 @@ class Excitation:
                 continue
             if seg.kind == "hold":
                 return seg.speed, seg.yaw_rate
-            err = _wrap(math.atan2(-dy, -dx) - yaw)
+            err = wrap(math.atan2(-dy, -dx) - yaw)
             if seg.kind == "face_home":
                 if dist < 1.5 or abs(err) < 0.1:
                     self._advance(t)
@@ -329,276 +334,31 @@ class Excitation:
         return Command(speed, rate, speed * math.cos(yaw), speed * math.sin(yaw))
 
 
-# --------------------------------------------------------------------------- a car
+# --------------------------------------------------------------------------- which one
 
-CAR_TURN = 1.0          # rad/s a car is counted on to turn at when planning its way back
-CAR_MIN_SPEED = 0.8     # m/s: a car turning home keeps at least this (it cannot turn at rest)
-
-
-def car_script(plan: Plan) -> list[Segment]:
-    """The segments for a rover that cannot turn in place (a car: ArduPilot's Ackermann
-    rover): every turn is flown at speed, so each shows the turn rate the steering gives at
-    that speed (the turning radius at low speed, the steering and turn-rate limits above):
-
-    1. off, straight, at a walk; small turn-rate steps both ways (delay and lag at speed);
-    2. faster: a speed step, a turn-rate step to the limit and its reversal (the clamp, the
-       turn-rate acceleration), a swing;
-    3. slow and tight: full turn-rate setpoints at a crawl (the turning radius, |v| / R);
-    4. a stop, reversing straight and turning (reversing), a stop;
-    5. fast: a speed step towards the top the space allows, a swing there, a stop from speed
-       (deceleration);
-    6. stand still.
-    Between the parts ``steer_home`` turns back towards home at speed (a car's "face home");
-    the guard of :class:`Excitation` keeps it within the space by steering home at speed."""
-    v, w = plan.max_speed, plan.max_yaw_rate
-    ws = min(0.4, 0.25 * w)
-    v_lo = min(1.0, 0.4 * v)
-    v_mid = min(2.0, 0.6 * v)
-    # as fast as the space allows: a straight of about half its radius, accelerating at ~1 m/s^2
-    v_hi = min(0.8 * plan.expected_top, math.sqrt(max(plan.space, 1.0) * 0.9), v)
-    v_crawl = min(0.5, 0.3 * v)
-    home = min(HOME_SPEED, v)
-    return [
-        Segment("hold", 2.5, v_lo, 0.0, "car: off at a walk"),
-        Segment("hold", 1.5, v_lo, ws, "car: small turn step"),
-        Segment("hold", 1.5, v_lo, -ws, "car: small turn step back"),
-        Segment("hold", 1.0, v_lo, 0.0),
-        Segment("steer_home", 5.0, home, w, "car: steer home"),
-        Segment("hold", 2.0, v_mid, 0.0, "car: speed step"),
-        Segment("hold", 2.0, v_mid, w, "car: turn step to the limit at speed"),
-        Segment("hold", 2.0, v_mid, -w, "car: reversal at the limit"),
-        Segment("hold", 1.0, v_mid, 0.6 * w, "car: swing"),
-        Segment("hold", 1.0, v_mid, -0.6 * w),
-        Segment("steer_home", 5.0, home, w, "car: steer home"),
-        Segment("hold", 2.0, v_crawl, 0.0, "car: crawl"),
-        Segment("hold", 2.5, v_crawl, w, "car: tight turn at a crawl"),
-        Segment("hold", 2.5, v_crawl, -w, "car: tight turn back"),
-        Segment("hold", 1.5, 0.0, 0.0, "car: stop"),
-        Segment("hold", 2.5, -v_lo, 0.0, "car: reverse"),
-        Segment("hold", 2.0, -v_lo, 0.5 * w, "car: reversing turn"),
-        Segment("hold", 1.5, 0.0, 0.0, "car: stop"),
-        Segment("steer_home", 6.0, home, w, "car: steer home"),
-        Segment("hold", 3.0, v_hi, 0.0, "car: fast"),
-        Segment("hold", 1.5, v_hi, 0.5 * w, "car: swing fast"),
-        Segment("hold", 1.5, v_hi, -0.5 * w),
-        Segment("hold", 2.5, 0.0, 0.0, "car: stop from speed"),
-        Segment("steer_home", 6.0, home, w, "car: steer home"),
-        Segment("hold", 2.0, v_mid, 0.3 * w, "car: arc"),
-        Segment("hold", 2.0, 0.0, 0.0),
-        Segment("hold", math.inf, 0.0, 0.0, "done"),
-    ]
+IN_PLACE, AT_SPEED, VECTORS = "turns in place", "turns at speed", "velocity vectors"
 
 
-class CarExcitation(Excitation):
-    """The manoeuvre of :func:`car_script`. Its guard differs from :class:`Excitation`'s: a car
-    cannot brake and turn on the spot, so it steers home at speed (at least CAR_MIN_SPEED,
-    slowing to that first) and starts doing so a turning circle earlier."""
-
-    def __init__(self, plan: Plan):
-        super().__init__(plan)
-        self.segments = car_script(plan)
-
-    @property
-    def _turn_room(self) -> float:
-        """m: the diameter of the circle a car steering home at HOME_SPEED drives."""
-        return 2.0 * min(HOME_SPEED, self.plan.max_speed) / min(CAR_TURN, self.plan.max_yaw_rate)
-
-    def _heading_out(self, yaw: float, omega: float, dx: float, dy: float, dist: float,
-                     speed: float) -> bool:
-        sx, sy = self.stop_point(yaw, omega, dx, dy, speed)
-        stop = math.hypot(sx, sy)
-        soft = self.plan.soft_radius - self._turn_room
-        outward = dx * math.cos(yaw) + dy * math.sin(yaw) > 0 if speed >= 0 else \
-            dx * math.cos(yaw) + dy * math.sin(yaw) < 0
-        return (stop > max(soft, 0.3 * self.plan.space) and stop > dist and outward) \
-            or dist > self.plan.soft_radius + 0.5 * self.plan.margin
-
-    def _return(self, t: float, yaw: float, dx: float, dy: float, dist: float,
-                speed: float) -> tuple[float, float] | None:
-        if math.isnan(self._guard_t0):
-            self._guard_t0 = t
-        self._guard = "drive"
-        err = _wrap(math.atan2(-dy, -dx) - yaw)
-        if (dist < 0.4 * self.plan.space and abs(err) < 0.5) or t - self._guard_t0 > 20.0:
-            self._guard = None
-            return None
-        return self._steer_home(yaw, dx, dy, min(HOME_SPEED, self.plan.max_speed),
-                                self.plan.max_yaw_rate)
-
-    def _steer_home(self, yaw: float, dx: float, dy: float, speed: float,
-                    rate: float) -> tuple[float, float]:
-        """Forward at ``speed`` (no less than CAR_MIN_SPEED while far off course, to turn),
-        turning towards home."""
-        err = _wrap(math.atan2(-dy, -dx) - yaw)
-        v = max(min(CAR_MIN_SPEED, speed), speed * max(0.0, math.cos(err)))
-        return v, self._turn_toward(err, rate)
-
-    def _scripted(self, t: float, yaw: float, dx: float, dy: float, dist: float,
-                  speed: float) -> tuple[float, float]:
-        if self._seg_t0 is None:
-            self._seg_t0 = t
-        while True:
-            seg = self.segments[self.index]
-            if t - self._seg_t0 >= seg.duration:
-                self._advance(t)
-                continue
-            if seg.kind == "steer_home":
-                err = _wrap(math.atan2(-dy, -dx) - yaw)
-                if dist < 1.5 or abs(err) < 0.3:
-                    self._advance(t)
-                    continue
-                return self._steer_home(yaw, dx, dy, seg.speed, seg.yaw_rate)
-            return super()._scripted(t, yaw, dx, dy, dist, speed)
-
-    def describe(self) -> str:
-        p = self.plan
-        return (f"car manoeuvre (turns at speed) within {p.space:g} m: setpoints up to "
-                f"{p.max_speed:.2f} m/s, {p.max_yaw_rate:.2f} rad/s")
-
-
-# --------------------------------------------------------------------------- PX4
-
-@dataclass(frozen=True)
-class CourseSegment:
-    """One piece of the velocity-vector manoeuvre: ``speed`` (m/s) for ``duration`` s along a
-    course ``offset`` rad off the heading at the segment's start (a course step), or, with
-    ``circle`` set, a course kept ``offset`` ahead of the current heading (a steady turn)."""
-
-    duration: float
-    speed: float
-    offset: float = 0.0
-    circle: bool = False
-    label: str = ""
-
-
-def vector_script(plan: Plan) -> list[CourseSegment]:
-    """The manoeuvre for a vehicle driven by velocity vectors (PX4: its own speed and course
-    loops; an Ackermann rover cannot turn on the spot, so nothing here asks it to):
-
-    1. speed steps on a gentle circle (delay, lag, acceleration and deceleration, the clamp);
-    2. course steps at a moderate speed, small and large, both ways (the course gain, the
-       turn-rate clamp and its rate limits);
-    3. large course steps slowly (the rover turns at |v| / R_min: the turning radius);
-    4. a stop.
-    The guard of :class:`VectorExcitation` turns the rover back towards home whenever it would
-    leave ``space``."""
-    v = plan.max_speed
-    v_lo, v_mid = min(0.6, 0.2 * v), min(HOME_SPEED, 0.45 * v)
-    v_hi = min(0.8 * plan.expected_top, math.sqrt(max(plan.space, 1.0) * 1.2))
-    gentle = 0.25                                    # rad of course lead: a wide circle
-    return [
-        CourseSegment(2.0, 0.0, 0.0, False, "still"),
-        CourseSegment(4.0, v_lo, gentle, True, "speed step small"),
-        CourseSegment(4.0, v_mid, gentle, True, "speed step"),
-        CourseSegment(4.0, v_hi, gentle, True, "speed step large"),
-        CourseSegment(3.0, v_lo, gentle, True, "slow down"),
-        CourseSegment(3.0, v_mid, 0.3, False, "course +0.3"),
-        CourseSegment(3.0, v_mid, -0.3, False, "course -0.3"),
-        CourseSegment(3.0, v_mid, 1.2, False, "course +1.2"),
-        CourseSegment(3.0, v_mid, -1.2, False, "course -1.2"),
-        CourseSegment(3.0, v_mid, 2.5, False, "course +2.5"),
-        CourseSegment(3.0, v_mid, -2.5, False, "course -2.5"),
-        CourseSegment(4.0, v_lo, 2.8, True, "tight turn slow +"),
-        CourseSegment(4.0, v_lo, -2.8, True, "tight turn slow -"),
-        CourseSegment(4.0, v_mid, 2.8, True, "tight turn +"),
-        CourseSegment(3.0, v_hi, 0.0, False, "straight fast"),
-        CourseSegment(3.0, 0.0, 0.0, False, "stop"),
-        CourseSegment(math.inf, 0.0, 0.0, False, "done"),
-    ]
-
-
-class VectorExcitation:
-    """The excitation tracker for a velocity-vector vehicle (PX4): ``step`` returns the script's
-    velocity vector u_p = speed (cos course, sin course) (``speed`` and ``yaw_rate`` carry the
-    speed and the course offset asked, for the logs). While the rover heads out beyond
-    ``space`` less a margin it is sent towards home at a moderate speed instead (a return),
-    then the script goes on with its next segment."""
-
-    name = "excitation"
-
-    def __init__(self, plan: Plan):
-        self.plan = plan
-        self.segments = vector_script(plan)
-        self.index = 0
-        self.estimate: Estimate | None = None
-        self.returns = 0
-        self.max_distance = 0.0
-        self._home: tuple[float, float] | None = None
-        self._seg_t0: float | None = None
-        self._course: float | None = None
-        self._returning = False
-
-    @property
-    def phase(self) -> str:
-        if self._returning:
-            return "return"
-        return self.segments[min(self.index, len(self.segments) - 1)].label
-
-    @property
-    def finished(self) -> bool:
-        """The script is over: the rover stopped (its last segment)."""
-        return not self._returning and self.index == len(self.segments) - 1
-
-    def reset(self) -> None:
-        self._seg_t0 = None
-        self._course = None
-
-    def step(self, t: float, meas: Measurement, ref: Reference) -> Command:
-        self.estimate = Estimate(meas.x, meas.y, meas.yaw, meas.vx, meas.vy, meas.yaw_rate)
-        if self._home is None:
-            self._home = (ref.x, ref.y)
-        dx, dy = meas.x - self._home[0], meas.y - self._home[1]
-        dist = math.hypot(dx, dy)
-        self.max_distance = max(self.max_distance, dist)
-        p = self.plan
-        outward = dx * meas.vx + dy * meas.vy > 0
-        if not self._returning and dist > p.soft_radius - 1.0 and outward:
-            self._returning = True
-            self.returns += 1
-        if self._returning:
-            if dist > 0.4 * p.space:
-                home = math.atan2(-dy, -dx)
-                return self._vector(min(HOME_SPEED, p.max_speed, 0.5 * p.max_speed + 0.5),
-                                    home, _wrap(home - meas.yaw))
-            self._returning = False
-            self._advance(t)
-        if self._seg_t0 is None:
-            self._seg_t0 = t
-        seg = self.segments[self.index]
-        if t - self._seg_t0 >= seg.duration:
-            self._advance(t)
-            seg = self.segments[self.index]
-        if seg.circle or self._course is None:
-            self._course = meas.yaw + seg.offset
-        return self._vector(seg.speed, self._course, seg.offset)
-
-    def _advance(self, t: float) -> None:
-        self.index = min(self.index + 1, len(self.segments) - 1)
-        self._seg_t0, self._course = t, None
-
-    def describe(self) -> str:
-        return (f"velocity-vector manoeuvre within {self.plan.space:g} m: up to "
-                f"{self.plan.max_speed:.2f} m/s")
-
-    def _vector(self, speed: float, course: float, offset: float) -> Command:
-        speed = max(0.0, min(self.plan.max_speed, speed))
-        return Command(speed, offset, speed * math.cos(course), speed * math.sin(course))
+def manoeuvres() -> dict[str, type[Excitation] | type[VectorExcitation]]:
+    """The manoeuvres by the name a profile gives (``IdentFacts.manoeuvre`` of an autopilot
+    that flies its own whatever steers the rover, else ``SteeringProfile.manoeuvre``). A new
+    one: a module beside this (``excite_car.py``, ``excite_vector.py``) and a line here."""
+    from .excite_car import CarExcitation  # they build on this module
+    from .excite_vector import VectorExcitation
+    return {IN_PLACE: Excitation, AT_SPEED: CarExcitation, VECTORS: VectorExcitation}
 
 
 def manoeuvre(profile: AutopilotProfile, prior: RoverParams, space: float,
               limits: Limits, steering: SteeringProfile | None = None
-              ) -> Excitation | CarExcitation | VectorExcitation:
+              ) -> Excitation | VectorExcitation:
     """The excitation tracker for a vehicle of this autopilot whose priors are ``prior``: within
     ``space`` m, setpoints up to the profile's headroom x the autopilot's limits (so the clamps
-    show) and no more than the companion's ``limits``; the velocity-vector manoeuvre where the
-    profile's setpoints are velocity vectors; the car's (every turn at speed) for a
-    ``steering`` kind that does not turn in place."""
+    show) and no more than the companion's ``limits``; the autopilot's own manoeuvre where its
+    profile names one (PX4's velocity vectors), else the ``steering`` kind's (the car's flies
+    every turn at speed; none known: the vehicle model's kind, which turns in place)."""
     h = profile.ident.headroom
     plan = Plan(space=space, max_speed=min(limits.max_speed, h * prior.max_speed),
                 max_yaw_rate=min(limits.max_yaw_rate, h * prior.max_yaw_rate),
                 decel=min(prior.decel, prior.max_accel), top_speed=prior.max_speed)
-    if profile.setpoint.velocity_vector:
-        return VectorExcitation(plan)
-    if steering is not None and not steering.turns_in_place:
-        return CarExcitation(plan)
-    return Excitation(plan)
+    name = profile.ident.manoeuvre or (steering or model_steering()).manoeuvre
+    return manoeuvres()[name](plan)

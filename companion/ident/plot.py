@@ -8,7 +8,8 @@ from __future__ import annotations
 from pathlib import Path
 
 from ..sim.plant import RoverParams
-from .fit import Series, simulate
+from .fit import simulate
+from .series import Series
 
 
 def _pyplot():

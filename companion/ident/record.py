@@ -14,10 +14,13 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from .. import profiles
+from ..profiles.autopilot import AutopilotProfile
 from ..sim.plant import RoverParams
 from ..sim.vehicle_file import VehicleFile
-from .fit import Fit, Series
-from .priors import FILE_NAMES, SPEED_FIELDS, YAW_FIELDS, Priors
+from .fit import Fit
+from .priors import COURSE_FIELDS, FILE_NAMES, SPEED_FIELDS, YAW_FIELDS, Priors
+from .series import Series
 
 
 @dataclass
@@ -37,6 +40,9 @@ class Report:
     command: str = ""
     parts: list[Series] = field(default_factory=list)    # each log's series, when several
     fit_cpu_s: float = 0.0         # this process's CPU seconds for the fit
+    # the autopilot the log was recorded with (its heartbeat; a log that does not say: the
+    # default): its priors, what calibrate holds the fit to
+    profile: AutopilotProfile = field(default_factory=profiles.default_autopilot)
 
 
 def file_value(params: RoverParams, name: str) -> float:
@@ -56,15 +62,20 @@ def _number(value: float) -> float | None:
     return value if math.isfinite(value) else None
 
 
-def parameter_table(params: RoverParams) -> dict[str, dict[str, float | None]]:
-    """{"speed": {"delay_s": ...}, "turn_rate": {...}, "coupling": {...}} (None: no limit)."""
+def parameter_table(params: RoverParams, autopilot: AutopilotProfile | None = None
+                    ) -> dict[str, dict[str, float | None]]:
+    """{"speed": {"delay_s": ...}, "turn_rate": {...}, "coupling": {...}} (None: no limit),
+    and "course" where the profiles describe the vehicle by its fields (the ``autopilot``'s
+    course loop, found from the model when not given; a steering kind's turning radius)."""
     out: dict[str, dict[str, float | None]] = {}
     for name in SPEED_FIELDS + YAW_FIELDS:        # the vehicle file's order: turn_speed first
         section, key = FILE_NAMES[name].split(".")
         out.setdefault(section, {})[key] = _number(file_value(params, name))
     table = {k: out[k] for k in ("speed", "turn_rate", "coupling")}
     table["turn_rate"]["lat_accel_max_m_s2"] = _number(float(params.max_lat_accel))
-    if params.velocity_vector or float(params.min_turn_radius) > 0:
+    autopilot = autopilot or profiles.autopilot_of_model(params)
+    described = {*autopilot.model_fields, *profiles.steering_of_model(params).model_fields}
+    if described & set(COURSE_FIELDS):
         table["course"] = {"gain_1_s": float(params.course_gain),
                            "min_turn_radius_m": float(params.min_turn_radius)}
     return table
@@ -136,7 +147,7 @@ def as_dict(report: Report) -> dict[str, Any]:
         "duration_s": report.series.duration,
         "fit_time_s": report.fit_time_s,
         "evaluations": f.evaluations,
-        "params": parameter_table(f.params),
+        "params": parameter_table(f.params, report.profile),
         "rms": {"speed_m_s": f.speed_rms, "yaw_rate_rad_s": f.yaw_rate_rms},
         "check": (None if report.check_rms is None else
                   {"log": report.check_log, "speed_m_s": report.check_rms[0],
@@ -186,5 +197,9 @@ def vehicle_file(report: Report, name: str) -> VehicleFile:
     source.update(report.autopilot)
     record = {key.replace(".", "_"): _determined_line(entry)
               for key, entry in determined(report).items()}
+    # the profiles that fly it, named in the file: the log's autopilot, the steering kind its
+    # parameters show (else the fitted model's)
+    steering = report.priors.steering or profiles.steering_of_model(f.params)
     return VehicleFile(params=f.params, name=name, header="\n".join(header), fit=fit_record,
-                       source=source, determined=record)
+                       source=source, determined=record, autopilot=report.profile.name,
+                       steering=steering.name)

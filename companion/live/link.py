@@ -5,9 +5,10 @@ Connect, wait for the vehicle's heartbeat and pick its autopilot's profile
 falling back to a rate the vehicle accepts), change mode, arm, and encode the tracker's command
 as SET_POSITION_TARGET_LOCAL_NED. What differs between autopilots is the profile's: the mode
 table (names as pymavlink gives them), how DO_SET_MODE asks for a mode, and the setpoint
-encoding (:class:`~companion.profiles.autopilot.SetpointEncoding`: ArduPilot's speed and yaw rate
-in BODY_NED, Rover's ``set_desired_turn_rate_and_speed``, the paper's two inputs; PX4's velocity
-vector u_p in LOCAL_NED, along which PX4 rovers steer themselves).
+encoding (:class:`~companion.profiles.setpoint.SetpointEncoding`, its frame, type mask and
+``encode``: ArduPilot's speed and yaw rate in BODY_NED, Rover's
+``set_desired_turn_rate_and_speed``, the paper's two inputs; PX4's velocity vector u_p in
+LOCAL_NED, along which PX4 rovers steer themselves).
 
 Each setpoint carries the ``time_boot_ms`` of the telemetry sample it answers (ArduPilot and PX4
 ignore the field), so a log or a test can pair every setpoint with its sample.
@@ -43,6 +44,7 @@ from ..mav import signing  # noqa: E402
 from ..mav.connection import open_connection  # noqa: E402
 from ..mav.sockets import size_receive_buffer  # noqa: E402
 from ..profiles.autopilot import AutopilotProfile, ModeTable  # noqa: E402
+from ..profiles.setpoint import SetpointEncoding  # noqa: E402
 from .config import PLACEHOLDER_SYSID, LinkConfig  # noqa: E402,F401  (its home; imported from here too)
 
 mavlink = mavutil.mavlink
@@ -97,7 +99,7 @@ class Link:
         self._armed = False
         self._modes = ModeTable()                 # the vehicle's, from its profile and MAV_TYPE
         # the setpoint encoding, from the profile (see send_command)
-        self._frame, self._mask, self._vector = 0, 0, False
+        self._setpoint: SetpointEncoding | None = None
         self.setpoints_sent = 0
         self._recv_failed = False                 # the last read raised (see wait)
         self.last_ack: dict[int, int] = {}        # command id -> last result
@@ -274,8 +276,7 @@ class Link:
                 # The onboard-computer convention: a component of the vehicle's own system.
                 self.mav.srcSystem = self.vehicle.sysid
             self._modes = profile.modes_for(msg.type)
-            sp = profile.setpoint
-            self._frame, self._mask, self._vector = sp.frame, sp.type_mask, sp.velocity_vector
+            self._setpoint = profile.setpoint
             self._note_heartbeat(msg)
             return self.vehicle
         if should_stop():
@@ -358,15 +359,12 @@ class Link:
 
     def send_command(self, cmd: Command, time_boot_ms: int) -> None:
         """The tracker's command as SET_POSITION_TARGET_LOCAL_NED (see the module docstring)."""
-        v = self.vehicle
-        if self._vector:
-            self.mav.set_position_target_local_ned_send(
-                time_boot_ms, v.sysid, v.compid, self._frame, self._mask,
-                0.0, 0.0, 0.0, cmd.ux, cmd.uy, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
-        else:
-            self.mav.set_position_target_local_ned_send(
-                time_boot_ms, v.sysid, v.compid, self._frame, self._mask,
-                0.0, 0.0, 0.0, cmd.speed, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, cmd.yaw_rate)
+        v, sp = self.vehicle, self._setpoint
+        assert sp is not None          # set with the vehicle (wait_vehicle)
+        vx, vy, yaw_rate = sp.encode(cmd)
+        self.mav.set_position_target_local_ned_send(
+            time_boot_ms, v.sysid, v.compid, sp.frame, sp.type_mask,
+            0.0, 0.0, 0.0, vx, vy, 0.0, 0.0, 0.0, 0.0, 0.0, yaw_rate)
         self.setpoints_sent += 1
 
     def send_stop(self, time_boot_ms: int = 0) -> None:

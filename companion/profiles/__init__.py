@@ -8,7 +8,7 @@ from __future__ import annotations
 from typing import Any
 
 from . import ackermann, ardupilot, px4, skid, steering
-from .autopilot import AirframeFrame, AutopilotProfile, ServoFrame
+from .autopilot import AutopilotProfile
 from .steering import SteeringProfile
 
 # Adding one: a module beside these with its PROFILE, and one line here (docs/design/profiles.md).
@@ -34,10 +34,20 @@ def from_heartbeat(mav_autopilot: int) -> AutopilotProfile | None:
     return next((p for p in AUTOPILOTS.values() if mav_autopilot in p.mav_autopilot), None)
 
 
-def from_setpoints(velocity_vector: bool) -> AutopilotProfile:
-    """The first profile whose setpoints are velocity vectors (or speed / yaw rate): which
-    autopilot a log's setpoints were written for, when nothing else says."""
-    return next(p for p in AUTOPILOTS.values() if p.setpoint.velocity_vector == velocity_vector)
+def default_autopilot() -> AutopilotProfile:
+    """The profile of a vehicle that says nothing else (the plant's and the demo's default; a
+    log without a heartbeat)."""
+    return AUTOPILOTS[DEFAULT_AUTOPILOT]
+
+
+def autopilot_of_model(params) -> AutopilotProfile:
+    """The autopilot a vehicle model was identified on (``params``: a RoverParams): the first
+    whose own fields (``model_fields``: PX4's course loop) are set in it, else the default.
+    For a vehicle known only by its model (a vehicle file); one that names its autopilot
+    passes the profile instead."""
+    return next((p for p in AUTOPILOTS.values()
+                 if any(float(getattr(params, f)) > 0 for f in p.model_fields)),
+                default_autopilot())
 
 
 def prior_params() -> tuple[str, ...]:
@@ -72,34 +82,26 @@ def steering_by_servos(functions: set[int] | frozenset[int]) -> SteeringProfile 
 
 def steering_params(profile: AutopilotProfile) -> tuple[str, ...]:
     """The parameters that tell this autopilot's steering kind (its frame's)."""
-    frame = profile.preflight.frame
-    if isinstance(frame, ServoFrame):
-        return frame.function_params
-    return (frame.param,)
+    return profile.preflight.frame.params()
 
 
 def steering_from_params(profile: AutopilotProfile,
                          values: dict[str, float]) -> SteeringProfile | None:
     """The steering kind the parameters ``values`` (``{name: value}``) show, None if none."""
-    frame = profile.preflight.frame
-    if isinstance(frame, AirframeFrame):
-        value = values.get(frame.param)
-        return steering_by_airframe(int(value)) if value is not None else None
-    functions = {int(v) for k, v in values.items() if k in frame.function_params and v == v}
-    return steering_by_servos(functions)
+    return profile.preflight.frame.steering(values)
 
 
 __all__ = ["AUTOPILOTS", "STEERING", "DEFAULT_AUTOPILOT", "AutopilotProfile", "SteeringProfile",
-           "autopilot_named", "from_heartbeat", "from_setpoints", "prior_params", "model_steering",
-           "steering_of_model", "steering_by_airframe", "steering_by_servos", "steering_params",
+           "autopilot_named", "from_heartbeat", "default_autopilot", "autopilot_of_model",
+           "kinds_of_model", "prior_params", "model_steering", "steering_of_model", "steering_by_airframe", "steering_by_servos", "steering_params",
            "steering_from_params"]
 
 
 def kinds_of_model(params) -> tuple[AutopilotProfile, SteeringProfile]:
     """(the autopilot, the steering kind) a vehicle model is flown by, for a vehicle file that
-    does not name them (written before files named them): the first autopilot whose setpoint
-    interface the model takes, the steering kind whose fields it sets."""
-    return from_setpoints(bool(params.velocity_vector)), steering_of_model(params)
+    does not name them: the autopilot whose fields it sets (:func:`autopilot_of_model`), the
+    steering kind whose fields it sets (:func:`steering_of_model`)."""
+    return autopilot_of_model(params), steering_of_model(params)
 
 
 def tune_settings(autopilot: AutopilotProfile, steering_kind: SteeringProfile) -> dict[str, Any]:
@@ -108,6 +110,6 @@ def tune_settings(autopilot: AutopilotProfile, steering_kind: SteeringProfile) -
     (``tune_on_turn_rate``; the steering kind's win where both say). Names are RobustConfig's
     (companion.sim.vehicle_gains.config_for)."""
     settings = dict(autopilot.tune)
-    if not autopilot.setpoint.velocity_vector:
+    if not autopilot.setpoint.velocity_vector:     # velocity vectors: its course loop steers
         settings.update(steering_kind.tune_on_turn_rate)
     return settings

@@ -14,7 +14,7 @@ PROFILE = SteeringProfile(
     name="ackermann", label="Ackermann",
     servo_functions=(26, 70), servo_text="ground steering 26, throttle 70",
     airframe=5, airframe_label="Rover (Ackermann)",
-    turns_in_place=False,
+    turns_in_place=False, manoeuvre="turns at speed",
     verdict=WARN,
     why=("an Ackermann rover cannot turn in place and its turn rate follows its speed; the "
          "paper's model is a differential drive: identify the vehicle (companion identify) and "

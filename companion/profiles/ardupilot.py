@@ -26,7 +26,10 @@ import math
 from collections.abc import Mapping
 from typing import TYPE_CHECKING
 
+from ..core.angles import wrap
+from ..core.signals import Command
 from . import skid
+from .ardupilot_preflight import GcsFailsafe, ServoFrame
 from .autopilot import (
     FLAG_CUSTOM_MODE_ENABLED,
     FLAG_GUIDED_ENABLED,
@@ -42,18 +45,42 @@ from .autopilot import (
     AutopilotProfile,
     EstimateFacts,
     FailsafeFacts,
-    GcsFailsafe,
     IdentFacts,
     LimitParam,
     Mode,
     ModeTable,
     PlantFacts,
     PreflightFacts,
-    ServoFrame,
-    SetpointEncoding,
     TopSpeedParams,
 )
 from .priors import Priors, defaults, finite
+from .setpoint import (
+    ACC_IGNORE,
+    BODY_FRAMES,
+    FRAME_BODY_NED,
+    FRAME_BODY_OFFSET_NED,
+    FRAME_LOCAL_NED,
+    FRAME_LOCAL_OFFSET_NED,
+    MAX_TARGET_POSITION,
+    MAX_TARGET_RATE,
+    MAX_TARGET_SPEED,
+    POS_IGNORE,
+    STOP,
+    VEL_IGNORE,
+    YAW_IGNORE,
+    YAW_RATE_IGNORE,
+    HeadingSpeed,
+    Pose,
+    Rejected,
+    Setpoint,
+    SetpointEncoding,
+    Target,
+    TurnRateSpeed,
+    all_finite,
+    plausible,
+    position,
+    used,
+)
 
 if TYPE_CHECKING:
     from ..sim.plant import RoverParams
@@ -99,6 +126,58 @@ def mode_name(table: ModeTable, base_mode: int, custom_mode: int) -> str:
         return f"Mode(0x{base_mode:08x})"
     mode = table.by_number(custom_mode)
     return mode.name if mode is not None else f"Mode({custom_mode:d})"
+
+
+# --------------------------------------------------------------------------- setpoints
+
+FRAMES = (FRAME_LOCAL_NED, FRAME_LOCAL_OFFSET_NED, FRAME_BODY_NED, FRAME_BODY_OFFSET_NED)
+
+
+def encode_setpoint(cmd: Command) -> tuple[float, float, float]:
+    """(vx, vy, yaw_rate) = (v_ref, 0, omega_ref) in BODY_NED: Rover's
+    ``set_desired_turn_rate_and_speed``."""
+    return cmd.speed, 0.0, cmd.yaw_rate
+
+
+def decode_setpoint(sp: Setpoint, pose: Pose, max_speed: float) -> Target | Rejected:
+    """ArduPilot Rover's reading of a SET_POSITION_TARGET_LOCAL_NED (Rover/GCS_MAVLink_Rover.cpp,
+    handle_set_position_target_local_ned): a field group counts as ignored when ANY of its
+    type_mask bits is set; acceleration must be ignored or the message is dropped; a position
+    wins; velocity alone is a heading + speed; velocity with yaw or yaw rate keeps the sign of
+    vx (reverse); velocity with yaw rate is exactly the paper's (v_ref, omega_ref)."""
+    if sp.frame not in FRAMES:
+        return Rejected("frame")
+    mask = sp.type_mask
+    pos, vel = used(mask, POS_IGNORE), used(mask, VEL_IGNORE)
+    yaw, rate = used(mask, YAW_IGNORE), used(mask, YAW_RATE_IGNORE)
+    if used(mask, ACC_IGNORE):
+        return Rejected("acceleration")
+    if ((pos and not all_finite(sp.x, sp.y)) or (vel and not all_finite(sp.vx, sp.vy))
+            or (yaw and not all_finite(sp.yaw)) or (rate and not all_finite(sp.yaw_rate))):
+        return Rejected("non-finite")
+    if ((pos and not plausible(sp.x, sp.y, limit=MAX_TARGET_POSITION))
+            or (vel and not plausible(sp.vx, sp.vy, limit=MAX_TARGET_SPEED))
+            or (yaw and abs(sp.yaw) > 100.0)
+            or (rate and not plausible(sp.yaw_rate, limit=MAX_TARGET_RATE))):
+        return Rejected("out of range")
+    if pos:
+        return position(sp, pose)
+    body = sp.frame in BODY_FRAMES
+    speed, heading = 0.0, pose.yaw
+    if vel:
+        speed = min(math.hypot(sp.vx, sp.vy), max_speed)
+        heading = math.atan2(sp.vy, sp.vx) + (pose.yaw if body else 0.0)
+        if (yaw or rate) and sp.vx < 0.0:
+            speed = -speed
+    if yaw:
+        heading = sp.yaw + (pose.yaw if body else 0.0)
+    if rate:
+        return TurnRateSpeed(speed, sp.yaw_rate)
+    if vel and not yaw and speed == 0.0:
+        return STOP  # a zero vector has no direction: stand still rather than turn to north
+    if vel or yaw:
+        return HeadingSpeed(wrap(heading), speed)
+    return Rejected("nothing to do")
 
 
 # --------------------------------------------------------------------------- priors
@@ -254,7 +333,8 @@ PROFILE = AutopilotProfile(
     track_mode="GUIDED", hold_mode="HOLD",
     set_mode_params=set_mode_params, requested_mode=requested_mode, mode_name=mode_name,
     setpoint=SetpointEncoding(frame=MAV_FRAME_BODY_NED, type_mask=1511,   # 0x05E7
-                              velocity_vector=False),
+                              velocity_vector=False, encode=encode_setpoint,
+                              decode=decode_setpoint),
     offboard_warmup=None,
     bytewise_params=False,
     preflight=PreflightFacts(

@@ -3,17 +3,21 @@
 One :class:`AutopilotProfile` per autopilot (``ardupilot.py``, ``px4.py``), registered in
 ``companion/profiles/__init__.py``. Code outside ``companion/profiles/`` never asks which
 autopilot it talks to; it reads the answer from the profile (``tests/test_profiles.py`` reads
-the code for any test of an autopilot's name). The profile holds facts, not I/O:
+the code for any test of an autopilot's name). The profile holds facts and the behaviour that
+differs (a frontend calls it, one backend per autopilot), no I/O:
 
 * ids: the HEARTBEAT's MAV_AUTOPILOT value(s);
 * modes: the mode table (pymavlink's names <-> HEARTBEAT ``custom_mode`` and ``base_mode``), the
   mode that follows the companion's setpoints and the one it hands the vehicle back in, how
   MAV_CMD_DO_SET_MODE asks for a mode and how a heartbeat names one;
 * the setpoint encoding of SET_POSITION_TARGET_LOCAL_NED (frame, type mask, speed and yaw rate
-  or the velocity vector u_p) and the offboard warm-up (setpoints streamed before the track mode
+  or the velocity vector u_p: :class:`~companion.profiles.setpoint.SetpointEncoding`, which also
+  reads such a message as the autopilot does, for the plant) and the offboard warm-up (setpoints streamed before the track mode
   is asked for; None: none needed);
 * the parameter protocol's encoding (bytewise or C cast);
-* the preflight facts (:class:`PreflightFacts`: parameter names and the values the checks want);
+* the preflight facts (:class:`PreflightFacts`: parameter names and the values the checks want,
+  and the autopilot's own checks of its frame and its failsafe, ``frame.check`` /
+  ``failsafe.check``);
 * the identification facts (:class:`IdentFacts`: the parameters read, the priors made of them,
   the manoeuvre's headroom);
 * what ``sitl_plant`` emulates differently (:class:`PlantFacts`);
@@ -28,9 +32,14 @@ from __future__ import annotations
 
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any, Protocol
 
 from .priors import Priors
+from .setpoint import SetpointEncoding
+
+if TYPE_CHECKING:
+    from .observed import Check, Observed
+    from .steering import SteeringProfile
 
 # MAVLink numbers (common.xml), here so the profiles need no pymavlink.
 MAV_AUTOPILOT_ARDUPILOTMEGA = 3
@@ -72,72 +81,34 @@ class ModeTable:
         return frozenset(m.name for m in self.modes)
 
 
-# --------------------------------------------------------------------------- setpoints
-
-@dataclass(frozen=True)
-class SetpointEncoding:
-    """How the tracker's command goes out as SET_POSITION_TARGET_LOCAL_NED.
-
-    ``velocity_vector`` False: (vx, vy, yaw_rate) = (v_ref, 0, omega_ref) in ``frame`` (the
-    paper's two inputs); True: (vx, vy) = u_p, the autopilot ignores yaw and yaw rate and steers
-    along the velocity itself (and a plant emulating it reads setpoints so)."""
-
-    frame: int
-    type_mask: int
-    velocity_vector: bool
-
-
 # --------------------------------------------------------------------------- preflight facts
 
-@dataclass(frozen=True)
-class ServoFrame:
-    """The steering kind shows in the frame class and the output functions (ArduPilot):
-    ``class_param`` must be one of ``classes``, ``type_param`` 0, and a steering kind's
-    SERVOn_FUNCTION values (:attr:`companion.profiles.steering.SteeringProfile.servo_functions`)
-    all assigned."""
+class SteeringFrame(Protocol):
+    """How the autopilot's setup shows the steering kind (ArduPilot's output functions:
+    :class:`~companion.profiles.ardupilot_preflight.ServoFrame`; PX4's airframe parameter:
+    :class:`~companion.profiles.px4.AirframeFrame`)."""
 
-    class_param: str
-    classes: Mapping[int, str]          # accepted frame classes -> what they are
-    type_param: str
-    # the output-function parameters (ArduPilot: SERVO1_FUNCTION ... SERVO16_FUNCTION)
-    function_params: tuple[str, ...] = tuple(f"SERVO{n}_FUNCTION" for n in range(1, 17))
+    def params(self) -> tuple[str, ...]:
+        """The parameters that tell the steering kind."""
+        ...
 
+    def steering(self, values: Mapping[str, float]) -> SteeringProfile | None:
+        """The steering kind those parameters (``{name: value}``) show, None if none."""
+        ...
 
-@dataclass(frozen=True)
-class AirframeFrame:
-    """The steering kind is one airframe parameter (PX4's CA_AIRFRAME): a steering kind's
-    :attr:`~companion.profiles.steering.SteeringProfile.airframe`, or one of ``other_rovers``."""
-
-    param: str
-    other_rovers: Mapping[int, str]     # rover airframes no steering profile describes
+    def check(self, obs: Observed) -> list[Check]:
+        """Preflight's rows on the frame and its steering kind."""
+        ...
 
 
-@dataclass(frozen=True)
-class GcsFailsafe:
-    """A failsafe on the ground station's heartbeat (the companion's counts): on / off, what it
-    does, after how long, and which system id it watches (several firmware spellings)."""
+class SilenceFailsafe(Protocol):
+    """The autopilot's failsafe for a companion that falls silent (ArduPilot's GCS failsafe:
+    :class:`~companion.profiles.ardupilot_preflight.GcsFailsafe`; PX4's offboard loss:
+    :class:`~companion.profiles.px4.OffboardFailsafe`)."""
 
-    enable: str
-    action: str
-    action_hold: float                  # the value that stops the rover
-    action_hold_label: str
-    timeout: str
-    timeout_range: tuple[float, float]  # s, inclusive
-    timeout_fix: float
-    sysid_params: tuple[tuple[str, str, str], ...]   # (watched id, its upper bound or '', enforce)
-    silent_companion: str               # what happens without the failsafe
-
-
-@dataclass(frozen=True)
-class OffboardFailsafe:
-    """A failsafe on the setpoint stream itself (PX4's offboard loss): how long the last
-    setpoint is followed, and what the vehicle then does."""
-
-    loss_timeout: str
-    loss_timeout_max: float             # s
-    action: str
-    action_hold: int
-    action_names: Mapping[int, str]
+    def check(self, obs: Observed) -> list[Check]:
+        """Preflight's rows on that failsafe's parameters."""
+        ...
 
 
 @dataclass(frozen=True)
@@ -147,7 +118,7 @@ class LimitParam:
     name: str
     unit: str
     to_si: float
-    field: str                          # companion.preflight.checks.Limits field
+    field: str                          # companion.profiles.observed.Limits field
     what: str
     zero_as: str | None = None          # 0 means "as this parameter" (None: 0 is no limit)
 
@@ -163,8 +134,8 @@ class TopSpeedParams:
 
 @dataclass(frozen=True)
 class PreflightFacts:
-    frame: ServoFrame | AirframeFrame
-    failsafe: GcsFailsafe | OffboardFailsafe
+    frame: SteeringFrame                 # its ``check``: preflight's steering rows
+    failsafe: SilenceFailsafe            # its ``check``: preflight's failsafe rows
     loop_rate_param: str | None         # a stream above 0.8 x it is refused (None: no such cap)
     limits: tuple[LimitParam, ...]      # () : not read, ``limits_unread`` says why
     top_speed: TopSpeedParams | None
@@ -177,8 +148,7 @@ class PreflightFacts:
 
 @dataclass(frozen=True)
 class IdentFacts:
-    """What identification reads and assumes. The manoeuvre follows the setpoint encoding:
-    speed / turn-rate steps (with turns in place) or velocity vectors (no turn in place)."""
+    """What identification reads and assumes, and the manoeuvre it flies."""
 
     params: tuple[str, ...]                         # read with PARAM_REQUEST_READ (or a .tlog)
     priors: Callable[[Mapping[str, float]], Priors]  # {name: value} (any subset) -> priors
@@ -190,6 +160,9 @@ class IdentFacts:
     # (speed m/s, turn rate rad/s): the RMS up to which the model is taken to explain a flight
     # (companion calibrate stops above it; issue 11's held-out standard on ArduPilot)
     explain_limit: tuple[float, float] = (0.15, 0.15)
+    # the excitation manoeuvre this autopilot flies whatever steers the rover (a name of
+    # companion.ident.excite.manoeuvres: PX4's "velocity vectors"); None: the steering kind's
+    manoeuvre: str | None = None
 
 
 # --------------------------------------------------------------------------- the plant
@@ -293,10 +266,14 @@ class AutopilotProfile:
     # one whose recorded parameters (its ``[source]`` values of ``ident.params``) and steering
     # kind the vehicle has (companion.live.presets); () : none.
     presets: Mapping[str, str] = field(default_factory=dict)
-    # The robust tuner's settings (companion.sim.robust.RobustConfig fields; ``spread`` as a
+    # The robust tuner's settings (companion.sim.robust.config.RobustConfig fields; ``spread`` as a
     # mapping of Spread's) for a vehicle flown by these setpoints: what the identified model
     # leaves out of how this autopilot drives (companion.profiles.tune_settings).
     tune: Mapping[str, Any] = field(default_factory=dict)
+    # RoverParams fields of the inner loops only this autopilot has (PX4's course loop,
+    # ``course_gain``): a vehicle model with one set was identified on it
+    # (companion.profiles.autopilot_of_model, the vehicle file's [course])
+    model_fields: tuple[str, ...] = ()
     # modes the autopilot reports while it starts and leaves on its own (ArduPilot's
     # INITIALISING, then its INITIAL_MODE): nobody's choice (companion.live.runner)
     boot_modes: frozenset[str] = frozenset()

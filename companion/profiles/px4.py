@@ -26,8 +26,10 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping
+from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
+from ..core.signals import Command
 from . import skid
 from .autopilot import (
     FLAG_AUTO_ENABLED,
@@ -40,22 +42,41 @@ from .autopilot import (
     MAV_RESULT_DENIED,
     PARAM_INT32,
     PARAM_REAL32,
-    AirframeFrame,
     AutopilotProfile,
     EstimateFacts,
     FailsafeFacts,
     IdentFacts,
     Mode,
     ModeTable,
-    OffboardFailsafe,
     PlantFacts,
     PreflightFacts,
-    SetpointEncoding,
 )
+from .observed import FAIL, OK, WARN, Check, Observed, missing
 from .priors import Priors, defaults, finite
+from .setpoint import (
+    FRAME_BODY_NED,
+    FRAME_LOCAL_NED,
+    MAX_TARGET_POSITION,
+    MAX_TARGET_SPEED,
+    POS_IGNORE,
+    STOP,
+    VEL_IGNORE,
+    HeadingSpeed,
+    Pose,
+    PositionTarget,
+    Rejected,
+    Setpoint,
+    SetpointEncoding,
+    Target,
+    all_finite,
+    body_to_ne,
+    plausible,
+    used,
+)
 
 if TYPE_CHECKING:
     from ..sim.plant import RoverParams
+    from .steering import SteeringProfile
 
 MAIN_AUTO = 4
 OFFBOARD_WARMUP = 1.2      # vehicle s of setpoints before asking for OFFBOARD
@@ -115,6 +136,127 @@ def mode_name(table: ModeTable, base_mode: int, word: int) -> str:
     main, sub = _split(word)
     mode = table.by_number(custom_mode(main, sub if main == MAIN_AUTO else 0))
     return mode.name if mode is not None else "UNKNOWN"
+
+
+# --------------------------------------------------------------------------- setpoints
+
+FRAMES = (FRAME_LOCAL_NED, FRAME_BODY_NED)
+
+
+def encode_setpoint(cmd: Command) -> tuple[float, float, float]:
+    """(vx, vy) = u_p in LOCAL_NED; yaw and yaw rate ignored (PX4 steers along u_p)."""
+    return cmd.ux, cmd.uy, 0.0
+
+
+def decode_setpoint(sp: Setpoint, pose: Pose, max_speed: float) -> Target | Rejected:
+    """PX4 rover offboard: position (LOCAL_NED) or velocity vector; yaw and yaw rate ignored."""
+    if sp.frame not in FRAMES:
+        return Rejected("frame")
+    mask = sp.type_mask
+    pos, vel = used(mask, POS_IGNORE), used(mask, VEL_IGNORE)
+    if (pos and not all_finite(sp.x, sp.y)) or (vel and not all_finite(sp.vx, sp.vy)):
+        return Rejected("non-finite")
+    if ((pos and not plausible(sp.x, sp.y, limit=MAX_TARGET_POSITION))
+            or (vel and not plausible(sp.vx, sp.vy, limit=MAX_TARGET_SPEED))):
+        return Rejected("out of range")
+    if pos and sp.frame == FRAME_LOCAL_NED:
+        return PositionTarget(sp.x, sp.y)
+    if vel:
+        vx, vy = sp.vx, sp.vy
+        if sp.frame == FRAME_BODY_NED:
+            vx, vy = body_to_ne(vx, vy, pose.yaw)
+        speed = min(math.hypot(vx, vy), max_speed)
+        if speed == 0.0:
+            return STOP
+        return HeadingSpeed(math.atan2(vy, vx), speed)
+    return Rejected("nothing to do")
+
+
+# --------------------------------------------------------------------------- preflight
+
+@dataclass(frozen=True)
+class AirframeFrame:
+    """The steering kind is one airframe parameter (PX4's CA_AIRFRAME): a steering kind's
+    :attr:`~companion.profiles.steering.SteeringProfile.airframe`, or one of ``other_rovers``."""
+
+    param: str
+    other_rovers: Mapping[int, str]     # rover airframes no steering profile describes
+
+    def params(self) -> tuple[str, ...]:
+        """The parameters that tell the steering kind."""
+        return (self.param,)
+
+    def steering(self, values: Mapping[str, float]) -> SteeringProfile | None:
+        """The steering kind the airframe in ``values`` is, None if none."""
+        from . import steering_by_airframe  # the registry imports the profiles
+        value = values.get(self.param)
+        return steering_by_airframe(int(value)) if value is not None else None
+
+    def check(self, obs: Observed) -> list[Check]:
+        """Skid-steer or Ackermann (a steering profile), from the airframe (the paper's model
+        is a differential-drive rover)."""
+        from . import model_steering, steering_by_airframe
+        model, name = model_steering(), self.param
+        want = f"{model.airframe} ({model.airframe_label})"
+        absent = missing(name, obs, want, "the frame tells skid steering from Ackermann")
+        if absent:
+            return [absent]
+        airframe = int(obs.params[name])
+        kind = steering_by_airframe(airframe)
+        label = (f"{kind.label} ({kind.airframe_label})" if kind is not None
+                 else self.other_rovers.get(airframe, "not a rover"))
+        value = f"{label} ({name} {airframe})"
+        if kind is model:
+            return [Check(name, OK, value, f"{model.airframe}", model.why)]
+        if kind is not None:
+            return [Check(name, kind.verdict, value, want, kind.why)]
+        if airframe in self.other_rovers:
+            return [Check(name, WARN, value, want, "the companion's model is a "
+                          "differential-drive rover")]
+        return [Check(name, FAIL, value, want, "the airframe is not a rover")]
+
+
+@dataclass(frozen=True)
+class OffboardFailsafe:
+    """A failsafe on the setpoint stream itself (PX4's offboard loss): how long the last
+    setpoint is followed, and what the vehicle then does."""
+
+    loss_timeout: str
+    loss_timeout_max: float             # s
+    action: str
+    action_hold: int
+    action_names: Mapping[int, str]
+
+    def check(self, obs: Observed) -> list[Check]:
+        """The failsafe for a companion that falls silent: the offboard-loss timeout, then
+        Hold."""
+        p, out = obs.params, []
+        who = obs.profile.label
+        t_max = self.loss_timeout_max
+        absent = missing(self.loss_timeout, obs, f"{t_max:g} s or less",
+                         f"how long {who} follows a lost stream")
+        if absent:
+            out.append(absent)
+        else:
+            t = p[self.loss_timeout]
+            ok = 0.0 < t <= t_max
+            out.append(Check(self.loss_timeout, OK if ok else WARN, f"{t:g} s",
+                             f"0 < t <= {t_max:g} s",
+                             f"{who} holds the last setpoint this long after the companion falls "
+                             "silent" + ("" if ok else ": the rover drives blind meanwhile"),
+                             {} if ok else {self.loss_timeout: t_max}))
+        hold = f"{self.action_hold} ({self.action_names[self.action_hold]})"
+        absent = missing(self.action, obs, hold, f"what {who} does when offboard is lost")
+        if absent:
+            return out + [absent]
+        act = int(p[self.action])
+        value = f"{act} ({self.action_names.get(act, '?')})"
+        if act == self.action_hold:
+            return out + [Check(self.action, OK, value, hold,
+                                "a lost companion leaves the rover stopped")]
+        return out + [Check(self.action, WARN, value, hold,
+                            "on offboard loss the rover should stop where it is, not wait for "
+                            "a pilot's sticks or drive away", {self.action: float(self.action_hold)})]
 
 
 # --------------------------------------------------------------------------- priors
@@ -217,7 +359,8 @@ PROFILE = AutopilotProfile(
     track_mode="OFFBOARD", hold_mode="LOITER",
     set_mode_params=set_mode_params, requested_mode=requested_mode, mode_name=mode_name,
     setpoint=SetpointEncoding(frame=MAV_FRAME_LOCAL_NED, type_mask=3559,   # 0x0DE7
-                              velocity_vector=True),
+                              velocity_vector=True, encode=encode_setpoint,
+                              decode=decode_setpoint),
     offboard_warmup=OFFBOARD_WARMUP,
     bytewise_params=True,
     preflight=PreflightFacts(
@@ -243,7 +386,10 @@ PROFILE = AutopilotProfile(
                      # turn rate 0.26 rad/s through the course loop); calibrated on such a
                      # model it tracked at a fifth to a half of PX4's own following
                      # (docs/benchmarks.md), so calibrate goes on up to these
-                     explain_limit=(0.5, 0.35)),
+                     explain_limit=(0.5, 0.35),
+                     # its own speed and course loops steer: speeds and course steps, nothing
+                     # on the spot, whatever the steering kind
+                     manoeuvre="velocity vectors"),
     plant=PlantFacts(
         modes=("MANUAL", "POSCTL", "LOITER", "OFFBOARD"),
         unsettable=(),
@@ -254,7 +400,11 @@ PROFILE = AutopilotProfile(
         params=plant_params),
     failsafe=FAILSAFE,
     estimate=ESTIMATE,
+    model_fields=("course_gain",),
     tune={
+        # PX4 steers by u_p and ignores the turn-rate setpoint: one at its limit is no limit
+        # cycle of the vehicle's
+        "limit_cycles": False,
         # the law's progress floor: the share of the reference speed u_p keeps along it, so an
         # Ackermann rover does not turn round when it gets ahead (core.pzc, min_progress). PX4
         # steers its own course from u_p, which the course correction leaves be: none here.

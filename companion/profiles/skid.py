@@ -14,7 +14,7 @@ PROFILE = SteeringProfile(
     name="skid", label="skid-steer",
     servo_functions=(73, 74), servo_text="throttle left 73 / right 74",
     airframe=6, airframe_label="Rover (Differential)",
-    turns_in_place=True,
+    turns_in_place=True, manoeuvre="turns in place",
     verdict=OK, why="a differential-drive rover: the vehicle model's kind",
     model_fields=("turn_speed_coupling", "speed_turn_coupling"),
     # Not tuned on references that ask more than twice its acceleration along the path

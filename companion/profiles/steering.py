@@ -6,8 +6,9 @@ One :class:`SteeringProfile` per kind (``skid.py``, ``ackermann.py``), registere
 verdict on it (the paper's model is a differential drive: ``ok`` for that kind, ``warn`` with a
 why for the others), the vehicle model's fields that describe it
 (:class:`companion.sim.plant.RoverParams`) and the priors identification starts them from.
-Whether it turns in place picks identification's manoeuvre
-(:func:`companion.ident.excite.manoeuvre`: a car's is flown at speed).
+Its identification manoeuvre is named by ``manoeuvre``
+(:func:`companion.ident.excite.manoeuvres`: a car's is flown at speed), and the robust
+tuner's settings for it by ``tune_on_turn_rate``.
 """
 
 from __future__ import annotations
@@ -28,6 +29,9 @@ class SteeringProfile:
     airframe: int                      # PX4 CA_AIRFRAME
     airframe_label: str                # PX4's name of that airframe
     turns_in_place: bool
+    # identification's excitation manoeuvre for this kind (a name of companion.ident.excite.
+    # manoeuvres: "turns in place", "turns at speed"), unless the autopilot flies its own
+    manoeuvre: str
     verdict: str                       # preflight: OK (the vehicle model's kind) or WARN
     why: str                           # the preflight row's reason
     model_fields: tuple[str, ...]      # RoverParams fields describing it (0: not this kind)

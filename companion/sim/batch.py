@@ -3,9 +3,10 @@
 The plant (:mod:`companion.sim.plant`) is integrated with RK4 on a fine fixed step (1 ms or finer);
 the trackers run at their own rate (1 kHz down to 10 Hz or less) on the sampled pose, and their
 command is held (zero-order hold) until the next control step, as on a real autopilot link.
-The very same tracker objects run here and in the live MAVLink loop (a vehicle with PX4's
-velocity-vector interface, ``RoverParams.velocity_vector``, is sent the command's u_p); ``n=None`` simulates one
-vehicle on Python floats, ``n=k`` simulates k vehicles on arrays, each tracker owning a slice.
+The very same tracker objects run here and in the live MAVLink loop (a vehicle model with
+PX4's course loop takes the command's u_p, :meth:`~companion.sim.plant.RoverModel.step_command`);
+``n=None`` simulates one vehicle on Python floats, ``n=k`` simulates k vehicles on arrays, each
+tracker owning a slice.
 
 Metrics (Section 5.3), per vehicle, integrated on the plant step:
     f_cost     = sqrt( int_0^T |p_ref - p|^2 dt )
@@ -105,7 +106,9 @@ def simulate(trackers: Tracker | Sequence[tuple[Tracker, slice]], params: RoverP
 
     ``trackers`` is one tracker for all vehicles, or ``(tracker, slice)`` pairs that split the
     ``n`` vehicles between several trackers (each built with ``n = slice length``).
-    ``progress(fraction)`` is called about a hundred times.
+    ``progress(fraction)`` is called about a hundred times. The model takes each command as its
+    vehicle does (:meth:`companion.sim.plant.RoverModel.step_command`: u_p where it has PX4's
+    course loop, else speed and turn rate).
     """
     groups: list[tuple[Tracker, slice | None]] = (
         list(trackers) if isinstance(trackers, Sequence) else [(trackers, None)])
@@ -115,72 +118,22 @@ def simulate(trackers: Tracker | Sequence[tuple[Tracker, slice]], params: RoverP
     zero = 0.0 if n is None else np.zeros(n)
     x0, y0, yaw0 = config.start
     state = RoverState(x0 + zero, y0 + zero, yaw0 + zero, zero, zero)
-    rng = np.random.default_rng(config.seed)
-    noisy = config.noise_pos > 0 or config.noise_yaw > 0
-    shape: int | None = n
-    noise_part = slice(None)
-    if config.noise_slice is not None and n is not None:
-        total, first = config.noise_slice
-        shape, noise_part = total, slice(first, first + n)
-
+    noise = _Noise(config, n)
     times, substeps_after, h = config.schedule()
     n_control = len(times)
-    half = sum(substeps_after) // 2
-    limit = config.yaw_rate_limit if config.yaw_rate_limit is not None else params.max_yaw_rate
-    at_limit_from = 0.98 * np.asarray(limit, dtype=float) if _ops_finite(limit) else None
-    tv_speed = tv_yaw = at_limit = zero
-    at_limit_steps = 0
-    cost = zero
-    steady = zero
+    tally = _Tally(config, params, zero, sum(substeps_after) // 2)
     trace_stride = None if config.trace_every is None else max(1, round(config.trace_every / h))
     trace: dict[str, list] = {}
     report_every = max(1, n_control // 100)
-    speed_cmd = yaw_rate_cmd = zero
-    last_speed = last_yaw_rate = zero      # the previous step's commands (for the variation)
-    step_index = 0
-    # PX4's interface: the vehicle gets the velocity vector u_p, not (speed, turn rate)
-    vector = params.velocity_vector
-    ux: Any = zero   # Num: a float for one vehicle, filled slice by slice for groups
-    uy: Any = zero
-
+    cost = steady = zero
+    step_index, half = 0, tally.half
     for k in range(n_control):
         t = times[k]
-        substeps = substeps_after[k]
         ref = reference.sample(t)
-        meas = model.measure(state)
-        if noisy:
-            if shape is None:
-                meas.x = meas.x + config.noise_pos * rng.standard_normal()
-                meas.y = meas.y + config.noise_pos * rng.standard_normal()
-                meas.yaw = meas.yaw + config.noise_yaw * rng.standard_normal()
-            else:
-                meas.x = meas.x + config.noise_pos * rng.standard_normal(shape)[noise_part]
-                meas.y = meas.y + config.noise_pos * rng.standard_normal(shape)[noise_part]
-                meas.yaw = meas.yaw + config.noise_yaw * rng.standard_normal(shape)[noise_part]
-        if len(groups) == 1 and groups[0][1] is None:
-            cmd = groups[0][0].step(t, meas, ref)
-            speed_cmd, yaw_rate_cmd = cmd.speed, cmd.yaw_rate
-            if vector:
-                ux, uy = cmd.ux, cmd.uy
-        else:
-            assert n is not None   # the groups split n vehicles
-            speed_cmd, yaw_rate_cmd = np.empty(n), np.empty(n)
-            if vector:
-                ux, uy = np.empty(n), np.empty(n)
-            for tracker, sl in groups:
-                cmd = tracker.step(t, _take(meas, sl), _take(ref, sl))
-                speed_cmd[sl], yaw_rate_cmd[sl] = cmd.speed, cmd.yaw_rate
-                if vector:
-                    ux[sl], uy[sl] = cmd.ux, cmd.uy
-        if k:
-            tv_speed = tv_speed + abs(speed_cmd - last_speed)
-            tv_yaw = tv_yaw + abs(yaw_rate_cmd - last_yaw_rate)
-        last_speed, last_yaw_rate = speed_cmd, yaw_rate_cmd
-        if at_limit_from is not None and step_index >= half:
-            at_limit = at_limit + (abs(yaw_rate_cmd) >= at_limit_from)
-            at_limit_steps += 1
-
-        for j in range(substeps):
+        meas = noise.add(model.measure(state))
+        speed_cmd, yaw_rate_cmd, vector = _commands(groups, t, meas, ref, n)
+        tally.command(k, speed_cmd, yaw_rate_cmd, step_index)
+        for j in range(substeps_after[k]):
             if j:
                 ref = reference.sample(t + j * h)
             ex, ey = ref.x - state.x, ref.y - state.y
@@ -190,23 +143,91 @@ def simulate(trackers: Tracker | Sequence[tuple[Tracker, slice]], params: RoverP
                 steady = steady + err2
             if trace_stride is not None and step_index % trace_stride == 0:
                 _record(trace, t + j * h, state, ref, speed_cmd, yaw_rate_cmd, meas, groups, n)
-            state = (model.step_vector(state, ux, uy, h) if vector
-                     else model.step(state, speed_cmd, yaw_rate_cmd, h))
+            state = model.step_command(state, speed_cmd, yaw_rate_cmd, h, vector)
             step_index += 1
         if progress is not None and (k % report_every == 0 or k == n_control - 1):
             progress((k + 1) / n_control)
-
-    steady_count = step_index - half
-    result = SimResult(f_cost=np.sqrt(cost) if n is not None else math.sqrt(cost),
-                       steady_rms=(np.sqrt(steady / steady_count) if n is not None
-                                   else math.sqrt(steady / steady_count)),
-                       speed_tv=tv_speed / config.duration, yaw_rate_tv=tv_yaw / config.duration,
-                       yaw_at_limit=(at_limit / at_limit_steps if at_limit_steps else zero))
-    if n is None:
-        result.yaw_at_limit = float(result.yaw_at_limit)
+    result = tally.result(cost, steady, step_index - half, n)
     if trace:
         result.trace = {key: np.asarray(values) for key, values in trace.items()}
     return result
+
+
+class _Noise:
+    """White noise on the measured pose (SimConfig.noise_pos / noise_yaw, seeded); with a
+    ``noise_slice`` each vehicle draws the whole batch's noise and keeps its own."""
+
+    def __init__(self, config: SimConfig, n: int | None):
+        self.rng = np.random.default_rng(config.seed)
+        self.pos, self.yaw = config.noise_pos, config.noise_yaw
+        self.on = self.pos > 0 or self.yaw > 0
+        self.shape: int | None = n
+        self.part = slice(None)
+        if config.noise_slice is not None and n is not None:
+            total, first = config.noise_slice
+            self.shape, self.part = total, slice(first, first + n)
+
+    def add(self, meas: Measurement) -> Measurement:
+        if not self.on:
+            return meas
+        rng, shape = self.rng, self.shape
+        if shape is None:
+            meas.x = meas.x + self.pos * rng.standard_normal()
+            meas.y = meas.y + self.pos * rng.standard_normal()
+            meas.yaw = meas.yaw + self.yaw * rng.standard_normal()
+        else:
+            meas.x = meas.x + self.pos * rng.standard_normal(shape)[self.part]
+            meas.y = meas.y + self.pos * rng.standard_normal(shape)[self.part]
+            meas.yaw = meas.yaw + self.yaw * rng.standard_normal(shape)[self.part]
+        return meas
+
+
+def _commands(groups: Sequence[tuple[Tracker, slice | None]], t: float, meas: Measurement,
+              ref: Reference, n: int | None) -> tuple[Num, Num, tuple[Num, Num]]:
+    """Every tracker's step: (speed, turn rate, u_p) for all the vehicles."""
+    if len(groups) == 1 and groups[0][1] is None:
+        cmd = groups[0][0].step(t, meas, ref)
+        return cmd.speed, cmd.yaw_rate, (cmd.ux, cmd.uy)
+    assert n is not None   # the groups split n vehicles
+    speed, yaw_rate, ux, uy = np.empty(n), np.empty(n), np.empty(n), np.empty(n)
+    for tracker, sl in groups:
+        cmd = tracker.step(t, _take(meas, sl), _take(ref, sl))
+        speed[sl], yaw_rate[sl], ux[sl], uy[sl] = cmd.speed, cmd.yaw_rate, cmd.ux, cmd.uy
+    return speed, yaw_rate, (ux, uy)
+
+
+class _Tally:
+    """What the commands show (their total variation, the share at the turn-rate limit) and the
+    result made of it and the integrated errors."""
+
+    def __init__(self, config: SimConfig, params: RoverParams, zero: Num, half: int):
+        self.duration, self.half, self.zero = config.duration, half, zero
+        limit = config.yaw_rate_limit if config.yaw_rate_limit is not None else params.max_yaw_rate
+        self.at_limit_from = (0.98 * np.asarray(limit, dtype=float) if _ops_finite(limit)
+                              else None)
+        self.tv_speed = self.tv_yaw = self.at_limit = zero
+        self.at_limit_steps = 0
+        self.last_speed = self.last_yaw_rate = zero   # the previous step's commands
+
+    def command(self, k: int, speed: Num, yaw_rate: Num, step_index: int) -> None:
+        if k:
+            self.tv_speed = self.tv_speed + abs(speed - self.last_speed)
+            self.tv_yaw = self.tv_yaw + abs(yaw_rate - self.last_yaw_rate)
+        self.last_speed, self.last_yaw_rate = speed, yaw_rate
+        if self.at_limit_from is not None and step_index >= self.half:
+            self.at_limit = self.at_limit + (abs(yaw_rate) >= self.at_limit_from)
+            self.at_limit_steps += 1
+
+    def result(self, cost: Num, steady: Num, steady_count: int, n: int | None) -> SimResult:
+        root = np.sqrt if n is not None else math.sqrt
+        result = SimResult(f_cost=root(cost), steady_rms=root(steady / steady_count),
+                           speed_tv=self.tv_speed / self.duration,
+                           yaw_rate_tv=self.tv_yaw / self.duration,
+                           yaw_at_limit=(self.at_limit / self.at_limit_steps
+                                         if self.at_limit_steps else self.zero))
+        if n is None:
+            result.yaw_at_limit = float(result.yaw_at_limit)
+        return result
 
 
 def _ops_finite(value: Num) -> bool:

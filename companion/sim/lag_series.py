@@ -1,6 +1,6 @@
 """One inner-loop channel over a whole command series, many models at once: identification's loop.
 
-:func:`lag_series` runs :func:`companion.sim.plant.lag_step` (the exact rate-limited lag of
+:func:`lag_series` runs :func:`companion.sim.actuator.lag_step` (the exact rate-limited lag of
 ``_channel``, then the overshoot of ``overshoot_step``) for ``n`` parameter sets over every grid
 step of a delayed, clamped command, the loop :mod:`companion.ident.channels` spends a fit in.
 
@@ -24,7 +24,7 @@ import numpy as np
 
 from ..core import ops
 from ..core.signals import Num
-from .plant import lag_step
+from .actuator import lag_step
 
 _compiled: Callable[..., None] | None = None     # the loop below, compiled (when numba is here)
 
@@ -48,7 +48,7 @@ def lag_series(padded: np.ndarray, offset: np.ndarray, top: np.ndarray, steps: i
     |x| grows / shrinks), ``overshoot`` and ``overshoot_s`` (g and tau of ``overshoot_step``):
     numbers or arrays of length n. Every output at the start of each step, as respond records.
     ``capped`` (the turn rate's channel): an overshooting output (g != 0) is capped at
-    ``+-top[k, i]`` as well (:func:`companion.sim.plant.turn_rate_cap`); x and z run on."""
+    ``+-top[k, i]`` as well (:func:`companion.sim.actuator.turn_rate_cap`); x and z run on."""
     offset = np.ascontiguousarray(offset, dtype=np.int64)
     n = len(offset)
     top = np.ascontiguousarray(np.asarray(top, dtype=np.float64).reshape(

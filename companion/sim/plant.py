@@ -68,6 +68,8 @@ four. With rate limits each channel is still exact over a step (a ramp at the li
 error is small enough, then the exponential; its integral gives the heading), and x, y again
 use Simpson's rule. Delays need a fixed step (the commands in flight sit in a ring buffer).
 
+Each channel's step (the rate-limited lag, the overshoot, the motors' cap) is
+:mod:`companion.sim.actuator`'s, the delays' ring buffers :mod:`companion.sim.command_delay`'s.
 What each piece was built from (the autopilots' measured behaviour): the design note
 docs/design/vehicle-model.md.
 """
@@ -82,6 +84,15 @@ import numpy as np
 
 from ..core import ops as _ops
 from ..core.signals import Measurement, Num
+from .actuator import (
+    channel,
+    overshoot_integral,
+    overshoot_step,
+    overshoot_target,
+    rate_bounds,
+    turn_rate_cap,
+)
+from .command_delay import CommandDelay
 
 # m/s: ArduPilot takes the lateral-acceleration limit at no less than this speed
 # (AR_AttitudeControl.cpp, AR_ATTCONTROL_STEER_SPEED_MIN), so a rover starting off may turn.
@@ -206,6 +217,7 @@ class RoverModel:
         self.n = n
         self._m = _ops.for_size(n)
         self._paper = params.is_paper
+        self._course_loop = params.velocity_vector         # u_p in (step_command)
         self._coupled = _any_positive(params.turn_speed_coupling)
         self._turn_coupled = _any_positive(params.speed_turn_coupling)
         self._curvature = _any_positive(params.min_turn_radius)
@@ -246,9 +258,9 @@ class RoverModel:
         m, p = self._m, self.params
         c, sn = m.cos(yaw), m.sin(yaw)
         lat = p.d_cen * omega
-        dv = m.clip(p.w_c * (v_cmd - v), *_rate_bounds(m, v, p.max_accel, p.decel))
+        dv = m.clip(p.w_c * (v_cmd - v), *rate_bounds(m, v, p.max_accel, p.decel))
         dw = m.clip(p.yaw_bandwidth * (w_cmd - omega),
-                    *_rate_bounds(m, omega, p.max_yaw_accel, p.yaw_decel))
+                    *rate_bounds(m, omega, p.max_yaw_accel, p.yaw_decel))
         return v * c - lat * sn, v * sn + lat * c, omega, dv, dw
 
     def clamp_command(self, speed: Num, yaw_rate: Num, omega: Num = 0.0,
@@ -300,6 +312,19 @@ class RoverModel:
         course_err = m.wrap(m.atan2(uy, ux) - s.yaw)
         return self.step(s, m.hypot(ux, uy), self.params.course_gain * course_err, dt)
 
+    def step_command(self, s: RoverState, speed_cmd: Num, yaw_rate_cmd: Num, dt: float,
+                     vector: tuple[Num, Num] | None = None) -> RoverState:
+        """Advance ``dt`` seconds on a command as this vehicle takes it: (v_ref, omega_ref)
+        (:meth:`step`), or, where the model has PX4's course loop, u_p = ``vector``
+        (:meth:`step_vector`; None: the vector of that speed whose course asks the loop for
+        that turn rate)."""
+        if not self._course_loop:
+            return self.step(s, speed_cmd, yaw_rate_cmd, dt)
+        if vector is None:
+            heading = s.yaw + yaw_rate_cmd / self.params.course_gain
+            vector = (speed_cmd * self._m.cos(heading), speed_cmd * self._m.sin(heading))
+        return self.step_vector(s, vector[0], vector[1], dt)
+
     def step(self, s: RoverState, speed_cmd: Num, yaw_rate_cmd: Num, dt: float) -> RoverState:
         """Advance ``dt`` seconds with the commands (v_ref, omega_ref) held (after the delay)."""
         if self.delay is not None:
@@ -311,7 +336,7 @@ class RoverModel:
 
     def _step_limited(self, s: RoverState, u: Num, w: Num, h: float,
                       top_w: Num) -> RoverState:
-        """Rate-limited channels, exact per channel (:func:`_channel`), Simpson for x and y;
+        """Rate-limited channels, exact per channel (:func:`channel`), Simpson for x and y;
         with an overshoot, the channel's output x passes :func:`overshoot_step` (and, for the
         turn rate, the heading takes its integral, :func:`overshoot_integral`, and the motors
         cap it at ``top_w``: :func:`turn_rate_cap`)."""
@@ -319,19 +344,19 @@ class RoverModel:
         v0, z_end = s.v, s.v_slow
         if self._overshoot:
             v0 = overshoot_target(s.v, s.v_slow, p.speed_overshoot)
-        v_mid, v_end, _, _ = _channel(m, v0, u, p.w_c, p.max_accel, p.decel, h, integrals=False)
+        v_mid, v_end, _, _ = channel(m, v0, u, p.w_c, p.max_accel, p.decel, h, integrals=False)
         if self._overshoot:
             (v_mid, _), (v_end, z_end) = (
                 overshoot_step(m, v0, x, s.v_slow, p.speed_overshoot, p.speed_overshoot_s, t)
                 for x, t in ((v_mid, 0.5 * h), (v_end, h)))
         if not self._yaw_overshoot:
-            w_mid, w_end, i_mid, i_end = _channel(m, s.omega, w, p.yaw_bandwidth,
+            w_mid, w_end, i_mid, i_end = channel(m, s.omega, w, p.yaw_bandwidth,
                                                   p.max_yaw_accel, p.yaw_decel, h)
             return self._simpson(s, s.yaw + i_mid, s.yaw + i_end, v_mid, v_end, w_mid, w_end, h,
                                  z_end)
         g, tau = p.yaw_overshoot, p.yaw_overshoot_s
         x0 = overshoot_target(s.omega, s.w_slow, g) if s.w_lag is None else s.w_lag
-        x_mid, x_end, ix_mid, ix_end = _channel(m, x0, w, p.yaw_bandwidth, p.max_yaw_accel,
+        x_mid, x_end, ix_mid, ix_end = channel(m, x0, w, p.yaw_bandwidth, p.max_yaw_accel,
                                                 p.yaw_decel, h)
         (w_mid, _), (w_end, wz_end) = (overshoot_step(m, x0, x, s.w_slow, g, tau, t)
                                        for x, t in ((x_mid, 0.5 * h), (x_end, h)))
@@ -395,185 +420,3 @@ class RoverModel:
             s.v + h6 * (k1[3] + 2.0 * (k2[3] + k3[3]) + k4[3]),
             s.omega + h6 * (k1[4] + 2.0 * (k2[4] + k3[4]) + k4[4]),
         )
-
-
-def turn_rate_cap(m: _ops.Ops, w0: Num, w_mid: Num, w_end: Num, i_mid: Num, i_end: Num,
-                  g: Num, top: Num, h: float) -> tuple[Num, Num, Num, Num]:
-    """The overshooting turn rate (``yaw_overshoot`` g != 0) capped at ``top``, the turn-rate
-    range the state leaves (:meth:`RoverModel.tops`): the rate loop's feed-forward can drive
-    the motors past its target, not past what the motors give. A skid-steer rover at speed
-    has less steering left (the mixer shares one range), so the overshoot a fast rover would
-    have is cut where a slow one shows it whole (SITL ``rover-skid`` with ``ATC_STR_RAT_FF``
-    0.5: 3.8 rad/s at rest for a 2.5 rad/s target, 2.5-2.6 at 2-3 m/s). Returns (omega at
-    h/2, at h, the heading's change to each): where the cap cuts either, the heading takes
-    the quadratic through omega at 0, h/2 and h (Simpson's rule and its half-step form) in
-    place of the exact integral, which is of the uncapped rate. The lag behind (x, z) runs on
-    uncapped, as the fit's (:func:`companion.sim.lag_series.lag_series`, ``capped``)."""
-    c_mid, c_end = cap_overshoot(m, w_mid, g, top), cap_overshoot(m, w_end, g, top)
-    cut = (c_mid != w_mid) | (c_end != w_end)
-    if not np.any(cut):             # the usual case: nothing capped, the exact integrals stand
-        return w_mid, w_end, i_mid, i_end
-    q_mid = h / 24.0 * (5.0 * w0 + 8.0 * c_mid - c_end)
-    q_end = h / 6.0 * (w0 + 4.0 * c_mid + c_end)
-    return c_mid, c_end, m.where(cut, q_mid, i_mid), m.where(cut, q_end, i_end)
-
-
-def cap_overshoot(m: _ops.Ops, w: Num, g: Num, top: Num) -> Num:
-    """A turn rate ``w`` with a two-time-scale share ``g`` within +-``top`` (where g is 0 the
-    rate is the lag's own, within the clamp already, and left as it is)."""
-    return m.where(g != 0, m.clip(w, -top, top), w)
-
-
-def overshoot_target(v: Num, z: Num, g: Num) -> Num:
-    """The speed channel's inner output x behind a speed v with overshoot state z:
-    v = (1 + g) x - g z."""
-    return (v + g * z) / (1.0 + g)
-
-
-def overshoot_step(m: _ops.Ops, x0: Num, x1: Num, z0: Num, g: Num, tau: Num, t: float) -> tuple[Num, Num]:
-    """(speed, z) ``t`` s on, x having gone from x0 to x1 (linearly, as over one step).
-
-    ArduPilot's speed loop with a throttle feed-forward that over-drives the motors (SITL
-    ``rover`` on rover.parm: CRUISE_THROTTLE 30 % gives 6 m/s, CRUISE_SPEED says 5) and a PI
-    that takes the excess back: the speed overshoots each change of the rate-limited target x by
-    a share g, and returns to it as z catches up, ``z' = (x - z) / tau``, so
-    ``v = x + g (x - z)`` (a lead-lag (1 + (1 + g) tau s) / (1 + tau s) on x). z over the step
-    with x taken at its mean (a step is at most a tick, tau about a second)."""
-    k = 1.0 - m.exp(-t / tau)
-    z1 = z0 + k * (0.5 * (x0 + x1) - z0)
-    return (1.0 + g) * x1 - g * z1, z1
-
-
-def lag_step(m: _ops.Ops, x: Num, z: Num, u: Num, b: Num, up: Num, down: Num, dt: float,
-             g: Num, tau: Num, over: bool, cap: Num = None) -> tuple[Num, Num, Num]:
-    """One grid step of a channel for the fit and :mod:`companion.sim.response`: the
-    rate-limited lag's output x from ``x`` towards ``u`` (:func:`_channel`), then, ``over``,
-    its overshoot (:func:`overshoot_step`), capped at ``cap`` where g != 0 (the turn rate's:
-    :func:`turn_rate_cap`; None: no cap, the speed's). Returns (what is measured, x, z)."""
-    # x(h) only: the fit's step loop spends most of its time here, and the integrals (unused
-    # here) were a third of it (a stock manoeuvre's fit: 39.3 -> 26.0 s, the same parameters)
-    _, x1, _, _ = _channel(m, x, u, b, up, down, dt, both=False, integrals=False)
-    if not over:
-        return x1, x1, z
-    y, z1 = overshoot_step(m, x, x1, z, g, tau, dt)
-    if cap is not None:
-        y = cap_overshoot(m, y, g, cap)
-    return y, x1, z1
-
-
-def overshoot_integral(x0: Num, x1: Num, x_integral: Num, z0: Num, g: Num, tau: Num, t: float,
-                       m: _ops.Ops) -> Num:
-    """The integral over ``t`` s of the output ``(1 + g) x - g z`` of :func:`overshoot_step`,
-    given the channel's own integral of x: z as that function has it (x at its mean,
-    ``z(s) = xm + (z0 - xm) e^{-s / tau}``), so the heading and the turn rate agree."""
-    xm = 0.5 * (x0 + x1)
-    z_integral = xm * t - (xm - z0) * tau * (1.0 - m.exp(-t / tau))
-    return (1.0 + g) * x_integral - g * z_integral
-
-
-def _rate_bounds(m: _ops.Ops, x: Num, up: Num, down: Num) -> tuple[Num, Num]:
-    """(lowest, highest) rate of change for a channel at ``x``: ``up`` while |x| grows, ``down``
-    while it shrinks (at x = 0 both directions grow)."""
-    lo = m.where(x > 0, -down, -up)
-    hi = m.where(x < 0, down, up)
-    return lo, hi
-
-
-def _channel(m: _ops.Ops, x0: Num, u: Num, b: Num, up: Num, down: Num, h: float,
-             both: bool = True, integrals: bool = True) -> tuple[Num, Num, Num, Num]:
-    """One channel over a step with its input ``u`` held: x' = clip(b (u - x), rate bounds).
-
-    Exact: x ramps at the limit L (``up`` or ``down``, by the direction of travel at the start)
-    for t1 = (|e0| - L / b) / L while the lag would ask more than L, then decays as
-    u - e1 exp(-b (t - t1)) with |e1| = L / b. Returns x(h/2), x(h) and their integrals from 0
-    (``both=False``: x(h) only, the others None; ``integrals=False``: no integrals).
-    (A ramp that crosses zero keeps the limit it started with: a step is a millisecond or so.)
-    """
-    e0 = u - x0
-    limit = up if down is up else m.where(e0 * x0 < 0, down, up)
-    knee = limit / b                                  # |error| below which the lag is unclipped
-    t1 = m.maximum(abs(e0) / limit - 1.0 / b, 0.0)    # = (|e0| - knee) / L; 0 with no limit
-    e1 = m.clip(e0, -knee, knee)                      # the error when the ramp ends
-    ramp = m.where(t1 > 0, m.where(e0 < 0, -limit, limit), 0.0)   # 0: no inf * 0
-    out = []
-    for t in ((0.5 * h, h) if both else (h,)):
-        tr = m.minimum(t, t1)                          # time spent ramping
-        te = t - tr                                    # then decaying
-        decay = m.exp(-b * te)
-        x = m.where(te > 0, u - e1 * decay, x0 + ramp * tr)
-        integral = (x0 * tr + 0.5 * ramp * tr * tr + (u * te - e1 * (1.0 - decay) / b)
-                    if integrals else None)
-        out += [x, integral]
-    if not both:
-        return None, out[0], None, out[1]
-    return out[0], out[2], out[1], out[3]
-
-
-def delay_steps(speed_delay: Num, yaw_delay: Num, h: float, n: int | None) -> np.ndarray:
-    """[channel (speed, turn rate), vehicle]: each pure delay in whole steps of ``h``,
-    ``round(delay / h)`` (int64; one column for one vehicle)."""
-    return np.stack([np.broadcast_to(np.rint(np.asarray(d, dtype=float) / h).astype(np.int64),
-                                     (1 if n is None else n,)) for d in (speed_delay, yaw_delay)])
-
-
-class CommandDelay:
-    """Commands in flight through a pure delay (per channel, per vehicle), on a fixed step.
-
-    ``push(speed, yaw_rate, h)`` stores the commands given now and returns those given
-    ``round(delay / h)`` steps ago (zero before any). The step ``h`` is fixed by the first push.
-    """
-
-    def __init__(self, speed_delay: Num, yaw_delay: Num, n: int | None = None):
-        self.speed_delay, self.yaw_delay, self.n = speed_delay, yaw_delay, n
-        self.h: float | None = None
-
-    def _setup(self, h: float) -> None:
-        self.h = h
-        shape = () if self.n is None else (self.n,)
-        self._lags = delay_steps(self.speed_delay, self.yaw_delay, h, self.n)
-        self._lag = [lag.reshape(shape) for lag in self._lags]
-        self._size = int(max(lag.max(initial=0) for lag in self._lag)) + 1
-        # both channels' rings in one array (the compiled plant takes it whole), one view each
-        self._ring = np.zeros((2, self._size) + shape)
-        self._buf = [self._ring[0], self._ring[1]]
-        self._cols = None if self.n is None else np.arange(self.n)
-        self._flat = [buf.reshape(-1) for buf in self._buf]
-        # one delay for every vehicle (the usual case) reads a whole row, no gather
-        self._uniform = [int(lag.flat[0]) if lag.size and np.all(lag == lag.flat[0]) else None
-                         for lag in self._lag]
-        self._k = 0
-
-    def advance(self, h: float) -> int:
-        """The slot this push writes (the step count so far), the step ``h`` checked."""
-        if self.h is None:
-            self._setup(h)
-        elif abs(h - self.h) > 1e-12:
-            raise ValueError(f"a delayed plant needs a fixed step: {self.h} s, then {h} s")
-        k = self._k
-        self._k = k + 1
-        return k
-
-    @property
-    def ring(self) -> np.ndarray:
-        """The ring buffers, [channel (speed, turn rate), slot, vehicle]: slot k % size holds
-        push k (after :meth:`advance`)."""
-        return self._ring
-
-    @property
-    def lags(self) -> np.ndarray:
-        """[channel, vehicle]: how many pushes back each command comes out (int64)."""
-        return self._lags
-
-    def push(self, speed: Num, yaw_rate: Num, h: float) -> tuple[Num, Num]:
-        k = self.advance(h)
-        size = self._size
-        out = []
-        for buf, flat, lag, uniform, value in zip(self._buf, self._flat, self._lag, self._uniform,
-                                                  (speed, yaw_rate), strict=True):
-            buf[k % size] = value
-            if uniform is not None:
-                row = buf[(k - uniform) % size]
-                out.append(float(row) if self._cols is None else row.copy())
-            else:
-                out.append(flat.take(((k - lag) % size) * self.n + self._cols))
-        return out[0], out[1]

@@ -2,7 +2,7 @@
 
 :class:`LaneStepper` advances every vehicle of a :class:`companion.sim.plant.RoverModel` built
 on arrays by one step: PX4's course loop (``step_vector``), the commands' pure delay
-(:class:`companion.sim.plant.CommandDelay`'s ring buffers), ``clamp_command``, the
+(:class:`companion.sim.command_delay.CommandDelay`'s ring buffers), ``clamp_command``, the
 rate-limited channels with their overshoots (``_channel``, ``overshoot_step``,
 ``overshoot_integral``) and Simpson's rule for x and y (``_simpson``): the same operations in
 the same order, per vehicle on floats; :class:`LaneModel` is a ``RoverModel`` whose steps go
@@ -12,10 +12,9 @@ compiled the loop, else the numpy ``RoverModel``). :func:`respond_series` is
 series, what a fit's RMS and its plots run) the same way.
 
 Stepped by numpy, a batch step costs about 150 array operations whatever the number of vehicles
-is: on the robust tuner's batches (1,344 vehicles: 64 candidates on 7 neighbours and 3
-references, 2026-12-05) the plant was 3.1 of an evaluation's 5.7 s; respond on one model is
-all overhead (an 85 s manoeuvre's RMS 1.6 s, compiled 2 ms). Compiled by numba (when it is
-installed) a step is one pass over the vehicles. Both compute the same numbers (to rounding:
+is, which was most of a robust evaluation, and respond on one model is all overhead (measured:
+docs/design/vehicle-model.md). Compiled by numba (when it is installed) a step is one pass over
+the vehicles. Both compute the same numbers (to rounding:
 ``tests/test_plant_lanes.py``); ``RoverModel`` itself and ``respond(..., compiled=False)``
 are numpy, the reference, and know nothing of this module. The paper's exact linear step (no limits) is not
 compiled: nothing tunes on it.
@@ -33,7 +32,9 @@ import numpy as np
 
 from ..core.ops import TAU
 from ..core.signals import Num
-from .plant import LAT_ACCEL_MIN_SPEED, CommandDelay, RoverModel, RoverParams, RoverState, overshoot_target
+from .actuator import overshoot_target
+from .command_delay import CommandDelay
+from .plant import LAT_ACCEL_MIN_SPEED, RoverModel, RoverParams, RoverState
 
 _compiled: Callable[..., None] | None = None     # _loop, compiled (when numba is here)
 _respond_compiled: Callable[..., None] | None = None     # _respond_loop, likewise
@@ -175,7 +176,7 @@ def _clamp(speed_cmd: float, yaw_cmd: float, v: float, omega: float, max_speed: 
 
 def _channel(x0: float, u: float, b: float, up: float, down: float, t: float,
              whole: float) -> tuple[float, float]:
-    """``plant._channel`` at one time ``t``: (x(t), its integral from 0). ``whole`` is
+    """``actuator.channel`` at one time ``t``: (x(t), its integral from 0). ``whole`` is
     exp(-b t), the decay when no ramp is needed (the usual case: one exp less)."""
     e0 = u - x0
     limit = down if e0 * x0 < 0 else up
@@ -192,14 +193,14 @@ def _channel(x0: float, u: float, b: float, up: float, down: float, t: float,
 
 
 def _overshoot(x0: float, x1: float, z0: float, g: float, keep: float) -> tuple[float, float]:
-    """``plant.overshoot_step`` with ``keep`` = exp(-t / tau): (output, z)."""
+    """``actuator.overshoot_step`` with ``keep`` = exp(-t / tau): (output, z)."""
     z1 = z0 + (1.0 - keep) * (0.5 * (x0 + x1) - z0)
     return (1.0 + g) * x1 - g * z1, z1
 
 
 def _overshoot_integral(x0: float, x1: float, x_integral: float, z0: float, g: float,
                         tau: float, t: float, keep: float) -> float:
-    """``plant.overshoot_integral`` with ``keep`` = exp(-t / tau)."""
+    """``actuator.overshoot_integral`` with ``keep`` = exp(-t / tau)."""
     xm = 0.5 * (x0 + x1)
     z_integral = xm * t - (xm - z0) * tau * (1.0 - keep)
     return (1.0 + g) * x_integral - g * z_integral
@@ -226,91 +227,119 @@ def _loop(vector: bool, delayed: bool, trig: bool, coupled: bool, turn_coupled: 
     v_slow, w_slow, w_lag, cos(yaw), sin(yaw) (``trig``: the state's are there, else computed). ``p``
     rows: :data:`PARAMS`; ``decays``: :func:`_decays`'s for ``h``; ``ring`` and ``lags``:
     CommandDelay's (``delayed``)."""
-    n = out.shape[1]
-    size = ring.shape[1]
-    for i in range(n):
-        (d_cen, w_c, w_c_yaw, max_speed, max_yaw_rate, accel, decel, yaw_accel, yaw_decel, tsc,
-         stc, course_gain, min_radius, lat_accel, g_v, _tau_v, g_w, tau_w) = (   # tau_v: in decays
-            p[0, i], p[1, i], p[2, i], p[3, i], p[4, i], p[5, i], p[6, i], p[7, i], p[8, i],
-            p[9, i], p[10, i], p[11, i], p[12, i], p[13, i], p[14, i], p[15, i], p[16, i],
-            p[17, i])
-        x, y, yaw0, v0, w0, v_slow, w_slow, w_lag = (
-            state[0, i], state[1, i], state[2, i], state[3, i], state[4, i], state[5, i],
-            state[6, i], state[7, i])
-        if vector:                                  # PX4's course loop on u_p
-            angle = math.atan2(b[i], a[i]) - yaw0
-            course_err = angle - TAU * math.ceil((angle - math.pi) * (1.0 / TAU))
-            speed_cmd = math.hypot(a[i], b[i])
-            yaw_cmd = course_gain * course_err
-        else:
-            speed_cmd, yaw_cmd = a[i], b[i]
-        if delayed:                                 # CommandDelay.push
-            ring[0, k % size, i] = speed_cmd
-            ring[1, k % size, i] = yaw_cmd
-            speed_cmd = ring[0, (k - lags[0, i]) % size, i]
-            yaw_cmd = ring[1, (k - lags[1, i]) % size, i]
-        u, w, top_w = _clamp(speed_cmd, yaw_cmd, v0, w0, max_speed, max_yaw_rate, tsc, stc,
-                             min_radius, lat_accel, coupled, turn_coupled, curvature, lateral)
-        # _step_limited: the speed channel (and its overshoot)
-        z_end = v_slow
-        vx0 = v0
-        if overshoot:
-            vx0 = (v0 + g_v * v_slow) / (1.0 + g_v)
-        v_mid = _channel(vx0, u, w_c, accel, decel, 0.5 * h, decays[0, i])[0]
-        v_end = _channel(vx0, u, w_c, accel, decel, h, decays[1, i])[0]
-        if overshoot:
-            v_mid = _overshoot(vx0, v_mid, v_slow, g_v, decays[4, i])[0]
-            v_end, z_end = _overshoot(vx0, v_end, v_slow, g_v, decays[5, i])
-        # the turn-rate channel (and its two time scales) and the heading it integrates
-        wz_end, x_end = w_slow, w_lag
-        if not yaw_overshoot:
-            w_mid, i_mid = _channel(w0, w, w_c_yaw, yaw_accel, yaw_decel, 0.5 * h, decays[2, i])
-            w_end, i_end = _channel(w0, w, w_c_yaw, yaw_accel, yaw_decel, h, decays[3, i])
-        else:
-            x0 = w_lag
-            x_mid, ix_mid = _channel(x0, w, w_c_yaw, yaw_accel, yaw_decel, 0.5 * h,
-                                     decays[2, i])
-            x_end, ix_end = _channel(x0, w, w_c_yaw, yaw_accel, yaw_decel, h, decays[3, i])
-            w_mid = _overshoot(x0, x_mid, w_slow, g_w, decays[6, i])[0]
-            w_end, wz_end = _overshoot(x0, x_end, w_slow, g_w, decays[7, i])
-            i_mid = _overshoot_integral(x0, x_mid, ix_mid, w_slow, g_w, tau_w, 0.5 * h,
-                                        decays[6, i])
-            i_end = _overshoot_integral(x0, x_end, ix_end, w_slow, g_w, tau_w, h, decays[7, i])
-            if g_w != 0.0:                          # plant.turn_rate_cap
-                c_mid = _nan_min(_nan_max(w_mid, -top_w), top_w)
-                c_end = _nan_min(_nan_max(w_end, -top_w), top_w)
-                if c_mid != w_mid or c_end != w_end:
-                    i_mid = h / 24.0 * (5.0 * w0 + 8.0 * c_mid - c_end)
-                    i_end = h / 6.0 * (w0 + 4.0 * c_mid + c_end)
-                    w_mid, w_end = c_mid, c_end
-        # _simpson: x and y from the heading, speed and turn rate at the start, middle and end
-        yaw_mid, yaw_end = yaw0 + i_mid, yaw0 + i_end
-        if trig:
-            c0, s0 = state[8, i], state[9, i]
-        else:
-            c0, s0 = math.cos(yaw0), math.sin(yaw0)
-        c1, s1 = math.cos(yaw_mid), math.sin(yaw_mid)
-        c2, s2 = math.cos(yaw_end), math.sin(yaw_end)
-        lat0, lat1, lat2 = d_cen * w0, d_cen * w_mid, d_cen * w_end
-        h6 = h / 6.0
-        out[0, i] = x + h6 * ((v0 * c0 - lat0 * s0) + 4.0 * (v_mid * c1 - lat1 * s1)
-                              + (v_end * c2 - lat2 * s2))
-        out[1, i] = y + h6 * ((v0 * s0 + lat0 * c0) + 4.0 * (v_mid * s1 + lat1 * c1)
-                              + (v_end * s2 + lat2 * c2))
-        out[2, i] = yaw_end
-        out[3, i] = v_end
-        out[4, i] = w_end
+    for i in range(out.shape[1]):
+        speed_cmd, yaw_cmd = _command(vector, delayed, a[i], b[i], state[2, i], p[11, i], ring,
+                                      lags, k, i)
+        u, w, top_w = _clamp(speed_cmd, yaw_cmd, state[3, i], state[4, i], p[3, i], p[4, i],
+                             p[9, i], p[10, i], p[12, i], p[13, i], coupled, turn_coupled,
+                             curvature, lateral)
+        v_mid, v_end, z_end = _speed_channel(state[3, i], state[5, i], u, p[1, i], p[5, i],
+                                             p[6, i], p[14, i], overshoot, h, decays, i)
+        w_mid, w_end, i_mid, i_end, wz_end, x_end = _turn_channel(
+            state[4, i], state[6, i], state[7, i], w, top_w, p[2, i], p[7, i], p[8, i],
+            p[16, i], p[17, i], yaw_overshoot, h, decays, i)
+        _simpson(state, i, trig, p[0, i], v_mid, v_end, w_mid, w_end, i_mid, i_end, h, out)
         out[5, i] = z_end
         out[6, i] = wz_end
         out[7, i] = x_end
-        out[8, i] = c2
-        out[9, i] = s2
+
+
+def _command(vector: bool, delayed: bool, a: float, b: float, yaw0: float, course_gain: float,
+             ring: Any, lags: Any, k: int, i: int
+             ) -> tuple[float, float]:   # pragma: no cover - compiled; as Python: test_plant_lanes
+    """Vehicle i's (speed, turn rate) commands out of the delay: ``step_vector``'s course loop on
+    PX4's u_p = (a, b) (else (a, b) are the commands), then ``CommandDelay.push``."""
+    if vector:                                  # PX4's course loop on u_p
+        angle = math.atan2(b, a) - yaw0
+        course_err = angle - TAU * math.ceil((angle - math.pi) * (1.0 / TAU))
+        speed_cmd = math.hypot(a, b)
+        yaw_cmd = course_gain * course_err
+    else:
+        speed_cmd, yaw_cmd = a, b
+    if delayed:                                 # CommandDelay.push
+        size = ring.shape[1]
+        ring[0, k % size, i] = speed_cmd
+        ring[1, k % size, i] = yaw_cmd
+        speed_cmd = ring[0, (k - lags[0, i]) % size, i]
+        yaw_cmd = ring[1, (k - lags[1, i]) % size, i]
+    return speed_cmd, yaw_cmd
+
+
+def _speed_channel(v0: float, v_slow: float, u: float, w_c: float, accel: float, decel: float,
+                   g_v: float, overshoot: bool, h: float, decays: Any, i: int
+                   ) -> tuple[float, float, float]:   # pragma: no cover - compiled
+    """``_step_limited``'s speed channel (and its overshoot) of vehicle i: (v at h/2, at h, z
+    at h); ``decays``: :func:`_decays`'s rows."""
+    z_end = v_slow
+    vx0 = v0
+    if overshoot:
+        vx0 = (v0 + g_v * v_slow) / (1.0 + g_v)
+    v_mid = _channel(vx0, u, w_c, accel, decel, 0.5 * h, decays[0, i])[0]
+    v_end = _channel(vx0, u, w_c, accel, decel, h, decays[1, i])[0]
+    if overshoot:
+        v_mid = _overshoot(vx0, v_mid, v_slow, g_v, decays[4, i])[0]
+        v_end, z_end = _overshoot(vx0, v_end, v_slow, g_v, decays[5, i])
+    return v_mid, v_end, z_end
+
+
+def _turn_channel(w0: float, w_slow: float, w_lag: float, w: float, top_w: float,
+                  w_c_yaw: float, yaw_accel: float, yaw_decel: float, g_w: float, tau_w: float,
+                  yaw_overshoot: bool, h: float, decays: Any, i: int
+                  ) -> tuple[float, float, float, float, float, float]:   # pragma: no cover
+    """``_step_limited``'s turn-rate channel (and its two time scales) of vehicle i and the
+    heading it integrates: (omega at h/2, at h, the heading's change to each, z at h, the lag's x at h)."""
+    if not yaw_overshoot:
+        w_mid, i_mid = _channel(w0, w, w_c_yaw, yaw_accel, yaw_decel, 0.5 * h, decays[2, i])
+        w_end, i_end = _channel(w0, w, w_c_yaw, yaw_accel, yaw_decel, h, decays[3, i])
+        return w_mid, w_end, i_mid, i_end, w_slow, w_lag
+    x0 = w_lag
+    x_mid, ix_mid = _channel(x0, w, w_c_yaw, yaw_accel, yaw_decel, 0.5 * h, decays[2, i])
+    x_end, ix_end = _channel(x0, w, w_c_yaw, yaw_accel, yaw_decel, h, decays[3, i])
+    w_mid = _overshoot(x0, x_mid, w_slow, g_w, decays[6, i])[0]
+    w_end, wz_end = _overshoot(x0, x_end, w_slow, g_w, decays[7, i])
+    i_mid = _overshoot_integral(x0, x_mid, ix_mid, w_slow, g_w, tau_w, 0.5 * h, decays[6, i])
+    i_end = _overshoot_integral(x0, x_end, ix_end, w_slow, g_w, tau_w, h, decays[7, i])
+    if g_w != 0.0:                          # actuator.turn_rate_cap
+        c_mid = _nan_min(_nan_max(w_mid, -top_w), top_w)
+        c_end = _nan_min(_nan_max(w_end, -top_w), top_w)
+        if c_mid != w_mid or c_end != w_end:
+            i_mid = h / 24.0 * (5.0 * w0 + 8.0 * c_mid - c_end)
+            i_end = h / 6.0 * (w0 + 4.0 * c_mid + c_end)
+            w_mid, w_end = c_mid, c_end
+    return w_mid, w_end, i_mid, i_end, wz_end, x_end
+
+
+def _simpson(state: Any, i: int, trig: bool, d_cen: float, v_mid: float, v_end: float,
+             w_mid: float, w_end: float, i_mid: float, i_end: float, h: float,
+             out: Any) -> None:   # pragma: no cover - compiled; as Python: test_plant_lanes
+    """``RoverModel._simpson`` for vehicle i (column i of ``state`` and ``out``): x and y
+    from the heading, speed and turn rate at the start, middle and end; out's x, y, yaw, v,
+    omega, cos(yaw) and sin(yaw) rows."""
+    x, y, yaw0, v0, w0 = state[0, i], state[1, i], state[2, i], state[3, i], state[4, i]
+    yaw_mid, yaw_end = yaw0 + i_mid, yaw0 + i_end
+    if trig:
+        c0, s0 = state[8, i], state[9, i]
+    else:
+        c0, s0 = math.cos(yaw0), math.sin(yaw0)
+    c1, s1 = math.cos(yaw_mid), math.sin(yaw_mid)
+    c2, s2 = math.cos(yaw_end), math.sin(yaw_end)
+    lat0, lat1, lat2 = d_cen * w0, d_cen * w_mid, d_cen * w_end
+    h6 = h / 6.0
+    out[0, i] = x + h6 * ((v0 * c0 - lat0 * s0) + 4.0 * (v_mid * c1 - lat1 * s1)
+                          + (v_end * c2 - lat2 * s2))
+    out[1, i] = y + h6 * ((v0 * s0 + lat0 * c0) + 4.0 * (v_mid * s1 + lat1 * c1)
+                          + (v_end * s2 + lat2 * c2))
+    out[2, i] = yaw_end
+    out[3, i] = v_end
+    out[4, i] = w_end
+    out[8, i] = c2
+    out[9, i] = s2
 
 
 def _lag_step(x: float, z: float, u: float, b: float, up: float, down: float, dt: float,
               whole: float, g: float, keep: float, over: bool, cap: float
               ) -> tuple[float, float, float]:
-    """``plant.lag_step``: (what is measured, the channel's output x, the overshoot's z);
+    """``actuator.lag_step``: (what is measured, the channel's output x, the overshoot's z);
     ``cap`` inf: none."""
     x1 = _channel(x, u, b, up, down, dt, whole)[0]
     if not over:
@@ -388,6 +417,9 @@ else:
     _channel, _overshoot, _overshoot_integral = (
         _jit(_channel), _jit(_overshoot), _jit(_overshoot_integral))
     _decays = _jit(_decays)
+    _command, _speed_channel, _turn_channel = (
+        _jit(_command), _jit(_speed_channel), _jit(_turn_channel))
+    _simpson = _jit(_simpson)
     _lag_step = _jit(_lag_step)
     _compiled = _jit(_loop)
     _respond_compiled = _jit(_respond_loop)

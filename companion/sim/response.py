@@ -4,7 +4,7 @@ What identification fits and what the plant's tests check: given the setpoints a
 sent (speed ``v_ref``, turn rate ``omega_ref``, held between samples) this runs only the two
 channels of :class:`companion.sim.plant.RoverModel` (delay -> clamp with both couplings -> rate
 limit -> lag -> the overshoot of each), without the pose, for ``n`` parameter sets side by side (any :class:`RoverParams` field may
-be an array of length ``n``). The same channel solution (:func:`companion.sim.plant._channel`) and
+be an array of length ``n``). The same channel solution (:func:`companion.sim.actuator.channel`) and
 delay line as the full model, so a fitted model is the model the simulations run.
 """
 
@@ -14,7 +14,9 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from . import plant_lanes
-from .plant import CommandDelay, RoverModel, RoverParams, delay_steps, lag_step
+from .actuator import lag_step
+from .command_delay import CommandDelay, delay_steps
+from .plant import RoverModel, RoverParams
 
 
 def respond(params: RoverParams, t: ArrayLike, speed_cmd: ArrayLike,

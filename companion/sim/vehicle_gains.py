@@ -4,7 +4,7 @@ settings the commands use, and the record a gains file keeps of what it was tune
 ``companion tune --vehicle V.toml`` writes a gains file that names the vehicle file and the
 SHA-256 of its bytes; ``companion run --vehicle V.toml`` flies a gains file found beside V
 tuned for exactly those bytes at its loop rate, and when there is none tunes one on the spot
-(:func:`companion.sim.robust.tune`) and stores it there for next time
+(:func:`companion.sim.robust.search.tune`) and stores it there for next time
 (:mod:`companion.app.vehicle` reads and writes the files). A vehicle file that changes
 (re-identified) no longer matches its old gains, so they are never applied by mistake.
 
@@ -17,14 +17,17 @@ import os
 from collections.abc import Mapping, Sequence
 from dataclasses import replace
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from ..core.limits import Limits
 from ..core.trajectory import Trajectory
 from ..errors import UserError
 from .gains import TunedGains
 from .plant import RoverParams
-from .robust import RobustConfig, RobustResult, Spread
+from .robust.config import RobustConfig, Spread
+
+if TYPE_CHECKING:                   # the search itself is imported only to tune
+    from .robust.search import RobustResult
 
 # The refining flight's gains in ``companion calibrate``: a quick robust search, enough to fly
 # 30 s of the 0.08 Hz ellipse without a limit cycle (the tuner rejects those on every
@@ -68,9 +71,9 @@ def config_for(vehicle: RoverParams, limits: Limits, rate: float,
 
 
 def tune_gains(cfg: RobustConfig, progress: Any = None, pool: Any = None) -> RobustResult:
-    """Run the robust search (``pool``: robust.worker_pool's); NothingRobust when no gain set
+    """Run the robust search (``pool``: robust.pool.worker_pool's); NothingRobust when no gain set
     held on every neighbour."""
-    from .robust import tune
+    from .robust.search import tune
     try:
         return tune(cfg, progress, pool)
     except RuntimeError as exc:

@@ -1,6 +1,6 @@
 """What the view knows of each rover on the bus, from ``rover/*/state`` and ``rover/*/status``.
 
-Zenoh's callback threads call :meth:`Fleet.on_sample`, which decodes (``bus.decode``) and keeps,
+Zenoh's callback threads call :meth:`Fleet.on_sample`, which decodes (``bus.codec.decode``) and keeps,
 per vehicle: the path driven and the reference path seen so far (every state sample's pose and
 reference, thinned to ``MAX_POINTS`` by dropping every other point when full, so an hours-long
 flight stays a bounded line), the latest state sample, the last life-cycle event and failsafe,
@@ -17,7 +17,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
-from ..bus import decode
+from ..bus.codec import decode
 
 MAX_POINTS = 4000          # per path: ~64 kB a redraw, thinned (never cut) when full
 
