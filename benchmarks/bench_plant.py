@@ -14,15 +14,15 @@ import os
 import time
 from pathlib import Path
 
+from companion.profiles import ardupilot, setpoint
 from companion.sim.plant import RoverParams
-from sitl_plant import modes, setpoint
 from sitl_plant.testing import Pilot, PlantProcess
 from sitl_plant.vehicle import Vehicle, VehicleConfig
 
 
 def bench_step(name: str, params: RoverParams, n: int = 200_000) -> None:
     v = Vehicle(VehicleConfig(params=params))
-    v.set_mode(modes.AP_GUIDED)
+    v.set_mode(ardupilot.PROFILE.mode_number(ardupilot.PROFILE.track_mode))   # GUIDED
     v.arm(True)
     v.setpoint(setpoint.Setpoint(8, 1511, vx=1.0, yaw_rate=0.2))
     t0 = time.perf_counter()
