@@ -56,7 +56,7 @@ lock:
 	@.lock-venv/bin/python -m pip install -q -e '.[test,check]' >&2
 	@{ echo "# The tested versions: \`make\` and .ci/run install with -c constraints.txt."; \
 	   echo "# Made by \`make lock\` (pip freeze of a fresh venv, the project itself left out);"; \
-	   echo "# pyproject.toml keeps the ranges. tests/test_checks.py holds the two together."; \
+	   echo "# pyproject.toml keeps the ranges. tests/project/test_lock_and_lint.py holds the two together."; \
 	   .lock-venv/bin/python -m pip freeze --exclude-editable; } > constraints.txt
 	@rm -rf .lock-venv
 	@echo "constraints.txt: $$(grep -c '==' constraints.txt) pinned" >&2

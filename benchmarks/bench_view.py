@@ -4,7 +4,7 @@ A demo (the companion flying sitl-plant at real time) publishes on Zenoh; ``comp
 --once --json`` counts the state samples that reach a subscriber over WINDOW seconds, first with
 no view, then with ``companion view`` subscribed (its CPU from its own getrusage summary).
 With ``--browser``, headless Chromium (playwright, a 640x400 page, as
-tests/test_view_browser.py) has the view open during the second window, and its CPU (every
+tests/view/test_view_browser.py) has the view open during the second window, and its CPU (every
 Chromium process, from /proc) is printed too: a browser drawing with its software rasteriser
 is the worst case, a GPU browser costs far less.
 Loopback only, multicast scouting off. Run: ``python benchmarks/bench_view.py [--browser]``.

@@ -14,7 +14,7 @@ class ExitCode(IntEnum):
 
     The systemd unit (``deploy/pzc-rover.service``) restarts on none of the codes a run means
     to return (USER_ERROR, FAULT and the named stops 4-7): ``RestartPreventExitStatus`` names
-    exactly :data:`NO_RESTART` (``tests/test_deploy.py`` holds it). Each stop names its cause in
+    exactly :data:`NO_RESTART` (``tests/project/test_deploy.py`` holds it). Each stop names its cause in
     the log, the JSON's ``reason`` and ``stop_cause``, and the Zenoh status as well.
     """
 

@@ -1,7 +1,8 @@
 """Scoring a flight: from the simulator's truth (SIMSTATE in metres), from a companion's flight
 csv (its largest error, a held reference, the share of time its yaw-rate setpoint sat at its
 limit), and the paper's tracking figures (f_cost, the steady RMS over the last half) from
-position errors sampled over a mission.
+position errors sampled over a mission; and a live run's batch twin (the same scenario in
+:func:`companion.sim.batch.simulate`).
 """
 
 from __future__ import annotations
@@ -75,3 +76,27 @@ def tracking_figures(errors: Sequence[tuple[float, float]], duration: float) -> 
     steady = [e for t, e in errors if t >= duration / 2]
     return {"f_cost": cost, "samples": len(errors),
             "steady_rms": math.sqrt(sum(e * e for e in steady) / len(steady))}
+
+
+# --------------------------------------------------------------------------- the batch twin
+
+def batch_twin(result: dict[str, Any], delay: float = 0.0) -> float:
+    """The f_cost of companion.sim.batch.simulate on a ``companion run --json`` result's
+    scenario (the paper's 0.12 Hz ellipse, 60 s, 40 Hz, the paper's plant with d_cen 0.3): the same gains, limits, rate, plant, start;
+    ``delay`` s of link transit on both channels (zero over loopback)."""
+    from companion.core.filter import FilterGains
+    from companion.core.limits import Limits
+    from companion.core.pzc import PZCGains, PZCTracker
+    from companion.core.trajectory import Ellipse
+    from companion.sim.batch import SimConfig, simulate
+    from companion.sim.plant import RoverParams
+    g = result["gains"]
+    tracker = PZCTracker(FilterGains(g["k_df"], g["lambda_f"]),
+                         PZCGains(**{k: g[k] for k in ("k_dc", "lambda_c", "k_dc_yaw",
+                                                       "lambda_c_yaw", "velocity_ff",
+                                                       "heading_rate_ff", "speed_law")}),
+                         Limits(**result["limits"]))
+    plant = RoverParams.paper(d_cen=0.3).with_(speed_delay=delay, yaw_delay=delay)
+    sim = simulate(tracker, plant, Ellipse.paper(0.12),
+                   config=SimConfig(duration=60.0, control_rate=40.0, start=(0.0, 0.0, 0.0)))
+    return float(sim.f_cost)

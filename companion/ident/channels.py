@@ -15,7 +15,7 @@ other channel's output at the start of the step (as :meth:`RoverModel.clamp_comm
 clamp on the turn rate, the turn-rate clamp on the speed, as the turning radius and the lateral-acceleration limit do), and the exact rate-limited lag of
 :func:`companion.sim.actuator.channel`. Each channel takes the other's output on the grid as
 given (the fit gives the turn-rate channel the measured speed, the speed channel the fitted
-turn-rate model's output); given respond's own, each is respond's. ``tests/test_identify.py``
+turn-rate model's output); given respond's own, each is respond's. ``tests/ident/test_identify.py``
 holds the two to each other.
 """
 

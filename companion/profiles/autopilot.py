@@ -2,7 +2,7 @@
 
 One :class:`AutopilotProfile` per autopilot (``ardupilot.py``, ``px4.py``), registered in
 ``companion/profiles/__init__.py``. Code outside ``companion/profiles/`` never asks which
-autopilot it talks to; it reads the answer from the profile (``tests/test_profiles.py`` reads
+autopilot it talks to; it reads the answer from the profile (``tests/profiles/test_profiles.py`` reads
 the code for any test of an autopilot's name). The profile holds facts and the behaviour that
 differs (a frontend calls it, one backend per autopilot), no I/O:
 
@@ -25,7 +25,7 @@ differs (a frontend calls it, one backend per autopilot), no I/O:
   :class:`EstimateFacts`): what the companion reads to tell the autopilot's failsafe from a pilot.
 
 Pure: no pymavlink (the MAVLink numbers it needs are spelled out below, checked against
-pymavlink's by ``tests/test_profiles.py``).
+pymavlink's by ``tests/profiles/test_profiles.py``).
 """
 
 from __future__ import annotations

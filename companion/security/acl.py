@@ -5,7 +5,7 @@ default. Its subjects are peers' certificate common names (known only over mutua
 allow message kinds on key expressions, per direction (``ingress``: from that peer,
 ``egress``: to it). A rule allows a message when one of its key expressions *includes* the
 message's, so a monitor's subscription to ``rover/*/state`` needs ``rover/**``, not each rover's
-key. Measured with eclipse-zenoh 1.10 (tests/test_zenoh_tls.py):
+key. Measured with eclipse-zenoh 1.10 (tests/bus/test_zenoh_tls.py):
 
 - at the router: a rover may put only under ``rover/<its name>/**``, declare and answer only its
   own ``rover/<its name>/control``, and is sent only queries for that; an operator may

@@ -7,7 +7,7 @@ step of a delayed, clamped command, the loop :mod:`companion.ident.channels` spe
 Stepped by numpy, a step costs about 25 array operations whatever ``n`` is (about 40 us: a
 two-log fit made 628,560 such calls, 26 of its 45 s); compiled by numba (when it is installed:
 x86-64 and 64-bit ARM wheels on PyPI) the same arithmetic runs per model as plain floats. Both
-paths compute the same numbers (to rounding: ``tests/test_lag_series.py``); ``compiled=False``
+paths compute the same numbers (to rounding: ``tests/sim/test_lag_series.py``); ``compiled=False``
 forces the numpy one, which is the reference.
 
 Pure: arrays in, arrays out (numba's cache of the compiled loop aside, next to this file or in

@@ -15,7 +15,7 @@ Stepped by numpy, a batch step costs about 150 array operations whatever the num
 is, which was most of a robust evaluation, and respond on one model is all overhead (measured:
 docs/design/vehicle-model.md). Compiled by numba (when it is installed) a step is one pass over
 the vehicles. Both compute the same numbers (to rounding:
-``tests/test_plant_lanes.py``); ``RoverModel`` itself and ``respond(..., compiled=False)``
+``tests/sim/test_plant_lanes.py``); ``RoverModel`` itself and ``respond(..., compiled=False)``
 are numpy, the reference, and know nothing of this module. The paper's exact linear step (no limits) is not
 compiled: nothing tunes on it.
 

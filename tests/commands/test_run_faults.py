@@ -215,7 +215,7 @@ def test_a_non_finite_command_is_never_sent(tmp_path):
 
 
 def test_a_reboot_that_streams_nothing_is_told_from_a_pilot_by_its_clock(tmp_path):
-    """As ArduPilot SITL reboots (tests/test_ardupilot_field_faults.py): back in MANUAL,
+    """As ArduPilot SITL reboots (tests/sitl/test_ardupilot_field_faults.py): back in MANUAL,
     disarmed, streaming nothing (the companion's message rates died with it), refusing modes
     while it starts. Its mode alone looks like a pilot's; the companion reads its clock
     (MAV_CMD_REQUEST_MESSAGE SYSTEM_TIME) before saying who, and ends with exit 7."""

@@ -31,7 +31,7 @@ from companion import cli
 from companion.commands import run as run_command
 from companion.errors import NO_RESTART, ExitCode
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 UNIT = ROOT / "deploy" / "pzc-rover.service"
 SYSUSERS = ROOT / "deploy" / "pzc-rover.sysusers"
 CONFIG = ROOT / "deploy" / "rover.toml"

@@ -16,7 +16,7 @@ from pathlib import Path
 from sitl_plant.testing import PlantProcess
 from testbed.missions import ellipse_mission
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 HEAVY = ("matplotlib", "scipy", "pandas", "PIL", "tqdm", "cryptography", "IPython")
 
 # companion's own entry point, with the module list written at exit (after sys.exit(main())).

@@ -132,7 +132,7 @@ def test_every_control_verb_and_every_refusal(tmp_path, capsys):
             assert not bad["ok"] and "trajectory.kind" in bad["message"], bad
             assert status()["mission"] == "first"
             # A file name on the companion's machine is not read for a remote operator.
-            shipped = str(Path(__file__).resolve().parent.parent / "missions" / "circle.toml")
+            shipped = str(Path(__file__).resolve().parents[2] / "missions" / "circle.toml")
             by_path = ask("load-mission", payload=shipped)
             assert not by_path["ok"] and status()["mission"] == "first", by_path
             assert ask("resume")["ok"]

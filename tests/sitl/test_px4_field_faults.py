@@ -5,7 +5,7 @@ station on the GCS link watching. PX4 leaves OFFBOARD for Hold on its offboard-l
 answer, not a pilot's nor a failsafe to respect, and resumes the mission from the held
 reference once the link is back. PX4 runs with COM_OBL_RC_ACT 5 (Hold), what `companion
 preflight` asks for: with this build's default its offboard loss switched to RTL (seen), which
-the companion does not take back (exit 5, tests/test_companion_field_faults.py). Skipped unless
+the companion does not take back (exit 5, tests/commands/test_run_field_faults.py). Skipped unless
 PX4_SITL or PX4_DIR is set.
 
 In `make sitl-test` (CI) since 2026-12-06: eleven runs in a row, each stall, beside another

@@ -1,6 +1,6 @@
 """A third autopilot is one module and one line of registration (docs/design/profiles.md).
 
-``tests/madeup_autopilot.py`` is a made-up autopilot, "Acme", with its own setpoint encoding and
+``tests/profiles/madeup_autopilot.py`` is a made-up autopilot, "Acme", with its own setpoint encoding and
 reading, failsafe report and preflight checks: here it is registered (the one line a real one
 adds to ``companion/profiles/__init__.py``) and flown through the companion's link to the plant
 over loopback UDP (encode -> the plant's reading -> the rover moves), its failsafe texts read by
@@ -13,10 +13,10 @@ from __future__ import annotations
 import threading
 import time
 
+import madeup_autopilot as acme
 import pytest
 
 import companion.profiles as profiles
-import madeup_autopilot as acme
 from companion.core.signals import Command
 from companion.ident.excite import manoeuvres
 from companion.live import health

@@ -26,7 +26,7 @@ from companion.sim.plant import RoverParams
 
 # the interface module (the registry's look-up function is ``profiles.autopilot_named``)
 iface = importlib.import_module("companion.profiles.autopilot")
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 PROFILES_DIR = ROOT / "companion" / "profiles"
 
 

@@ -21,7 +21,7 @@ from sitl_plant.testing import PlantProcess
 from testbed.missions import ellipse_mission
 from testbed.process import Companion
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 SKID = ROOT / "companion" / "sim" / "vehicles" / "ardupilot_skid.toml"
 
 

@@ -30,7 +30,7 @@ from companion import cli
 from companion.errors import ExitCode
 from sitl_plant import cli as plant_cli
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 README = ROOT / "README.md"
 DOCS = ROOT / "docs"
 README_LIMIT = 10 * 1024   # bytes

@@ -19,7 +19,7 @@ from companion.sim.vehicle_file import load as load_vehicle
 from companion.sim.vehicle_file import preset_path
 from sitl_plant.testing import Pilot, PlantProcess, free_udp_port
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 SKID = str(ROOT / "companion" / "sim" / "vehicles" / "ardupilot_skid.toml")
 STEERING = "FRAME_CLASS, SERVOn_FUNCTION"
 STREAMS = "LOCAL_POSITION_NED, ATTITUDE rate"

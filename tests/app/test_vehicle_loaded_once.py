@@ -19,7 +19,7 @@ from companion.sim.gains import TunedGains
 from companion.sim.plant import RoverParams
 from companion.vehicle import from_bytes
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 CAR = RoverParams(max_speed=2.0, max_yaw_rate=1.5, min_turn_radius=0.9)
 
 

@@ -22,7 +22,7 @@ import pytest
 
 import companion
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 NETWORK_TROUBLE = ("Could not find a version", "No matching distribution", "ConnectionError",
                    "Temporary failure in name resolution", "Network is unreachable",
                    "Max retries exceeded", "NewConnectionError", "ReadTimeoutError")

@@ -18,7 +18,7 @@ from companion.sim.gains import find_tuned
 from companion.sim.plant import RoverParams
 from testbed.process import companion_cli
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 SHIPPED = sorted(str(p.relative_to(ROOT)) for p in (ROOT / "missions").iterdir()
                  if p.suffix in (".toml", ".plan", ".waypoints"))
 REQUIRED = ["missions/paper_ellipse_004.toml", "missions/paper_ellipse_008.toml",

@@ -1,7 +1,7 @@
 """A made-up third autopilot, "Acme": everything a new autopilot brings, in one module.
 
 This is what ``companion/profiles/acme.py`` would be (with one line in ``AUTOPILOTS``,
-``companion/profiles/__init__.py``); ``tests/test_profiles_registry.py`` registers it for a test
+``companion/profiles/__init__.py``); ``tests/profiles/test_profiles_registry.py`` registers it for a test
 and flies it through the companion's link, the plant and preflight, touching no other file.
 Acme differs from both real ones on purpose: it takes u_p *and* a turn rate in LOCAL_NED and
 drives the turn rate at the vector's speed; its frame is one parameter (ACME_STEER: 0 skid,

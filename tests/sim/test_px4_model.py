@@ -33,7 +33,7 @@ from companion.sim.batch import SimConfig, simulate
 from companion.sim.plant import RoverModel, RoverParams, RoverState
 from testbed.process import companion_cli
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 
 # Close to PX4 SITL's SIH Ackermann rover (RO_* / RA_* defaults of its airframe)
 PX4_ROVER = RoverParams(w_c=1 / 0.25, w_c_yaw=1 / 0.05, speed_delay=0.1, yaw_delay=0.04,

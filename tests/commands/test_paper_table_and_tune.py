@@ -15,7 +15,7 @@ import pytest
 from companion.sim import gains as gains_mod
 from testbed.process import companion_cli
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 
 
 companion = partial(companion_cli, timeout=240)

@@ -18,7 +18,9 @@ from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 
 from companion.errors import UserError
 from companion.mav.connection import DEFAULT_BAUD, serial_target
-from test_companion_run import MISSION, batch_twin
+from testbed.scoring import batch_twin
+
+MISSION = "missions/paper_ellipse_012.toml"
 from testbed.marks import CANDIDATE
 from testbed.process import ROOT, Companion, companion_cli
 from testbed.pty_cable import PtyCable

@@ -26,7 +26,7 @@ from companion.sim.robust.search import tune
 from companion.sim.tuning import Candidates
 from testbed.process import companion_cli
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 
 ROVER = RoverParams(w_c=1 / 0.3, w_c_yaw=1 / 0.05, max_speed=4.0, max_yaw_rate=2.0944,
                     max_accel=1.0, max_yaw_accel=2.0944, speed_delay=0.05, yaw_delay=0.03,
@@ -490,7 +490,7 @@ def _car_and_skid() -> tuple[RobustConfig, RobustConfig]:
     tuner_config -> vehicle_gains.config_for), for SITL's car (benchmarks/vehicles) and the
     bundled skid rover."""
     from companion.app.vehicle import load, tuner_config
-    root = Path(__file__).resolve().parents[1]
+    root = Path(__file__).resolve().parents[2]
     files = (root / "benchmarks/vehicles/ardupilot_car_sitl.toml",
              root / "companion/sim/vehicles/ardupilot_skid.toml")
     car, skid = (tuner_config(load(f), 40.0) for f in files)

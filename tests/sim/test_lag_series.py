@@ -2,7 +2,7 @@
 
 identification's fit runs ``lag_series``; numba compiles its per-model loop where numba is
 installed, and ``compiled=False`` runs lag_step on arrays, one grid step a call (the reference,
-and what runs without numba). Channel against ``respond``: tests/test_identify.py.
+and what runs without numba). Channel against ``respond``: tests/ident/test_identify.py.
 """
 
 from __future__ import annotations

@@ -9,16 +9,11 @@ import math
 
 import pytest
 
-from companion.core.filter import FilterGains
-from companion.core.limits import Limits
-from companion.core.pzc import PZCGains, PZCTracker
-from companion.core.trajectory import Ellipse
-from companion.sim.batch import SimConfig, simulate
-from companion.sim.plant import RoverParams
 from sitl_plant.testing import PlantProcess
 from testbed.fake_vehicle import is_mode_command, is_zero
 from testbed.missions import ellipse_mission
 from testbed.process import Companion
+from testbed.scoring import batch_twin
 from testbed.udp_proxy import Proxy
 
 MISSION = "missions/paper_ellipse_012.toml"
@@ -30,21 +25,6 @@ def fly(plant_args, companion_args, timeout=60.0):
         code = comp.wait(timeout)
         assert code == 0, comp.stderr
         return comp.result()
-
-
-def batch_twin(result, delay: float = 0.0) -> float:
-    """companion.sim.batch.simulate of the same scenario: same gains, limits, rate, plant, start;
-    ``delay`` s of link transit on both channels (zero over loopback)."""
-    g = result["gains"]
-    tracker = PZCTracker(FilterGains(g["k_df"], g["lambda_f"]),
-                         PZCGains(**{k: g[k] for k in ("k_dc", "lambda_c", "k_dc_yaw",
-                                                       "lambda_c_yaw", "velocity_ff",
-                                                       "heading_rate_ff", "speed_law")}),
-                         Limits(**result["limits"]))
-    plant = RoverParams.paper(d_cen=0.3).with_(speed_delay=delay, yaw_delay=delay)
-    sim = simulate(tracker, plant, Ellipse.paper(0.12),
-                   config=SimConfig(duration=60.0, control_rate=40.0, start=(0.0, 0.0, 0.0)))
-    return float(sim.f_cost)
 
 
 def test_lockstep_tracks_the_paper_ellipse_and_agrees_with_batch():
