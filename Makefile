@@ -3,8 +3,11 @@ PYTHON ?= python3
 VENV ?= .venv
 BIN = $(VENV)/bin
 
-# pytest-xdist workers for `make test` (docs/development.md): 4 on two cores, since most tests
-# wait on real-time flights, not the CPU (5:17 against one process's 19:52); WORKERS=0 is one process.
+# pytest-xdist workers for `make test` (docs/development.md): 4 on two cores, since many tests
+# wait on real-time flights, not the CPU; WORKERS=0 is one process. Each test file goes to one
+# worker (--dist loadfile), so a module's shared fixture (one demo flight, 28 processes at once)
+# runs once (`--dist loadgroup` no longer groups under pytest 9.2: pytest-xdist issue 1386); in
+# the order tests/conftest.py gives (the slow first), not the most tests first.
 WORKERS ?= 4
 # The linter's paths; the type checker's are in pyproject.toml ([tool.mypy] files)
 LINT_PATHS = companion sitl_plant tests testbed benchmarks
@@ -26,7 +29,7 @@ demo: $(BIN)/.installed
 # the wall clock, or loading both cores) alone in one process. Either run may select nothing
 # (ARGS naming one file); nothing selected by both is pytest's "no tests", exit 5.
 test: $(BIN)/.installed
-	@$(BIN)/python -m pytest -n $(WORKERS) --dist loadgroup -m "not solo" $(ARGS); a=$$?; \
+	@$(BIN)/python -m pytest -n $(WORKERS) --dist loadfile --no-loadscope-reorder -m "not solo" $(ARGS); a=$$?; \
 	 $(BIN)/python -m pytest -m solo $(ARGS); b=$$?; \
 	 if [ $$a -eq 5 ] && [ $$b -eq 5 ]; then exit 5; fi; \
 	 for c in $$a $$b; do if [ $$c -ne 0 ] && [ $$c -ne 5 ]; then exit $$c; fi; done

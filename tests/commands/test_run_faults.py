@@ -101,30 +101,48 @@ def test_sigterm_stops_the_rover_holds_and_exits_0(tmp_path):
     assert heartbeats and heartbeats[-1].msg.custom_mode == HOLD
 
 
-def _bad_telemetry(k: int, ms: int):
-    """Tick script for the fake vehicle: bad samples once tracking has started (tick 60+)."""
+def _tracked_from(fake: FakeVehicle, at: list[int], k: int) -> int | None:
+    """Tick ``k`` counted from the first tick the companion tracked (``at`` remembers it), or
+    None before. Not from the first tick streamed: the setup's waits read (and drop) the stream
+    unchecked, and the setup's length varies (a fresh clone's cold bytecode: the first setpoint
+    came at tick 40-170, where fixed ticks 60-80 fell into the setup)."""
+    if not at and any(not is_zero(sp) for sp in fake.setpoints):
+        at.append(k)
+    return k - at[0] if at else None
+
+
+def _bad_telemetry(i: int, ms: int):
+    """Bad samples, ``i`` ticks after the companion's first tracking setpoint."""
     script = {
-        60: {"x": math.nan, "note": "nan x"},
-        64: {"vx": math.inf, "note": "inf vx"},
-        68: {"yaw": math.nan, "note": "nan yaw"},
-        72: {"sysid": 2, "ms": ms + 1, "note": "other system"},
-        76: {"ms": ms - 40, "note": "backwards"},      # before the previous tick, off its grid
-        80: {"ms": ms - 25, "note": "duplicate"},
+        10: {"x": math.nan, "note": "nan x"},
+        14: {"vx": math.inf, "note": "inf vx"},
+        18: {"yaw": math.nan, "note": "nan yaw"},
+        22: {"sysid": 2, "ms": ms + 1, "note": "other system"},
+        26: {"ms": ms - 40, "note": "backwards"},      # before the previous tick, off its grid
+        30: {"ms": ms - 25, "note": "duplicate"},
     }
-    return script.get(k)
+    return script.get(i)
 
 
 def test_bad_telemetry_never_produces_a_setpoint(tmp_path):
     mission = ellipse_mission(tmp_path / "m.toml", 4.0)
+    at: list[int] = []     # the tick the bad samples count from: once tracking setpoints come
+
+    def script(k, ms):
+        # (at fixed ticks 60-80 a fresh clone's slow setup dropped some: not_finite 0-2 of 3)
+        i = _tracked_from(fake, at, k)
+        return _bad_telemetry(i, ms) if i is not None else None
+
     port = free_udp_port()
     # The fake vehicle is a thread of this test's process, which shares two cores with the
     # suite: a stall of it longer than the default 0.5 s would be a true stale failsafe. The
     # refused samples leave gaps of at most two ticks (50 ms); 2 s tells the two apart.
+    fake = FakeVehicle(port, script=script)     # bound before its thread runs the script
     with Companion(port, "--arm", "--json", "--mission", str(mission),
-                   "--stale-timeout", "2") as comp, \
-            FakeVehicle(port, script=_bad_telemetry) as fake:
+                   "--stale-timeout", "2") as comp, fake:
         assert comp.wait(30.0) == 0, comp.stderr
         r = comp.result()
+    assert at, "never tracked"
     bad = {ms: note for ms, note in fake.sent_ms if note and note != "duplicate"}
     assert len(bad) == 5
     for ms, note in bad.items():
@@ -183,12 +201,15 @@ def test_the_first_pose_sample_goes_with_the_attitude_heard_during_the_setup(tmp
 def test_a_rebooted_vehicle_is_stopped_not_resumed(tmp_path):
     mission = ellipse_mission(tmp_path / "m.toml", 30.0)
 
+    at: list[int] = []
+
     def reboot(k, ms):
-        return {"restart": True, "ms": 40} if k == 80 else None
+        # 20 ticks into the companion's tracking, not at a fixed tick (see _tracked_from)
+        return {"restart": True, "ms": 40} if _tracked_from(fake, at, k) == 20 else None
 
     port = free_udp_port()
-    with Companion(port, "--arm", "--json", "--mission", str(mission)) as comp, \
-            FakeVehicle(port, script=reboot) as fake:
+    fake = FakeVehicle(port, script=reboot)     # bound before its thread runs the script
+    with Companion(port, "--arm", "--json", "--mission", str(mission)) as comp, fake:
         assert comp.wait(30.0) == 7, comp.stderr
         r = comp.result()
     assert "restarted" in r["reason"]
@@ -221,12 +242,15 @@ def test_a_reboot_that_streams_nothing_is_told_from_a_pilot_by_its_clock(tmp_pat
     (MAV_CMD_REQUEST_MESSAGE SYSTEM_TIME) before saying who, and ends with exit 7."""
     mission = ellipse_mission(tmp_path / "m.toml", 30.0)
 
+    at: list[int] = []
+
     def reboot(k, ms):
-        return {"reboot": True, "ms": 40} if k == 80 else None
+        # 20 ticks into the companion's tracking, not at a fixed tick (see _tracked_from)
+        return {"reboot": True, "ms": 40} if _tracked_from(fake, at, k) == 20 else None
 
     port = free_udp_port()
-    with Companion(port, "--arm", "--json", "--mission", str(mission)) as comp, \
-            FakeVehicle(port, script=reboot) as fake:
+    fake = FakeVehicle(port, script=reboot)     # bound before its thread runs the script
+    with Companion(port, "--arm", "--json", "--mission", str(mission)) as comp, fake:
         assert comp.wait(30.0) == 7, comp.stderr
         r = comp.result()
     assert r["reason"].startswith("vehicle_restarted"), r

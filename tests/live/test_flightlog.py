@@ -26,11 +26,6 @@ ENV = {**os.environ, "PYTHONPATH": str(ROOT)}
 companion = partial(companion_cli, timeout=90.0, env=ENV)
 
 
-# One worker takes the whole module (make test: --dist loadgroup): one demo flight, not one per
-# worker that gets a test of it.
-pytestmark = pytest.mark.xdist_group("flightlog_demo")
-
-
 @pytest.fixture(scope="module")
 def demo_logs(tmp_path_factory):
     """One 10 s demo with the default log directory (./logs of the working directory)."""

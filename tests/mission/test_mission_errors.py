@@ -130,11 +130,6 @@ def _write(tmp_path: Path, name: str, content: str | None) -> Path:
     return path
 
 
-# One worker takes the whole module (make test: --dist loadgroup), so the fixture below starts
-# its processes once, not once per worker that gets one of its tests.
-pytestmark = pytest.mark.xdist_group("mission_errors")
-
-
 @pytest.fixture(scope="module")
 def results(tmp_path_factory):
     """Run `python -m companion mission check FILE` once per case, all processes at once."""

@@ -227,6 +227,7 @@ def gcs_arms_and_starts_auto(gcs: GroundStation) -> None:
     assert gcs.command((1, 1), 176, 1, 10) == 0          # AUTO, by the GCS
 
 
+@pytest.mark.slow   # long (about 25 s of real-time flight): its file starts first under workers
 def test_handover_inside_auto_twice(tmp_path):
     """AUTO drives to the first waypoint, the companion tracks each enable..disable segment
     from the rover's pose, hands back, AUTO goes on and reaches the last waypoint."""

@@ -44,7 +44,10 @@ def make_venv(path: Path) -> Path:
 
 
 def pip_install(bin_dir: Path, *what: str) -> None:
-    proc = subprocess.run([str(bin_dir / "python"), "-m", "pip", "install", "-q", *what],
+    # --no-compile: no bytecode for every module of every dependency (numpy, numba, matplotlib,
+    # ...), most of this test's CPU time; what the checks below import compiles as it loads
+    proc = subprocess.run([str(bin_dir / "python"), "-m", "pip", "install", "-q", "--no-compile",
+                           *what],
                           capture_output=True, text=True, timeout=600, env=clean_env())
     if proc.returncode != 0:
         out = proc.stdout + proc.stderr
@@ -120,7 +123,9 @@ def test_wheel_installs_and_runs_in_a_clean_venv(tmp_path):
 
     # The demo: sitl-plant and the companion as two installed processes, the shipped tuned
     # gains (package data) picked for 40 Hz. $ZENOH_CONFIG (conftest) keeps Zenoh on loopback.
-    proc = run("companion", "demo", "--json", timeout=300)
+    # 30 s of the ellipse (steady RMS over its second half): the installed package flying,
+    # not the default minute again (test_companion_demo.py flies that)
+    proc = run("companion", "demo", "--json", "--duration", "30", timeout=300)
     assert proc.returncode == 0, proc.stderr
     result = json.loads(proc.stdout)
     assert result["reason"] == "mission_done" and result["exit_code"] == 0
