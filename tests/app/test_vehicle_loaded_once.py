@@ -86,3 +86,18 @@ def test_nothing_below_the_commands_opens_a_vehicle_file():
     found = [f"{p.relative_to(ROOT)}:{line}" for p in below for line in _calls_to_load(p)
              if p.name != "vehicle_file.py"]     # its own preset() reads the bundled files
     assert not found, found
+
+
+def test_a_command_parses_its_vehicle_file_once(monkeypatch, capsys):
+    # companion simulate --vehicle, in process: the file named by the flag, the gains beside it,
+    # the limits and the tuner's settings all come from one parse (it was three before)
+    from companion.cli import main
+    parsed: list[str] = []
+    real = vehicle_file.parse
+    monkeypatch.setattr(vehicle_file, "parse",
+                        lambda data, where: parsed.append(where) or real(data, where))
+    bundled = ROOT / "companion" / "sim" / "vehicles" / "ardupilot_skid.toml"
+    code = main(["simulate", "--vehicle", str(bundled), "--mission",
+                 str(ROOT / "missions" / "paper_ellipse_004.toml"), "--json"])
+    assert code == 0, capsys.readouterr().err
+    assert parsed == [str(bundled)]
