@@ -58,7 +58,9 @@ HEAVY = ("matplotlib", "scipy", "pandas", "PIL", "tqdm", "IPython", "sympy", "nu
          "cryptography")
 GUIDED = 15                     # ArduPilot Rover custom_mode
 ARMED = 128                     # MAV_MODE_FLAG_SAFETY_ARMED
-COMPANION_SYSID = 255           # companion.live.link.LinkConfig.source_system
+# The companion speaks as a component of the vehicle's own system (the onboard-computer
+# convention), so its messages are told apart by component: LinkConfig.source_component.
+COMPANION_COMPID = 191          # MAV_COMP_ID_ONBOARD_COMPUTER
 TARGETS = {"cpu_pct": 3.0, "rss_mb": 80.0, "import_s": 0.5}
 
 
@@ -258,7 +260,7 @@ def tlog_times(path: str) -> dict[str, float | None]:
         if msg is None:
             break
         kind, t = msg.get_type(), msg._timestamp
-        ours = msg.get_srcSystem() == COMPANION_SYSID
+        ours = msg.get_srcComponent() == COMPANION_COMPID
         if kind == "HEARTBEAT" and not ours:
             out["heartbeat"] = out["heartbeat"] or t
             engaged = bool(msg.base_mode & ARMED) and msg.custom_mode == GUIDED
