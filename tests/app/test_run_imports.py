@@ -1,7 +1,8 @@
 """What ``companion run`` loads on a board: a real run against ``sitl-plant`` (flight logs and
 Zenoh on) records the modules it imported, start to exit. Nothing heavy is on that path (no
 plotting, no progress bar without --progress, no scipy / pandas / cryptography without
---zenoh-tls), and pymavlink loads only the dialect the link uses, not its default "all".
+--zenoh-tls), pymavlink loads only the dialect the link uses, not its default "all", and no
+other command's module is imported.
 Import time and memory themselves are figures: benchmarks/budget.py prints them.
 """
 
@@ -51,3 +52,18 @@ def test_run_imports_nothing_heavy(tmp_path):
     heavy = sorted(m for m in modules if m.split(".")[0] in HEAVY)
     assert not heavy, heavy
     assert "pymavlink.dialects.v20.all" not in modules
+    # Only the command it names: not the other seventeen commands' modules and their imports.
+    commands = sorted(m for m in modules if m.startswith("companion.commands."))
+    assert commands == ["companion.commands.run"], commands
+
+
+def test_the_parser_holds_the_named_command_or_every_one():
+    from companion import cli
+    assert cli.named_command(["paper-table", "--rate", "40"]) == "paper_table"
+    assert cli.named_command(["run", "--help"]) == "run"
+    # help, version, nothing or a typo: every command, so argparse can list them
+    assert [cli.named_command(a) for a in (["--help"], ["--version"], [], ["runn"],
+                                           ["mission_pull"])] == [None] * 5
+    every = cli.build_parser()._subparsers._group_actions[0].choices     # type: ignore[union-attr]
+    one = cli.build_parser("run")._subparsers._group_actions[0].choices  # type: ignore[union-attr]
+    assert len(every) == len(cli.COMMANDS) and list(one) == ["run"]
