@@ -218,6 +218,10 @@ def _fault_arguments(p: argparse.ArgumentParser) -> None:
     flt = p.add_argument_group("faults and security")
     flt.add_argument("--takeover-at", type=_positive, metavar="S", dest="takeover_at",
                      help="a pilot switches to HOLD at S s of vehicle time (SIGUSR1: now)")
+    flt.add_argument("--battery-low-at", type=_positive, metavar="S", dest="battery_low_at",
+                     help="the autopilot's battery failsafe at S s of vehicle time, as ArduPilot "
+                          "Rover's with BATT_FS_LOW_ACT 2: HOLD (its heartbeat first), then "
+                          "\"Battery 1 is low ...\" and SYS_STATUS's battery bit unhealthy")
     flt.add_argument("--param", action="append", default=[], metavar="NAME=VALUE",
                      type=_param_override,
                      help="serve this parameter value (repeatable): overrides the modelled one "
@@ -280,6 +284,10 @@ def config_from_args(args: argparse.Namespace) -> PlantConfig:
                                 latency=args.latency, dropout=args.dropout,
                                 seed=args.sysid if args.seed is None else args.seed,
                                 duplicate=args.duplicate, reorder=args.reorder, burst=args.burst)
+    if args.battery_low_at is not None and vehicle.autopilot.plant.battery_text is None:
+        from companion.errors import UserError
+        raise UserError(f"--battery-low-at: the battery failsafe is not modelled for "
+                        f"--autopilot {args.autopilot}")
     key = None
     if args.signing_key is not None:
         from companion.mav.signing import load_key
@@ -290,7 +298,8 @@ def config_from_args(args: argparse.Namespace) -> PlantConfig:
                        duration=args.duration, preset=args.preset, vehicle=vehicle,
                        tick_aligned=(args.tick_aligned if args.tick_aligned is not None
                                      else args.preset == "ardupilot-skid"),
-                       telemetry=telemetry, takeover_at=args.takeover_at, signing_key=key,
+                       telemetry=telemetry, takeover_at=args.takeover_at,
+                       battery_low_at=args.battery_low_at, signing_key=key,
                        origin=OriginConfig(args.origin[0], args.origin[1], args.origin[2],
                                            delay=max(args.origin_delay, args.ekf_delay)),
                        global_position_rate=args.global_position_rate,

@@ -28,6 +28,7 @@ class PlantConfig:
     vehicle: VehicleConfig = field(default_factory=VehicleConfig)
     telemetry: TelemetryConfig = field(default_factory=TelemetryConfig)
     takeover_at: float | None = None  # vehicle s at which a "pilot" switches to HOLD
+    battery_low_at: float | None = None  # vehicle s of the autopilot's battery failsafe (HOLD)
     signing_key: bytes | None = None  # MAVLink 2 signing: 32-byte secret
     origin: OriginConfig = field(default_factory=OriginConfig)   # EKF origin (lat, lon, alt)
     global_position_rate: float = 0.0  # Hz of GLOBAL_POSITION_INT at boot (0: until asked)

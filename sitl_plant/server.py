@@ -79,6 +79,9 @@ class PlantServer:
         self.takeover_requested = False   # set by SIGUSR1
         self._takeover_us = (None if config.takeover_at is None
                              else int(round(config.takeover_at * 1e6)))
+        self._battery_low_us = (None if config.battery_low_at is None
+                                else int(round(config.battery_low_at * 1e6)))
+        self.battery_ok = True
         v = self.vehicle.config
         self.params = params.ParamTable(
             v.autopilot.plant.params(v.params, config.loop_rate, config.sysid,
@@ -95,7 +98,7 @@ class PlantServer:
 
     def _status_sensors(self) -> tuple[int, int, int]:
         """SYS_STATUS's pre-arm bit: healthy once arming would be accepted."""
-        return status.sensors(self.vehicle.t >= self.vehicle.config.arm_delay)
+        return status.sensors(self.vehicle.t >= self.vehicle.config.arm_delay, self.battery_ok)
 
     @property
     def t_us(self) -> int:
@@ -167,6 +170,9 @@ class PlantServer:
             if takeover is not None and self.t_us >= takeover:
                 self._takeover_us = takeover = None
                 self.pilot_takeover()
+            if self._battery_low_us is not None and self.t_us >= self._battery_low_us:
+                self._battery_low_us = None
+                self.battery_failsafe()
             vehicle.step(dt)
             if vehicle.texts:
                 self._flush_texts()
@@ -274,6 +280,22 @@ class PlantServer:
         self.link.heartbeat(v.autopilot, v.base_mode, v.custom_mode, v.armed)
         if self.gcs is not None:
             self.gcs.heartbeat(v.autopilot, v.base_mode, v.custom_mode, v.armed)
+
+    def battery_failsafe(self) -> None:
+        """The battery monitor's low failsafe with its action HOLD, in the order ArduPilot SITL
+        sends it (docs/field-faults.md): the HOLD heartbeat, then the text, then SYS_STATUS
+        with the battery bit unhealthy."""
+        v = self.vehicle
+        self.battery_ok = False
+        v.set_mode(hold_mode(v.autopilot))
+        links = [self.link] + ([self.gcs] if self.gcs is not None else [])
+        for link in links:
+            link.heartbeat(v.autopilot, v.base_mode, v.custom_mode, v.armed)
+        v.texts.append((SEVERITY_WARNING, v.autopilot.plant.battery_text or "Battery low"))
+        self._flush_texts()
+        for link in links:
+            link.sys_status(link.bad_data, v.setpoints_ignored.get("non-finite", 0),
+                            self._status_sensors())
 
     def _flush_mission(self) -> None:
         """AUTO's news to both links: items reached, its texts, the current item if it moved."""

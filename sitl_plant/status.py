@@ -21,6 +21,7 @@ from dataclasses import dataclass
 MSG_EKF_STATUS_REPORT = 193
 MAV_CMD_RUN_PREARM_CHECKS = 401
 PREARM_BIT = 0x10000000                 # MAV_SYS_STATUS_PREARM_CHECK
+BATTERY_BIT = 0x2000000                 # MAV_SYS_STATUS_SENSOR_BATTERY
 # EKF_ATTITUDE | VELOCITY_HORIZ | VELOCITY_VERT | POS_HORIZ_REL | POS_HORIZ_ABS | POS_VERT_ABS
 # | PRED_POS_HORIZ_REL | PRED_POS_HORIZ_ABS: 0x33f, what ArduPilot SITL reports once settled
 EKF_GOOD = 0x33F
@@ -77,6 +78,8 @@ def ekf_report(t: float, ekf_delay: float, faults: tuple[GpsFault, ...] = (),
     return EkfReport(EKF_ATTITUDE_ONLY, 0.0, 0.0, 0.0, 0.0)
 
 
-def sensors(can_arm: bool) -> tuple[int, int, int]:
-    """SYS_STATUS present / enabled / health: only the pre-arm bit is modelled."""
-    return PREARM_BIT, PREARM_BIT, PREARM_BIT if can_arm else 0
+def sensors(can_arm: bool, battery_ok: bool = True) -> tuple[int, int, int]:
+    """SYS_STATUS present / enabled / health: the pre-arm bit and the battery monitor's (whose
+    health ArduPilot clears when its battery failsafe triggers)."""
+    bits = PREARM_BIT | BATTERY_BIT
+    return bits, bits, (PREARM_BIT if can_arm else 0) | (BATTERY_BIT if battery_ok else 0)

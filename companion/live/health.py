@@ -118,6 +118,7 @@ class FailsafeWatch:
     last: tuple[str, str, float] | None = None    # (cause, text, s) of the last failsafe text
     cleared_at: float = -math.inf                 # s of the last "cleared" text
     seen: list[tuple[str, str]] = field(default_factory=list)   # every (cause, text), in order
+    sensor_health: int | None = None              # the last SYS_STATUS health bits
 
     def text(self, text: str, now: float) -> str | None:
         """A STATUSTEXT of the vehicle: the failsafe cause it names, or None."""
@@ -131,6 +132,28 @@ class FailsafeWatch:
                 self.seen.append((cause, text))
                 return cause
         return None
+
+    def sys_status(self, enabled: int, health: int, now: float) -> str | None:
+        """A SYS_STATUS of the vehicle: the cause whose sensor bit (one the autopilot reports
+        enabled) has just turned unhealthy, as :meth:`text` would name it; None otherwise. The
+        bit turning healthy again clears that cause, as a "cleared" text would."""
+        before, self.sensor_health = self.sensor_health, health
+        named = None
+        for bit, cause in self.facts.sensors:
+            if not enabled & bit:
+                continue
+            if not health & bit and (before is None or before & bit):
+                said = f"SYS_STATUS: {cause} unhealthy"
+                self.seen.append((cause, said))
+                named = named or cause
+                last = self.last
+                if not (last is not None and last[0] == cause and self.cleared_at < last[2]
+                        and now - last[2] <= TEXT_MEMORY):
+                    self.last = (cause, said, now)   # (the autopilot's own words, if any, stay)
+            elif (health & bit and before is not None and not before & bit
+                  and self.last is not None and self.last[0] == cause):
+                self.cleared_at = now
+        return named
 
     def heartbeat(self, system_status: int) -> None:
         self.critical = system_status in self.facts.states

@@ -378,7 +378,9 @@ PROFILE = AutopilotProfile(
         mode_refused=MAV_RESULT_FAILED,
         arm_texts=("Throttle armed", "Throttle disarmed"),
         tick_aligned=True,              # 40 Hz on a 50 Hz scheduler: 20 / 20 / 20 / 40 ms
-        params=plant_params),
+        params=plant_params,
+        # AP_BattMonitor::check_failsafes; Rover switches to HOLD (BATT_FS_LOW_ACT 2) with it
+        battery_text="Battery 1 is low 10.50V used 1200 mAh"),
     failsafe=FAILSAFE,
     estimate=ESTIMATE,
     mission_home_item=True, auto_mode="AUTO", boot_modes=frozenset({"INITIALISING"}),

@@ -42,6 +42,7 @@ if TYPE_CHECKING:
     from .steering import SteeringProfile
 
 # MAVLink numbers (common.xml), here so the profiles need no pymavlink.
+MAV_SYS_STATUS_SENSOR_BATTERY = 0x2000000
 MAV_AUTOPILOT_ARDUPILOTMEGA = 3
 MAV_AUTOPILOT_PX4 = 12
 MAV_TYPE_GROUND_ROVER, MAV_TYPE_SURFACE_BOAT = 10, 11
@@ -179,6 +180,8 @@ class PlantFacts:
     tick_aligned: bool                 # telemetry on the scheduler's ticks (a real vehicle's)
     # (name, value, MAV_PARAM_TYPE) served, from the rover, loop rate, sysid, offboard timeout
     params: Callable[..., list[tuple[str, float, int]]]
+    # its battery failsafe (low, its action HOLD) as its own text says it (None: not modelled)
+    battery_text: str | None = None
 
 
 # --------------------------------------------------------------------------- failsafes, estimate
@@ -199,13 +202,16 @@ class FailsafeFacts:
     guided timeout, PX4's offboard loss): once the link is back the companion takes the
     vehicle back, as from its own HOLD. ``leaves_on_silence``: that answer leaves the track
     mode (PX4), so a mode change while the companion's link is stalled is that answer unless a
-    text names another failsafe."""
+    text names another failsafe. ``sensors``: (SYS_STATUS health bit, cause) pairs: a bit the
+    autopilot reports enabled turning unhealthy names that failsafe as a text would (a battery
+    monitor clears MAV_SYS_STATUS_SENSOR_BATTERY when its failsafe triggers)."""
 
     texts: tuple[tuple[str, str], ...]
     cleared: tuple[str, ...]
     states: frozenset[int] = frozenset({MAV_STATE_CRITICAL, MAV_STATE_EMERGENCY})
     link_causes: frozenset[str] = frozenset()
     leaves_on_silence: bool = False
+    sensors: tuple[tuple[int, str], ...] = ((MAV_SYS_STATUS_SENSOR_BATTERY, "battery"),)
 
 
 @dataclass(frozen=True)

@@ -20,6 +20,7 @@ import pytest
 
 from testbed.ardupilot import CompanionProcess, GroundStation
 from testbed.field_faults import TO_COMPANION, TO_VEHICLE, StallProxy
+from testbed.marks import CANDIDATE
 from testbed.missions import circle_mission
 from testbed.safety import read_tlog
 from testbed.scoring import held_reference, largest_error, simstate_xy
@@ -366,3 +367,30 @@ def test_an_autopilot_reboot_mid_mission_ends_the_run_not_resumed(ardupilot, tmp
     assert code == 7 and r["reason"].startswith("vehicle_restarted"), comp.stderr
     assert "pilot took over" not in comp.stderr and "it rebooted" in comp.stderr
     assert back is not None and not asked, asked
+
+
+@pytest.mark.sitl
+@pytest.mark.slow
+@CANDIDATE
+def test_the_battery_failsafe_is_named_as_such(ardupilot, tmp_path):
+    """A low battery (issue 44): BATT_FS_LOW_ACT 2 (Hold) and BATT_LOW_VOLT above what the
+    simulated battery gives, 20 s into tracking (SITL's battery is SIM_BATT_VOLTAGE 12.6 V, its
+    monitor BATT_MONITOR 4). The autopilot says "Battery 1 is low ..." and switches to HOLD
+    after BATT_LOW_TIMER s; the companion must end naming the battery failsafe, not a pilot."""
+    sitl = ardupilot(speedup=SPEEDUP, params={"BATT_FS_LOW_ACT": 2, "BATT_LOW_TIMER": 2})
+    mission = circle_mission(tmp_path / "circle.toml", duration=75.0)
+    with _companion(sitl.url(0), tmp_path, mission) as comp, GroundStation(sitl) as gs:
+        _watch(gs)
+        _tracking_for(gs, 20.0)
+        t_low = time.monotonic()
+        _param(gs, "BATT_LOW_VOLT", 13.0)
+        code = comp.wait(120.0)
+        r = comp.result()
+        texts = [m.text for m in gs.messages("STATUSTEXT", t_low)]
+        modes = [m.custom_mode for m in gs.messages("HEARTBEAT", t_low)]
+    print(f"\nbattery low: the autopilot said {texts}; modes {sorted(set(modes))}; exit {code}: "
+          f"{r['reason']}")
+    assert any("battery" in t.lower() for t in texts), texts
+    assert HOLD in modes, modes
+    assert code == 5 and "battery" in r["reason"].lower(), (r["reason"], comp.stderr[-2000:])
+    assert "pilot_override" not in r["reason"] and "someone else" not in r["reason"], r

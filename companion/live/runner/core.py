@@ -133,6 +133,19 @@ class LoopCore:
                 f"--max-start-distance {limit:g} m: bring the rover nearer its first point or "
                 "raise the limit (0: no limit)")
 
+    def _autopilot_says(self, msg: Any, now: float) -> str | None:
+        """A STATUSTEXT or SYS_STATUS of the vehicle, logged and given to the failsafe watch:
+        the failsafe cause it names, or None."""
+        if msg.get_type() == "SYS_STATUS":
+            cause = self.autopilot_fs.sys_status(msg.onboard_control_sensors_enabled,
+                                                 msg.onboard_control_sensors_health, now)
+            if cause is not None:
+                self.log(f"vehicle's SYS_STATUS: {cause} unhealthy")
+            return cause
+        text = "".join(c if c.isprintable() else "?" for c in msg.text)
+        self.log("vehicle says: " + text)
+        return self.autopilot_fs.text(text, now)
+
     def _heartbeat_fresh(self, now: float) -> bool:
         return now - self.heard.heartbeat_wall <= self.config.heartbeat_lost
 

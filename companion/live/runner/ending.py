@@ -1,8 +1,10 @@
 """Ending a run: the rover stopped (zero setpoint, then HOLD), or left alone when a pilot has it.
 
 A pilot's takeover ends the loop at once, without another message to the vehicle; whether it
-was a pilot or a reboot (the autopilot comes back in its boot mode, disarmed, just as a pilot's
-switch looks) is judged after the loop, from the vehicle's clock. The HOLD the companion asked
+was a pilot, a reboot (the autopilot comes back in its boot mode, disarmed, just as a pilot's
+switch looks) or the autopilot's own failsafe whose word came just after its mode change
+(ArduPilot's battery failsafe: the HOLD heartbeat first, its "Battery 1 is low" and SYS_STATUS
+within 30 ms) is judged after the loop, from the vehicle's clock and what it says meanwhile. The HOLD the companion asked
 for is waited for, answering telemetry with zero setpoints meanwhile.
 """
 
@@ -26,6 +28,9 @@ REBOOTED = ("vehicle_restarted: time_boot_ms went back (the autopilot rebooted);
 CLOCK_KINDS = ("SYSTEM_TIME", "ATTITUDE", "LOCAL_POSITION_NED")
 CLOCK_LISTEN = 0.5
 CLOCK_WAIT = 3.0
+# and for at least this long (wall s) for the autopilot's STATUSTEXT or SYS_STATUS naming a
+# failsafe of its own that made the change
+FAILSAFE_LISTEN = 0.5
 
 
 class Ending(LoopCore):
@@ -101,6 +106,19 @@ class Ending(LoopCore):
                      f"{(last_ms or 0) / 1e3:.3f} s: it rebooted (what looked like a pilot: {why})")
             self._finish(REBOOTED, ExitCode.VEHICLE_RESTARTED)
             return
+        active = self.autopilot_fs.active(time.perf_counter())
+        if active is not None and active[0] not in self.profile.failsafe.link_causes:
+            cause, evidence = active
+            name = "own" if cause == "failsafe" else cause
+            did = (f"switched to {self.link.mode}" if self.link.mode != self.track_mode
+                   else "disarmed the vehicle")
+            took = f"the autopilot's {name} failsafe ({evidence}) {did}"
+            self.log(f"{took} (said just after: {why}): not taking the vehicle back; "
+                     "no more setpoints")
+            self._emit(ev.AUTOPILOT_FAILSAFE, took)
+            self._finish(f"autopilot_failsafe: {took}", ExitCode.AUTOPILOT_FAILSAFE, hold=False,
+                         stop=False)
+            return
         self.log(f"pilot took over ({why}): no more setpoints")
         self._emit(ev.PILOT_OVERRIDE, why)
         self._finish(f"pilot_override: {why}", ExitCode.PILOT_OVERRIDE, hold=False, stop=False)
@@ -108,20 +126,33 @@ class Ending(LoopCore):
     def _read_vehicle_clock(self, ask: bool) -> int | None:
         """The vehicle's time_boot_ms from the first of its messages that carries one, read
         for CLOCK_LISTEN s, then (``ask``) asked for (SYSTEM_TIME), up to CLOCK_WAIT s; None
-        if none came."""
+        if none came. Meanwhile, for at least FAILSAFE_LISTEN s, its STATUSTEXTs and
+        SYS_STATUS go to the failsafe watch (until one names a failsafe)."""
         link, clock = self.link, time.perf_counter
         start = clock()
         ask_at = start + CLOCK_LISTEN
+        clock_ms: int | None = None
+        named = False
         while (now := clock()) < start + CLOCK_WAIT:
+            if clock_ms is not None and (named or now >= start + FAILSAFE_LISTEN):
+                break
             msg = link.recv()
             if msg is None:
-                if ask and now >= ask_at:
+                if ask and clock_ms is None and now >= ask_at:
                     link.request_message(2)          # MAVLINK_MSG_ID_SYSTEM_TIME
                     ask_at = now + 0.5
                 link.wait(min(0.05, max(0.0, start + CLOCK_WAIT - now)))
-            elif msg.get_type() in CLOCK_KINDS and link.is_vehicle(msg):
-                return int(msg.time_boot_ms)
-        return None
+                continue
+            kind = msg.get_type()
+            if not link.is_vehicle(msg):
+                continue
+            if kind in CLOCK_KINDS and clock_ms is None:
+                clock_ms = int(msg.time_boot_ms)
+            elif kind in ("STATUSTEXT", "SYS_STATUS"):
+                cause = self._autopilot_says(msg, now)
+                named = named or (cause is not None
+                                  and cause not in self.profile.failsafe.link_causes)
+        return clock_ms
 
     def _wait_for_hold(self) -> None:
         """Until HOLD shows (ACK or heartbeat), answer telemetry with zero setpoints."""

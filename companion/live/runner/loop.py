@@ -164,15 +164,15 @@ class Runner(Failsafes, Requests):
             elif kind in ("COMMAND_LONG", "COMMAND_INT") and self.ground.gcs is not None:
                 self.ground.gcs.on_command(msg, self._on_request)   # DO_PAUSE_CONTINUE, ACKed
             elif kind == "STATUSTEXT" and link.is_vehicle(msg):
-                text = "".join(c if c.isprintable() else "?" for c in msg.text)
-                self.log("vehicle says: " + text)
-                cause = self.autopilot_fs.text(text, t_read)
+                cause = self._autopilot_says(msg, t_read)
                 if self.state is State.TRACKING and self.autopilot_fs.setpoints_lost(cause):
                     # telemetry flows but our setpoints do not arrive: the reference is held
                     # until the vehicle answers us again (our HOLD: see _may_recover)
                     self._failsafe(t_read, f'the vehicle says our setpoints stopped arriving '
-                                   f'("{text}"): the link is silent towards it',
+                                   f'("{msg.text}"): the link is silent towards it',
                                    cause="setpoints")
+            elif kind == "SYS_STATUS" and link.is_vehicle(msg):
+                self._autopilot_says(msg, t_read)
             if t_read >= self.timers.next_timer:
                 self._timers(t_read)
 
