@@ -106,3 +106,11 @@ def test_a_bad_param_flag_is_one_line_and_exit_2():
                            capture_output=True, text=True, timeout=30)
         assert r.returncode == 2 and len(r.stderr.strip().splitlines()) == 1, (bad, r.stderr)
         assert "--param" in r.stderr and "Traceback" not in r.stderr
+
+
+def test_a_battery_failsafe_where_none_is_modelled_is_one_line_and_exit_2():
+    r = subprocess.run([sys.executable, "-m", "sitl_plant", "--autopilot", "px4",
+                        "--battery-low-at", "5"], capture_output=True, text=True, timeout=30)
+    assert r.returncode == 2, r.stderr
+    assert r.stderr.strip() == ("sitl-plant: error: --battery-low-at: the battery failsafe is "
+                                "not modelled for --autopilot px4"), r.stderr
