@@ -126,6 +126,31 @@ def test_who_left_ardupilot():
     assert f.cleared(20.0) and f.who_left("MANUAL", "HOLD", 21.0, False, False)[0] == health.PILOT
 
 
+BATTERY = 0x2000000       # MAV_SYS_STATUS_SENSOR_BATTERY
+
+
+def test_a_battery_bit_turning_unhealthy_names_the_battery_failsafe():
+    f = fs()
+    others = 0x1000000 | 0x20
+    assert f.sys_status(others | BATTERY, others | BATTERY, 0.0) is None      # healthy
+    assert f.sys_status(others, others, 1.0) is None          # not enabled: says nothing
+    assert f.active(1.0) is None
+    assert f.sys_status(others | BATTERY, others, 2.0) == "battery"         # healthy -> not
+    who, why = f.who_left("HOLD", "HOLD", 2.1, False, False)
+    assert who == health.AUTOPILOT and why.startswith("the autopilot's battery failsafe")
+    assert f.sys_status(others | BATTERY, others, 3.0) is None     # still unhealthy: no news
+    assert f.sys_status(others | BATTERY, others | BATTERY, 4.0) is None   # healthy again
+    assert f.cleared(4.0)
+
+
+def test_the_autopilots_words_stay_the_evidence_when_its_sys_status_follows():
+    f = fs()
+    f.sys_status(BATTERY, BATTERY, 0.0)
+    assert f.text("Battery 1 is low 12.48V used 59 mAh", 1.0) == "battery"
+    assert f.sys_status(BATTERY, 0, 1.03) == "battery"
+    assert f.active(1.1) == ("battery", '"Battery 1 is low 12.48V used 59 mAh"')
+
+
 def test_a_guided_timeout_does_not_make_a_later_pilot_the_autopilot():
     f = fs()
     f.text("target not received last 3secs, stopping", 0.0)
