@@ -137,7 +137,8 @@ class FailsafeWatch:
         """A SYS_STATUS of the vehicle: the cause whose sensor bit (one the autopilot reports
         enabled) has just turned unhealthy, as :meth:`text` would name it; None otherwise. The
         bit turning healthy again clears that cause, as a "cleared" text would."""
-        before, self.sensor_health = self.sensor_health, health
+        # a bit not enabled counts as healthy: enabling it unhealthy is news too
+        before, self.sensor_health = self.sensor_health, health | (~enabled & 0xFFFFFFFF)
         named = None
         for bit, cause in self.facts.sensors:
             if not enabled & bit:
