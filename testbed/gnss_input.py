@@ -1,0 +1,131 @@
+"""The GNSS injector (issue 44): ArduPilot SITL's fixes from :mod:`testbed.gnss` via ``GPS_INPUT``.
+
+SITL runs with ``GPS1_TYPE 14`` (its GPS driver takes ``GPS_INPUT`` from any link) and
+``GPS1_DELAY_MS`` set to the scenario's lag (:func:`sitl_params`). :class:`GnssInjector` holds
+its own link (SITL's SERIAL2, say), asks for ``SIM_STATE`` (the simulator's truth: its
+``lat_int`` / ``lon_int`` extension, 1e-7 degree; the float fields are about 0.4 m coarse) at
+40 Hz, and at the scenario's rate sends the truth of ``lag`` seconds ago plus the scenario's
+error, with its fix type and claimed accuracy. Wall time is the clock: run SITL at speedup 1.
+The truth it saw is kept (``truth``: wall s, north / east metres from the first one) for
+scoring.
+"""
+
+from __future__ import annotations
+
+import bisect
+import math
+import select
+import threading
+import time
+from typing import Any
+
+from pymavlink import mavutil
+
+from .gnss import Fixes, Scenario, fixes
+
+SIM_STATE = 108
+EARTH_RADIUS = 6378137.0               # m, WGS-84 equatorial (ArduPilot's location maths)
+GPS_EPOCH_UNIX = 315964800             # 1980-01-06 in Unix seconds
+LEAP_SECONDS = 18                      # GPS - UTC since 2017
+TRUTH_HZ = 40.0                        # Rover's 50 Hz loop refuses 50 Hz (the notes)
+
+
+def sitl_params(scenario: Scenario) -> dict[str, float]:
+    """What SITL needs to take this scenario's fixes."""
+    return {"GPS1_TYPE": 14, "GPS1_DELAY_MS": round(scenario.lag * 1000)}
+
+
+def gps_time(unix: float) -> tuple[int, int]:
+    """(week, ms of week) of a Unix time."""
+    gps = unix - GPS_EPOCH_UNIX + LEAP_SECONDS
+    week = int(gps // 604800)
+    return week, int(round((gps - week * 604800) * 1000))
+
+
+class GnssInjector:
+    """A thread feeding SITL ``GPS_INPUT`` on ``url`` for a ``with`` block."""
+
+    def __init__(self, url: str, scenario: Scenario, seed: int, duration: float = 3600.0):
+        self.scenario = scenario
+        self.fixes: Fixes = fixes(scenario, duration, seed)
+        self.conn = mavutil.mavlink_connection(url, source_system=255, source_component=194,
+                                               dialect="ardupilotmega")
+        self._walls: list[float] = []           # SIM_STATE arrivals (wall s)
+        self._states: list[Any] = []
+        self.truth: list[tuple[float, float, float]] = []   # wall s, north m, east m
+        self.sent = 0
+        self.t0: float | None = None            # wall s of the first fix
+        self._origin: tuple[float, float] | None = None
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, daemon=True)
+
+    def __enter__(self) -> GnssInjector:
+        self._thread.start()
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self._stop.set()
+        self._thread.join(2.0)
+        self.conn.close()
+
+    # --- the thread -------------------------------------------------------------------------
+    def _run(self) -> None:
+        fd = self.conn.port.fileno()
+        next_ask = 0.0
+        k = 0
+        period = 1.0 / self.scenario.rate_hz
+        while not self._stop.is_set():
+            now = time.time()
+            if not self._states and now >= next_ask:      # until SIM_STATE flows
+                self.conn.mav.command_long_send(1, 1, 511, 0, SIM_STATE, 1e6 / TRUTH_HZ,
+                                                0, 0, 0, 0, 0)
+                next_ask = now + 1.0
+            if self._states and self.t0 is None:
+                self.t0 = now
+            if self.t0 is not None and now >= self.t0 + k * period:
+                if k < len(self.fixes.t):
+                    self._send(k, now)
+                k += 1
+            wait = period / 4 if self.t0 is None else max(0.0, self.t0 + k * period - now)
+            try:
+                ready, _, _ = select.select([fd], [], [], min(wait, 0.02))
+            except (OSError, ValueError):
+                return
+            if ready:
+                self._read()
+
+    def _read(self) -> None:
+        while (msg := self.conn.recv_msg()) is not None:
+            if msg.get_type() == "SIM_STATE":
+                wall = time.time()
+                self._walls.append(wall)
+                self._states.append(msg)
+                north, east = self._local(msg.lat_int, msg.lon_int)
+                self.truth.append((wall, north, east))
+
+    def _local(self, lat_e7: int, lon_e7: int) -> tuple[float, float]:
+        lat, lon = lat_e7 * 1e-7, lon_e7 * 1e-7
+        if self._origin is None:
+            self._origin = (lat, lon)
+        lat0, lon0 = self._origin
+        return (math.radians(lat - lat0) * EARTH_RADIUS,
+                math.radians(lon - lon0) * EARTH_RADIUS * math.cos(math.radians(lat0)))
+
+    def _send(self, k: int, now: float) -> None:
+        """Fix ``k``: the truth of ``lag`` s ago (the last SIM_STATE by then) plus its error."""
+        measured = now - self.scenario.lag
+        i = bisect.bisect_right(self._walls, measured) - 1
+        if i < 0:
+            return
+        s = self._states[i]
+        f = self.fixes
+        lat = s.lat_int * 1e-7 + math.degrees(f.north[k] / EARTH_RADIUS)
+        lon = s.lon_int * 1e-7 + math.degrees(
+            f.east[k] / (EARTH_RADIUS * math.cos(math.radians(s.lat_int * 1e-7))))
+        week, week_ms = gps_time(measured)
+        h_acc = float(f.h_acc[k])
+        self.conn.mav.gps_input_send(
+            int(measured * 1e6), 0, 0, week_ms, week, int(f.fix_type[k]),
+            int(round(lat * 1e7)), int(round(lon * 1e7)), s.alt, 0.8, 1.2,
+            s.vn, s.ve, s.vd, 0.05, h_acc, 2 * h_acc, 20, 0)
+        self.sent += 1
