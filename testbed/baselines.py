@@ -77,10 +77,12 @@ def _px4_offboard_armed(conn, timeout: float, arm: bool) -> None:
 
 
 def follow(url: str, mission, rate: float = 40.0, arm: bool = True, velocity: bool = False,
-           arm_timeout: float = 120.0) -> dict:
+           arm_timeout: float = 120.0, trace: list | None = None) -> dict:
     """The autopilot at ``url`` (ArduPilot or PX4, told from its heartbeat) follows ``mission``
     by its own position control, fed the reference at ``rate`` Hz (module docstring); scored
-    from its LOCAL_POSITION_NED (:func:`testbed.scoring.tracking_figures`), left in HOLD."""
+    from its LOCAL_POSITION_NED (:func:`testbed.scoring.tracking_figures`), left in HOLD.
+    ``trace`` (a list) gets (wall s of the sample's arrival, mission s, reference x, y,
+    estimate x, y) for each sample, to score against a simulator's truth."""
     conn = mavutil.mavlink_connection(url, source_system=254, source_component=191,
                                       dialect="ardupilotmega")
     try:
@@ -115,6 +117,8 @@ def follow(url: str, mission, rate: float = 40.0, arm: bool = True, velocity: bo
                 break
             ref = traj.sample(t)
             errors.append((t, math.hypot(ref.x - msg.x, ref.y - msg.y)))
+            if trace is not None:
+                trace.append((msg._timestamp, t, float(ref.x), float(ref.y), msg.x, msg.y))
             ahead = traj.sample(t + 1.0 / rate)
             conn.mav.set_position_target_local_ned_send(
                 0, conn.target_system, conn.target_component, 1, mask,

@@ -5,7 +5,10 @@ SITL runs with ``GPS1_TYPE 14`` (its GPS driver takes ``GPS_INPUT`` from any lin
 its own link (SITL's SERIAL2, say), asks for ``SIM_STATE`` (the simulator's truth: its
 ``lat_int`` / ``lon_int`` extension, 1e-7 degree; the float fields are about 0.4 m coarse) at
 40 Hz, and at the scenario's rate sends the truth of ``lag`` seconds ago plus the scenario's
-error, with its fix type and claimed accuracy. Wall time is the clock: run SITL at speedup 1.
+error, with its fix type and claimed accuracy. Its noise and drift run from the first fix (the
+boot's); its windows (float, multipath) from each :meth:`GnssInjector.begin`, so they fall
+where the scenario says into the flight that follows. Wall time is the clock: run SITL at
+speedup 1.
 The truth it saw is kept (``truth``: wall s, north / east metres from the first one) for
 scoring.
 """
@@ -17,6 +20,7 @@ import math
 import select
 import threading
 import time
+from dataclasses import replace
 from typing import Any
 
 from pymavlink import mavutil
@@ -47,7 +51,11 @@ class GnssInjector:
 
     def __init__(self, url: str, scenario: Scenario, seed: int, duration: float = 3600.0):
         self.scenario = scenario
-        self.fixes: Fixes = fixes(scenario, duration, seed)
+        self.base: Fixes = fixes(replace(scenario, windows=()), duration, seed)
+        self.spoilt: Fixes = fixes(replace(scenario, white=0.0, drift=None), duration, seed + 1)
+        self.k = 0                              # the next fix
+        self.k_begin: int | None = None         # the fix the windows count from
+        self.begin_wall: float | None = None
         self.conn = mavutil.mavlink_connection(url, source_system=255, source_component=194,
                                                dialect="ardupilotmega")
         self._walls: list[float] = []           # SIM_STATE arrivals (wall s)
@@ -68,11 +76,15 @@ class GnssInjector:
         self._thread.join(2.0)
         self.conn.close()
 
+    def begin(self) -> float:
+        """The scenario's windows start again from the next fix; the wall time of that."""
+        self.k_begin, self.begin_wall = self.k, time.time()
+        return self.begin_wall
+
     # --- the thread -------------------------------------------------------------------------
     def _run(self) -> None:
         fd = self.conn.port.fileno()
         next_ask = 0.0
-        k = 0
         period = 1.0 / self.scenario.rate_hz
         while not self._stop.is_set():
             now = time.time()
@@ -82,11 +94,12 @@ class GnssInjector:
                 next_ask = now + 1.0
             if self._states and self.t0 is None:
                 self.t0 = now
-            if self.t0 is not None and now >= self.t0 + k * period:
-                if k < len(self.fixes.t):
-                    self._send(k, now)
-                k += 1
-            wait = period / 4 if self.t0 is None else max(0.0, self.t0 + k * period - now)
+            if self.t0 is not None and now >= self.t0 + self.k * period:
+                if self.k < len(self.base.t):
+                    self._send(self.k, now)
+                self.k += 1
+            wait = (period / 4 if self.t0 is None
+                    else max(0.0, self.t0 + self.k * period - now))
             try:
                 ready, _, _ = select.select([fd], [], [], min(wait, 0.02))
             except (OSError, ValueError):
@@ -118,14 +131,18 @@ class GnssInjector:
         if i < 0:
             return
         s = self._states[i]
-        f = self.fixes
-        lat = s.lat_int * 1e-7 + math.degrees(f.north[k] / EARTH_RADIUS)
+        north, east = float(self.base.north[k]), float(self.base.east[k])
+        fix_type, h_acc = int(self.base.fix_type[k]), float(self.base.h_acc[k])
+        if self.k_begin is not None and 0 <= k - self.k_begin < len(self.spoilt.t):
+            j = k - self.k_begin
+            north, east = north + self.spoilt.north[j], east + self.spoilt.east[j]
+            fix_type, h_acc = int(self.spoilt.fix_type[j]), float(self.spoilt.h_acc[j])
+        lat = s.lat_int * 1e-7 + math.degrees(north / EARTH_RADIUS)
         lon = s.lon_int * 1e-7 + math.degrees(
-            f.east[k] / (EARTH_RADIUS * math.cos(math.radians(s.lat_int * 1e-7))))
+            east / (EARTH_RADIUS * math.cos(math.radians(s.lat_int * 1e-7))))
         week, week_ms = gps_time(measured)
-        h_acc = float(f.h_acc[k])
         self.conn.mav.gps_input_send(
-            int(measured * 1e6), 0, 0, week_ms, week, int(f.fix_type[k]),
+            int(measured * 1e6), 0, 0, week_ms, week, fix_type,
             int(round(lat * 1e7)), int(round(lon * 1e7)), s.alt, 0.8, 1.2,
             s.vn, s.ve, s.vd, 0.05, h_acc, 2 * h_acc, 20, 0)
         self.sent += 1
