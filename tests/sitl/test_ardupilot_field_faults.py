@@ -20,7 +20,6 @@ import pytest
 
 from testbed.ardupilot import CompanionProcess, GroundStation
 from testbed.field_faults import TO_COMPANION, TO_VEHICLE, StallProxy
-from testbed.marks import CANDIDATE
 from testbed.missions import circle_mission
 from testbed.safety import read_tlog
 from testbed.scoring import held_reference, largest_error, simstate_xy
@@ -371,7 +370,6 @@ def test_an_autopilot_reboot_mid_mission_ends_the_run_not_resumed(ardupilot, tmp
 
 @pytest.mark.sitl
 @pytest.mark.slow
-@CANDIDATE
 def test_the_battery_failsafe_is_named_as_such(ardupilot, tmp_path):
     """A low battery (issue 44): BATT_FS_LOW_ACT 2 (Hold) and BATT_LOW_VOLT above what the
     simulated battery gives, 20 s into tracking (SITL's battery is SIM_BATT_VOLTAGE 12.6 V, its
