@@ -147,9 +147,8 @@ class FailsafeWatch:
                 said = f"SYS_STATUS: {cause} unhealthy"
                 self.seen.append((cause, said))
                 named = named or cause
-                last = self.last
-                if not (last is not None and last[0] == cause and self.cleared_at < last[2]
-                        and now - last[2] <= TEXT_MEMORY):
+                live = self._live_text(now)
+                if live is None or live[0] != cause:
                     self.last = (cause, said, now)   # (the autopilot's own words, if any, stay)
             elif (health & bit and before is not None and not before & bit
                   and self.last is not None and self.last[0] == cause):
@@ -172,16 +171,31 @@ class FailsafeWatch:
         """(cause, what says so) of the autopilot's failsafe holding the vehicle, or None.
         A failsafe text counts for :data:`TEXT_MEMORY` s unless a "cleared" text followed it;
         a critical system_status counts for as long as it lasts."""
+        live = self._live_text(now)
+        if live is not None:
+            return live[0], f'"{live[1]}"'
         last = self.last
-        recent = (last is not None and now - last[2] <= TEXT_MEMORY
-                  and self.cleared_at < last[2])
-        if recent and last is not None:
-            return last[0], f'"{last[1]}"'
         if self.critical:
             if last is not None and self.cleared_at < last[2]:
                 return last[0], f'"{last[1]}" and system_status critical'
             return "failsafe", "system_status critical"
         return None
+
+    def _live_text(self, now: float) -> tuple[str, str, float] | None:
+        """The last failsafe text (or sensor news) if it still counts: within
+        :data:`TEXT_MEMORY` s and no "cleared" since."""
+        last = self.last
+        if last is not None and now - last[2] <= TEXT_MEMORY and self.cleared_at < last[2]:
+            return last
+        return None
+
+    def who_disarmed(self, now: float) -> tuple[str, str]:
+        """Who disarmed the vehicle while it stayed in the track mode, and why (for the log)."""
+        active = self.active(now)
+        if active is not None and active[0] not in self.facts.link_causes:
+            return AUTOPILOT, (f"the autopilot's {active[0]} failsafe ({active[1]}) disarmed the "
+                               "vehicle")
+        return PILOT, "vehicle disarmed by someone else"
 
     def cleared(self, now: float) -> bool:
         """No failsafe holds the vehicle any more (status not critical, no live text)."""

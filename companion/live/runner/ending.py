@@ -4,8 +4,9 @@ A pilot's takeover ends the loop at once, without another message to the vehicle
 was a pilot, a reboot (the autopilot comes back in its boot mode, disarmed, just as a pilot's
 switch looks) or the autopilot's own failsafe whose word came just after its mode change
 (ArduPilot's battery failsafe: the HOLD heartbeat first, its "Battery 1 is low" and SYS_STATUS
-within 30 ms) is judged after the loop, from the vehicle's clock and what it says meanwhile. The HOLD the companion asked
-for is waited for, answering telemetry with zero setpoints meanwhile.
+within 30 ms) is judged after the loop, from the vehicle's clock and what it says meanwhile.
+The HOLD the companion asked for is waited for, answering telemetry with zero setpoints
+meanwhile.
 """
 
 from __future__ import annotations
@@ -14,6 +15,7 @@ import time
 
 from ...errors import ExitCode
 from .. import events as ev
+from .. import health
 from ..loop_state import Outcome, State
 from ..telemetry import clock_went_back
 from .core import LoopCore
@@ -106,22 +108,26 @@ class Ending(LoopCore):
                      f"{(last_ms or 0) / 1e3:.3f} s: it rebooted (what looked like a pilot: {why})")
             self._finish(REBOOTED, ExitCode.VEHICLE_RESTARTED)
             return
-        active = self.autopilot_fs.active(time.perf_counter())
-        if active is not None and active[0] not in self.profile.failsafe.link_causes:
-            cause, evidence = active
-            name = "own" if cause == "failsafe" else cause
-            did = (f"switched to {self.link.mode}" if self.link.mode != self.track_mode
-                   else "disarmed the vehicle")
-            took = f"the autopilot's {name} failsafe ({evidence}) {did}"
-            self.log(f"{took} (said just after: {why}): not taking the vehicle back; "
-                     "no more setpoints")
-            self._emit(ev.AUTOPILOT_FAILSAFE, took)
-            self._finish(f"autopilot_failsafe: {took}", ExitCode.AUTOPILOT_FAILSAFE, hold=False,
-                         stop=False)
+        # The same verdicts as in the loop, now with what the autopilot said just after
+        now, mode, fs = time.perf_counter(), self.link.mode, self.autopilot_fs
+        who, took = (fs.who_left(mode, self.hold_mode, now, companion_stalled=False,
+                                 hold_asked=False)
+                     if mode != self.track_mode else fs.who_disarmed(now))
+        if who == health.AUTOPILOT:
+            self.log(f"the autopilot named its failsafe just after the change ({why})")
+            self._end_for_autopilot(took)
             return
         self.log(f"pilot took over ({why}): no more setpoints")
         self._emit(ev.PILOT_OVERRIDE, why)
         self._finish(f"pilot_override: {why}", ExitCode.PILOT_OVERRIDE, hold=False, stop=False)
+
+    def _end_for_autopilot(self, why: str, back: bool = True) -> None:
+        """The autopilot's own failsafe has the vehicle, and the companion does not take it
+        (back): say so and end, sending nothing more."""
+        self.log(f"{why}: not taking the vehicle{' back' if back else ''}; no more setpoints")
+        self._emit(ev.AUTOPILOT_FAILSAFE, why)
+        self._finish(f"autopilot_failsafe: {why}", ExitCode.AUTOPILOT_FAILSAFE, hold=False,
+                     stop=False)
 
     def _read_vehicle_clock(self, ask: bool) -> int | None:
         """The vehicle's time_boot_ms from the first of its messages that carries one, read

@@ -214,11 +214,7 @@ class Failsafes(Engaging):
         taken at all, --retake-after-failsafe or not, when it was never ours)."""
         never_ours = self._not_yet_engaged(self.state)
         if not self.config.retake_after_failsafe or never_ours:
-            self.log(f"{why}: not taking the vehicle{'' if never_ours else ' back'}; "
-                     "no more setpoints")
-            self._emit(ev.AUTOPILOT_FAILSAFE, why)
-            self._finish(f"autopilot_failsafe: {why}", ExitCode.AUTOPILOT_FAILSAFE, hold=False,
-                         stop=False)
+            self._end_for_autopilot(why, back=not never_ours)
             return
         if self.stopping.autopilot is None:
             self._emit(ev.AUTOPILOT_FAILSAFE, why)

@@ -58,6 +58,7 @@ from typing import Any
 from ...core.signals import Command, Measurement, Reference
 from ...errors import ExitCode
 from .. import events as ev
+from .. import health
 from ..events import LoopRecord
 from ..loop_state import ACTIVE, Outcome, State
 from ..telemetry import Sample
@@ -243,12 +244,11 @@ class Runner(Failsafes, Requests):
             if mode != self.track_mode:
                 self._left(mode, now, stalled=False)
             elif not armed:
-                active = self.autopilot_fs.active(now)
-                if active is not None and active[0] not in self.profile.failsafe.link_causes:
-                    self._autopilot_took(f"the autopilot's {active[0]} failsafe ({active[1]}) "
-                                         "disarmed the vehicle", now)
+                who, why = self.autopilot_fs.who_disarmed(now)
+                if who == health.AUTOPILOT:
+                    self._autopilot_took(why, now)
                 else:
-                    self._override("vehicle disarmed by someone else")
+                    self._override(why)
         elif state is State.FAILSAFE and mode != self.track_mode:
             self._left(mode, now, stalled=self.stopping.cause in ("telemetry", "heartbeat"))
         elif (state is State.ENGAGING and self.engagement.after_failsafe
