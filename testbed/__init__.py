@@ -10,8 +10,10 @@ following, Kanayama's hand-picked gains), :mod:`~testbed.reach_floor` (the best 
 and the tests' fakes: :mod:`~testbed.fake_vehicle`, :mod:`~testbed.udp_proxy`,
 :mod:`~testbed.field_faults`, :mod:`~testbed.mission_gcs`, :mod:`~testbed.origin`,
 :mod:`~testbed.safety`, :mod:`~testbed.fuzz`, :mod:`~testbed.pty_cable`,
-:mod:`~testbed.zenoh_fleet`; :mod:`~testbed.marks` (the suite's pytest marks: the only module
-that imports pytest).
+:mod:`~testbed.zenoh_fleet` (those on a link of their own share :mod:`~testbed.link_thread`);
+a field's GNSS for SITL: :mod:`~testbed.gnss` (seeded receiver errors) and
+:mod:`~testbed.gnss_input` (fed to ArduPilot as GPS_INPUT); :mod:`~testbed.marks` (the suite's
+pytest marks: the only module that imports pytest).
 
 Installed with the project (pyproject.toml), so ``python -m benchmarks.NAME``, ``python
 benchmarks/NAME.py`` and pytest all import it without touching ``sys.path``; it runs from the

@@ -5,12 +5,13 @@ of the frames the companion sent it (a zero setpoint, a mode command, a finite s
 from __future__ import annotations
 
 import math
-import threading
 import time
 from dataclasses import dataclass, field
 from typing import Any
 
 from pymavlink import mavutil
+
+from .link_thread import LinkThread
 
 
 def is_zero(sp: Any) -> bool:
@@ -22,7 +23,7 @@ def is_mode_command(msg: Any, mode: int) -> bool:
 
 
 @dataclass
-class FakeVehicle:
+class FakeVehicle(LinkThread):
     """A scripted ArduPilot-like rover for the companion, on pymavlink, in a thread.
 
     Answers SET_MESSAGE_INTERVAL, DO_SET_MODE and ARM with ACCEPTED, PARAM_REQUEST_READ with 0; streams ATTITUDE +
@@ -57,17 +58,7 @@ class FakeVehicle:
         self.system_status = 4                   # MAV_STATE_ACTIVE
         self.deaf, self.ms, self.booting = False, self.start_ms, False
         self.rebooting_until = 0.0
-        self._stop = threading.Event()
-        self._thread = threading.Thread(target=self._run, daemon=True)
-
-    def __enter__(self) -> FakeVehicle:
-        self._thread.start()
-        return self
-
-    def __exit__(self, *exc) -> None:
-        self._stop.set()
-        self._thread.join(2.0)
-        self.conn.close()
+        self._prepare_thread()
 
     def _heartbeat(self) -> None:
         if time.monotonic() < self.rebooting_until:

@@ -18,7 +18,6 @@ from __future__ import annotations
 import bisect
 import math
 import select
-import threading
 import time
 from dataclasses import replace
 from typing import Any
@@ -26,6 +25,7 @@ from typing import Any
 from pymavlink import mavutil
 
 from .gnss import Fixes, Scenario, fixes
+from .link_thread import LinkThread
 
 SIM_STATE = 108
 EARTH_RADIUS = 6378137.0               # m, WGS-84 equatorial (ArduPilot's location maths)
@@ -46,7 +46,7 @@ def gps_time(unix: float) -> tuple[int, int]:
     return week, int(round((gps - week * 604800) * 1000))
 
 
-class GnssInjector:
+class GnssInjector(LinkThread):
     """A thread feeding SITL ``GPS_INPUT`` on ``url`` for a ``with`` block."""
 
     def __init__(self, url: str, scenario: Scenario, seed: int, duration: float = 3600.0):
@@ -64,17 +64,7 @@ class GnssInjector:
         self.sent = 0
         self.t0: float | None = None            # wall s of the first fix
         self._origin: tuple[float, float] | None = None
-        self._stop = threading.Event()
-        self._thread = threading.Thread(target=self._run, daemon=True)
-
-    def __enter__(self) -> GnssInjector:
-        self._thread.start()
-        return self
-
-    def __exit__(self, *exc) -> None:
-        self._stop.set()
-        self._thread.join(2.0)
-        self.conn.close()
+        self._prepare_thread()
 
     def begin(self) -> float:
         """The scenario's windows start again from the next fix; the wall time of that."""

@@ -14,6 +14,8 @@ from pymavlink import mavutil
 
 from companion.mav import mission_transfer as mt
 
+from .link_thread import LinkThread
+
 COMPANION = 191
 
 
@@ -23,7 +25,7 @@ class Heard:
     msg: Any
 
 
-class GroundStation:
+class GroundStation(LinkThread):
     """``url`` (e.g. ``udpin:127.0.0.1:PORT`` or ``tcp:127.0.0.1:5762``) for a ``with`` block."""
 
     def __init__(self, url: str, sysid: int = 255, compid: int = 190):
@@ -32,19 +34,9 @@ class GroundStation:
         self.mav = self.conn.mav
         self.heard: list[Heard] = []
         self.lock = threading.Lock()
-        self._stop = threading.Event()
+        self._prepare_thread()
         self._paused = threading.Event()      # the reader steps aside (mission transfers)
-        self._thread = threading.Thread(target=self._run, daemon=True)
         self._next_hb = 0.0
-
-    def __enter__(self) -> GroundStation:
-        self._thread.start()
-        return self
-
-    def __exit__(self, *exc) -> None:
-        self._stop.set()
-        self._thread.join(2.0)
-        self.conn.close()
 
     def _run(self) -> None:
         while not self._stop.is_set():
