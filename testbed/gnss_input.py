@@ -26,9 +26,9 @@ from pymavlink import mavutil
 
 from .gnss import Fixes, Scenario, fixes
 from .link_thread import LinkThread
+from .scoring import EARTH, north_east
 
 SIM_STATE = 108
-EARTH_RADIUS = 6378137.0               # m, WGS-84 equatorial (ArduPilot's location maths)
 GPS_EPOCH_UNIX = 315964800             # 1980-01-06 in Unix seconds
 LEAP_SECONDS = 18                      # GPS - UTC since 2017
 TRUTH_HZ = 40.0                        # Rover's 50 Hz loop refuses 50 Hz (the notes)
@@ -63,7 +63,7 @@ class GnssInjector(LinkThread):
         self.truth: list[tuple[float, float, float]] = []   # wall s, north m, east m
         self.sent = 0
         self.t0: float | None = None            # wall s of the first fix
-        self._origin: tuple[float, float] | None = None
+        self._origin: tuple[int, int] | None = None   # the first SIM_STATE (1e-7 degrees)
         self._prepare_thread()
 
     def begin(self) -> float:
@@ -103,16 +103,10 @@ class GnssInjector(LinkThread):
                 wall = time.time()
                 self._walls.append(wall)
                 self._states.append(msg)
-                north, east = self._local(msg.lat_int, msg.lon_int)
-                self.truth.append((wall, north, east))
-
-    def _local(self, lat_e7: int, lon_e7: int) -> tuple[float, float]:
-        lat, lon = lat_e7 * 1e-7, lon_e7 * 1e-7
-        if self._origin is None:
-            self._origin = (lat, lon)
-        lat0, lon0 = self._origin
-        return (math.radians(lat - lat0) * EARTH_RADIUS,
-                math.radians(lon - lon0) * EARTH_RADIUS * math.cos(math.radians(lat0)))
+                if self._origin is None:
+                    self._origin = (msg.lat_int, msg.lon_int)
+                self.truth.append((wall, *north_east(msg.lat_int, msg.lon_int,
+                                                     *self._origin)))
 
     def _send(self, k: int, now: float) -> None:
         """Fix ``k``: the truth of ``lag`` s ago (the last SIM_STATE by then) plus its error."""
@@ -127,9 +121,9 @@ class GnssInjector(LinkThread):
             j = k - self.k_begin
             north, east = north + self.spoilt.north[j], east + self.spoilt.east[j]
             fix_type, h_acc = int(self.spoilt.fix_type[j]), float(self.spoilt.h_acc[j])
-        lat = s.lat_int * 1e-7 + math.degrees(north / EARTH_RADIUS)
+        lat = s.lat_int * 1e-7 + math.degrees(north / EARTH)
         lon = s.lon_int * 1e-7 + math.degrees(
-            east / (EARTH_RADIUS * math.cos(math.radians(s.lat_int * 1e-7))))
+            east / (EARTH * math.cos(math.radians(s.lat_int * 1e-7))))
         week, week_ms = gps_time(measured)
         self.conn.mav.gps_input_send(
             int(measured * 1e6), 0, 0, week_ms, week, fix_type,

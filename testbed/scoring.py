@@ -18,12 +18,18 @@ EARTH = 6378100.0      # m: ArduPilot's flat-earth radius (AP_Common/Location.cp
 
 # --------------------------------------------------------------------------- the truth
 
+def north_east(lat_e7: float, lon_e7: float, lat0_e7: float, lon0_e7: float
+               ) -> tuple[float, float]:
+    """A position (1e-7 degrees) in metres north / east of another, on ArduPilot's flat earth."""
+    dn = (lat_e7 - lat0_e7) * 1e-7 * math.pi / 180 * EARTH
+    de = ((lon_e7 - lon0_e7) * 1e-7 * math.pi / 180 * EARTH
+          * math.cos(lat0_e7 * 1e-7 * math.pi / 180))
+    return dn, de
+
+
 def simstate_xy(msg: Any, origin: Any) -> tuple[float, float]:
     """SIMSTATE's true position (1e-7 degrees) in metres north / east of ``origin``'s."""
-    dn = (msg.lat - origin.lat) * 1e-7 * math.pi / 180 * EARTH
-    de = ((msg.lng - origin.lng) * 1e-7 * math.pi / 180 * EARTH
-          * math.cos(origin.lat * 1e-7 * math.pi / 180))
-    return dn, de
+    return north_east(msg.lat, msg.lng, origin.lat, origin.lng)
 
 
 # --------------------------------------------------------------------------- a companion's csv
