@@ -213,9 +213,7 @@ class PlantServer:
         sample = None
         for mid in self.streams.due(t_us):
             if mid == streams.HEARTBEAT:
-                link.heartbeat(v.autopilot, v.base_mode, v.custom_mode, v.armed)
-                if self.gcs is not None:
-                    self.gcs.heartbeat(v.autopilot, v.base_mode, v.custom_mode, v.armed)
+                self._heartbeat_now()
             elif mid == streams.SYS_STATUS:
                 link.sys_status(link.bad_data, v.setpoints_ignored.get("non-finite", 0),
                                 self._status_sensors())
@@ -271,15 +269,23 @@ class PlantServer:
             lat, lon = earth.home()
             self.link.home_position(e7(lat), e7(lon), alt_mm, *earth.home_xy, t_us)
 
+    def _links(self) -> list[Link]:
+        """The vehicle's link and, with --gcs, the ground station's."""
+        return [self.link] + ([self.gcs] if self.gcs is not None else [])
+
+    def _heartbeat_now(self) -> None:
+        """A heartbeat on every link at once (a mode change is heard without waiting)."""
+        v = self.vehicle
+        for link in self._links():
+            link.heartbeat(v.autopilot, v.base_mode, v.custom_mode, v.armed)
+
     def pilot_takeover(self) -> None:
         """A pilot flips the mode switch to HOLD: the vehicle stops following setpoints."""
         v = self.vehicle
         v.set_mode(hold_mode(v.autopilot))
         v.texts.append((SEVERITY_WARNING, "Pilot took over: HOLD"))
         self._flush_texts()
-        self.link.heartbeat(v.autopilot, v.base_mode, v.custom_mode, v.armed)
-        if self.gcs is not None:
-            self.gcs.heartbeat(v.autopilot, v.base_mode, v.custom_mode, v.armed)
+        self._heartbeat_now()
 
     def battery_failsafe(self) -> None:
         """The battery monitor's low failsafe with its action HOLD, in the order ArduPilot SITL
@@ -288,20 +294,17 @@ class PlantServer:
         v = self.vehicle
         self.battery_ok = False
         v.set_mode(hold_mode(v.autopilot))
-        links = [self.link] + ([self.gcs] if self.gcs is not None else [])
-        for link in links:
-            link.heartbeat(v.autopilot, v.base_mode, v.custom_mode, v.armed)
+        self._heartbeat_now()
         v.texts.append((SEVERITY_WARNING, v.autopilot.plant.battery_text or "Battery low"))
         self._flush_texts()
-        for link in links:
+        for link in self._links():
             link.sys_status(link.bad_data, v.setpoints_ignored.get("non-finite", 0),
                             self._status_sensors())
 
     def _flush_mission(self) -> None:
         """AUTO's news to both links: items reached, its texts, the current item if it moved."""
         reached, texts = self.vehicle.auto.pop()
-        links = [self.link] + ([self.gcs] if self.gcs is not None else [])
-        for link in links:
+        for link in self._links():
             for seq in reached:
                 link._send(link.mav.mission_item_reached_send, seq)
             for severity, text in texts:

@@ -142,7 +142,7 @@ class LoopCore:
             if cause is not None:
                 self.log(f"vehicle's SYS_STATUS: {cause} unhealthy")
             return cause
-        text = "".join(c if c.isprintable() else "?" for c in msg.text)
+        text = printable(msg.text)
         self.log("vehicle says: " + text)
         return self.autopilot_fs.text(text, now)
 
@@ -199,6 +199,11 @@ def status_fields(state: str, mission: Any, track_mode: str | None, mode: str | 
             "armed": link.armed, "cycles": cycles, "telemetry_received": received,
             "telemetry_rejected": rejected or {}, "failsafes": failsafes,
             "signing_rejected": getattr(link, "signing_rejected", 0)}
+
+
+def printable(text: str) -> str:
+    """A vehicle's STATUSTEXT as the companion repeats it: unprintable characters as "?"."""
+    return "".join(c if c.isprintable() else "?" for c in text)
 
 
 def stop_cause(code: int) -> str:

@@ -62,7 +62,7 @@ from .. import health
 from ..events import LoopRecord
 from ..loop_state import ACTIVE, Outcome, State
 from ..telemetry import Sample
-from .core import nonzero, stop_cause
+from .core import nonzero, printable, stop_cause
 from .failsafes import Failsafes
 from .requests import Requests
 
@@ -170,7 +170,7 @@ class Runner(Failsafes, Requests):
                     # telemetry flows but our setpoints do not arrive: the reference is held
                     # until the vehicle answers us again (our HOLD: see _may_recover)
                     self._failsafe(t_read, f'the vehicle says our setpoints stopped arriving '
-                                   f'("{msg.text}"): the link is silent towards it',
+                                   f'("{printable(msg.text)}"): the link is silent towards it',
                                    cause="setpoints")
             elif kind == "SYS_STATUS" and link.is_vehicle(msg):
                 self._autopilot_says(msg, t_read)
