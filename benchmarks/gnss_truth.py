@@ -161,13 +161,17 @@ def main() -> int:
     p.add_argument("--scenario", default=",".join(SCENARIOS))
     p.add_argument("--seed", type=int, default=1)
     p.add_argument("--f-r", type=float, default=0.04, choices=sorted(PAPER_ELLIPSES))
-    p.add_argument("--model", default="rover-skid", choices=sorted(VEHICLES))
+    p.add_argument("--model", default="rover-skid",
+                   help="SITL frame: rover-skid (default) or rover (Ackermann; give --vehicle)")
     p.add_argument("--vehicle", type=Path, help="the calibrated vehicle file (default: the "
-                   "bundled one for --model)")
+                   "bundled one for rover-skid)")
     p.add_argument("--no-native", action="store_true", help="skip ArduPilot's own following")
     p.add_argument("--keep", metavar="DIR", help="keep the logs here")
     p.add_argument("--json", action="store_true")
     args = p.parse_args()
+    if args.vehicle is None and args.model not in VEHICLES:
+        p.error(f"--model {args.model}: no bundled vehicle file; give --vehicle (from "
+                "companion calibrate)")
     names = args.scenario.split(",")
     unknown = [n for n in names if n not in SCENARIOS]
     if unknown:
