@@ -12,7 +12,9 @@ by ``companion run --vehicle FILE`` and then by ArduPilot's own GUIDED following
 * ``floor``: the estimate's RMS error against the truth over the same 30 s, both taken relative
   to where they were when tracking began (the anchoring of the reference), what no tracker fed
   the estimate can beat;
-* ``worst in fault``: the largest truth error inside each of the scenario's windows, and
+* ``worst in fault``: the largest truth error inside each of the scenario's windows (against
+  the reference point; a held reference leaves the braking distance in it), ``from path``: the
+  largest distance of the truth from the path itself (shapely) there, and
   ``after``: the largest over half a second, 5 s after each (has it settled?).
 
 The truth is SIM_STATE on the injector's link, matched to a flight's samples by wall time
@@ -36,6 +38,8 @@ import sys
 import tempfile
 import threading
 from pathlib import Path
+
+from shapely import LineString, Point
 
 from testbed.gnss import SCENARIOS, Scenario
 from testbed.gnss_input import GnssInjector, sitl_params
@@ -92,11 +96,12 @@ def score(trace, truth: Truth, scenario: Scenario, duration: float, t0_wall: flo
     if not rows:
         return {"error": "no truth matched the flight's samples"}
     (_, _, _, _, ex0, ey0), (tn0, te0) = rows[0]
+    path = LineString([(r[2], r[3]) for r, _ in rows])    # where the reference went
     truth_err, est_err, floor, by_wall, by_mt = [], [], [], [], []
     for (wall, mt, xr, yr, xe, ye), (tn, te) in rows:
         xt, yt = tn - tn0 + ex0, te - te0 + ey0          # the truth in the estimate's frame
         e_truth = math.hypot(xr - xt, yr - yt)
-        by_wall.append((wall - t0_wall, e_truth))
+        by_wall.append((wall - t0_wall, e_truth, path.distance(Point(xt, yt))))
         by_mt.append((e_truth, mt))
         if mt >= duration - STEADY_S:
             truth_err.append(e_truth)
@@ -107,10 +112,11 @@ def score(trace, truth: Truth, scenario: Scenario, duration: float, t0_wall: flo
         return math.sqrt(sum(x * x for x in v) / len(v)) if v else math.nan
     faults = []
     for w in scenario.windows:
-        inside = [e for t, e in by_wall if w.start <= t < w.start + w.duration]
+        inside = [(e, d) for t, e, d in by_wall if w.start <= t < w.start + w.duration]
         end = w.start + w.duration
-        after = [e for t, e in by_wall if end + AFTER_S <= t < end + AFTER_S + 0.5]
-        faults.append({"start": w.start, "worst": max(inside, default=math.nan),
+        after = [e for t, e, _ in by_wall if end + AFTER_S <= t < end + AFTER_S + 0.5]
+        faults.append({"start": w.start, "worst": max((e for e, _ in inside), default=math.nan),
+                       "from_path": max((d for _, d in inside), default=math.nan),
                        "after": max(after, default=math.nan)})
     return {"truth": rms(truth_err), "estimate": rms(est_err), "floor": rms(floor),
             "worst": max(by_mt), "faults": faults, "samples": len(rows)}
@@ -191,13 +197,14 @@ def main() -> int:
     print(f"ArduPilot SITL {args.model}, the paper's ellipse at {args.f_r:g} Hz, seed "
           f"{args.seed}; steady RMS over the last {STEADY_S:g} s, m")
     print(f"{'scenario':12s} {'truth':>7s} {'estimate':>8s} {'floor':>7s} {'worst in fault':>15s} "
-          f"{'after':>7s} {'ArduPilot':>9s}")
+          f"{'from path':>15s} {'after':>15s} {'ArduPilot':>9s}")
     for row in rows:
         c, a = row["companion"], row.get("ardupilot", {})
         worst = ",".join(f"{f['worst']:.2f}" for f in c["faults"]) or "-"
         after = ",".join(f"{f['after']:.2f}" for f in c["faults"]) or "-"
+        path = ",".join(f"{f['from_path']:.2f}" for f in c["faults"]) or "-"
         print(f"{row['scenario']:12s} {c['truth']:7.3f} {c['estimate']:8.3f} {c['floor']:7.3f} "
-              f"{worst:>15s} {after:>7s} {a.get('truth', math.nan):9.3f}")
+              f"{worst:>15s} {path:>15s} {after:>15s} {a.get('truth', math.nan):9.3f}")
     return 0
 
 

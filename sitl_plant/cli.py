@@ -238,7 +238,18 @@ def _fault_arguments(p: argparse.ArgumentParser) -> None:
                           "of the truth (repeatable)")
     flt.add_argument("--gps-loss", type=_gps_fault("loss"), action="append", dest="gps_faults",
                      metavar="AT,DURATION",
-                     help="from AT s for DURATION s the EKF has no absolute position (0x27)")
+                     help="from AT s for DURATION s the EKF has no absolute position (0x27) "
+                          "and GPS_RAW_INT no fix")
+    flt.add_argument("--gps-float", type=_gps_fault("float"), action="append", dest="gps_faults",
+                     metavar="AT,DURATION[,METRES]",
+                     help="from AT s for DURATION s the receiver is in RTK float (GPS_RAW_INT "
+                          "fix type 5, 0.4 m) and LOCAL_POSITION_NED METRES (default 0.3) north "
+                          "of the truth, the EKF unflagged (repeatable)")
+    flt.add_argument("--gps-jump", type=_gps_fault("jump"), action="append", dest="gps_faults",
+                     metavar="AT,DURATION[,METRES]",
+                     help="from AT s for DURATION s multipath moves the receiver METRES (default "
+                          "0.25) north while it says RTK fixed; LOCAL_POSITION_NED slides after it "
+                          "(and back) over 0.7 s, the EKF unflagged (repeatable)")
     flt.add_argument("--mav-type", type=_mav_type, metavar="N",
                      help="the heartbeat's MAV_TYPE (default 10 rover, 11 with FRAME_CLASS 2); "
                           "another imitates a vehicle that is not a rover")
@@ -252,6 +263,10 @@ def _fault_arguments(p: argparse.ArgumentParser) -> None:
                           "unsigned commands and setpoints are ignored")
 
 
+FLOAT_OFFSET = 0.3     # m: --gps-float's default, a float solution's typical wander
+JUMP_SIZE = 0.25       # m: --gps-jump's default, a multipath jump of a "fixed" receiver
+
+
 def _gps_fault(kind: str):
     def parse(text: str) -> GpsFault:
         parts = text.split(",")
@@ -259,12 +274,15 @@ def _gps_fault(kind: str):
             values = [float(v) for v in parts]
         except ValueError:
             raise argparse.ArgumentTypeError(f"not numbers: {text!r}") from None
-        wanted = (2, 3) if kind == "glitch" else (2,)
+        sized = kind in ("glitch", "float", "jump")
+        wanted = (2, 3) if sized else (2,)
         if len(values) not in wanted or not all(math.isfinite(v) for v in values) \
                 or values[0] < 0 or values[1] <= 0:
             raise argparse.ArgumentTypeError(
-                f"{text!r}: want AT,DURATION{'[,METRES]' if kind == 'glitch' else ''} "
+                f"{text!r}: want AT,DURATION{'[,METRES]' if sized else ''} "
                 "(AT >= 0, DURATION > 0, finite)")
+        if kind in ("float", "jump") and len(values) == 2:
+            values.append(FLOAT_OFFSET if kind == "float" else JUMP_SIZE)
         return GpsFault(kind, *values)
     return parse
 

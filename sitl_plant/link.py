@@ -141,6 +141,12 @@ class Link:
         self._send(self.mav.global_position_int_send, time_boot_ms, lat_e7, lon_e7, alt_mm, 0,
                    int(round(vx * 100)), int(round(vy * 100)), 0, heading_cdeg)
 
+    def gps_raw(self, time_usec: int, fix_type: int, lat_e7: int, lon_e7: int, speed: float,
+                course_deg: float, h_acc_mm: int) -> None:
+        self._send(self.mav.gps_raw_int_send, time_usec, fix_type, lat_e7, lon_e7, 0, 80, 120,
+                   int(round(speed * 100)), int(round(course_deg * 100)) % 36000, 20, 0,
+                   h_acc_mm, 2 * h_acc_mm, 50, 0)
+
     def statustext(self, severity: int, text: str) -> None:
         self._send(self.mav.statustext_send, severity, text.encode("ascii", "replace")[:50])
 

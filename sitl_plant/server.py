@@ -223,6 +223,8 @@ class PlantServer:
                 link.ekf_status(self._ekf_report())
             elif mid == streams.MISSION_CURRENT:
                 link._send(link.mav.mission_current_send, self.mission.current)
+            elif mid == streams.GPS_RAW_INT:
+                self._gps_raw()
             else:
                 if sample is None:
                     sample = self._sample()
@@ -255,6 +257,21 @@ class PlantServer:
         heading = int(round(math.degrees(s.yaw) * 100)) % 36000
         self.link.global_position(self.t_us // 1000, e7(lat), e7(lon),
                                   int(round(self.config.origin.alt * 1000)), vx, vy, heading)
+
+    def _gps_raw(self) -> None:
+        """GPS_RAW_INT: the receiver's fix type and accuracy (sitl_plant.status.gps_raw) at
+        the true position, once the origin is set (no fix before)."""
+        fix, h_acc = status.gps_raw(self.vehicle.t, self.config.gps_faults)
+        lat = lon = 0
+        if self.earth.origin_set(self.t_us):
+            s = self.vehicle.state
+            north = status.receiver_offset(self.vehicle.t, self.config.gps_faults)
+            lat, lon = (e7(d) for d in self.earth.latlon(s.x + north, s.y))
+        else:
+            fix, h_acc = status.FIX_NONE, 0
+        vx, vy = self.vehicle.velocity()
+        self.link.gps_raw(self.t_us, fix, lat, lon, math.hypot(vx, vy),
+                          math.degrees(math.atan2(vy, vx)) % 360.0, h_acc)
 
     def _origin_message(self, msg_id: int) -> None:
         """GPS_GLOBAL_ORIGIN or HOME_POSITION, once the origin is set (else nothing, as

@@ -6,16 +6,20 @@ The plant's pose is exact, so its EKF is healthy from ``--ekf-delay`` seconds of
 40 s to arming). Before that it has an attitude and nothing else, and the pre-arm checks fail,
 as SITL's do until its EKF runs. Pure: the server sends.
 
-GPS faults (``--gps-glitch``, ``--gps-loss``; :class:`GpsFault`) imitate what ArduPilot SITL's
+GPS faults (``--gps-glitch``, ``--gps-loss``, ``--gps-float``; :class:`GpsFault`) imitate what ArduPilot SITL's
 EKF reports for SIM_GPS1_GLTCH_X / _Y and SIM_GPS1_ENABLE 0 (docs/field-faults.md): a glitch
 sets EKF_GPS_GLITCHING (0x833f) and moves LOCAL_POSITION_NED by its size (north) for its
 duration, as the fall-back to a glitched fix does; a loss drops the absolute position (0x27)
-while the pose stays true (dead reckoning on an exact plant). The plant has no EKF failsafe of
+while the pose stays true (dead reckoning on an exact plant); RTK float moves it by its size
+(north) with the EKF healthy, GPS_RAW_INT saying fix type 5 (:func:`gps_raw`); a multipath
+jump moves GPS_RAW_INT's position at once and LOCAL_POSITION_NED over ``EKF_SLIDE``, the
+receiver still "fixed". The plant has no EKF failsafe of
 its own: the companion's reaction is what these test.
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 MSG_EKF_STATUS_REPORT = 193
@@ -37,18 +41,54 @@ EKF_NO_ORIGIN = 0x12F                   # EKF_GOOD without absolute horizontal p
 
 @dataclass(frozen=True)
 class GpsFault:
-    kind: str            # "glitch" or "loss"
+    kind: str            # "glitch", "loss", "float" or "jump"
     at: float            # vehicle s
     duration: float      # s
-    size: float = 14.0   # m north (a glitch's step in LOCAL_POSITION_NED)
+    size: float = 14.0   # m north (a glitch's or a float's offset in LOCAL_POSITION_NED)
 
     def active(self, t: float) -> bool:
         return self.at <= t < self.at + self.duration
 
 
+EKF_SLIDE = 0.7          # s: the time constant the plant's EKF follows a receiver's jump with
+
+
 def position_offset(t: float, faults: tuple[GpsFault, ...]) -> float:
-    """Metres north the estimate is off the truth at vehicle time ``t``."""
-    return sum(f.size for f in faults if f.kind == "glitch" and f.active(t))
+    """Metres north the estimate is off the truth at vehicle time ``t``: a glitch's or a
+    float's size while it lasts; a jump's slid into (and, after it, out of) over EKF_SLIDE, as
+    ArduPilot's EKF follows a "fixed" receiver that multipath moved."""
+    total = sum(f.size for f in faults if f.kind in ("glitch", "float") and f.active(t))
+    for f in faults:
+        if f.kind != "jump" or t < f.at:
+            continue
+        inside = min(t, f.at + f.duration) - f.at
+        slid = f.size * (1.0 - math.exp(-inside / EKF_SLIDE))
+        total += slid * math.exp(-max(0.0, t - f.at - f.duration) / EKF_SLIDE)
+    return total
+
+
+def receiver_offset(t: float, faults: tuple[GpsFault, ...]) -> float:
+    """Metres north GPS_RAW_INT's position is off the truth at ``t``: a jump's size while it
+    lasts (multipath moves the receiver at once; the EKF follows it slowly)."""
+    return sum(f.size for f in faults if f.kind == "jump" and f.active(t))
+
+
+# GPS_RAW_INT: the plant's receiver is RTK fixed (its pose is exact) but in a fault
+FIX_NONE, FIX_RTK_FLOAT, FIX_RTK_FIXED = 1, 5, 6
+H_ACC_FIXED_MM, H_ACC_FLOAT_MM = 14, 400
+
+
+def gps_raw(t: float, faults: tuple[GpsFault, ...]) -> tuple[int, int]:
+    """GPS_RAW_INT's (fix_type, h_acc mm) at vehicle time ``t``: RTK fixed; float (5, 0.4 m)
+    in a ``--gps-float``, whose offset the EKF lets into LOCAL_POSITION_NED unflagged, as
+    ArduPilot's does (docs/gnss.md); no fix in a ``--gps-loss``. A glitch keeps "fixed" (the
+    receiver does not know)."""
+    active = {f.kind for f in faults if f.active(t)}
+    if "loss" in active:
+        return FIX_NONE, 0
+    if "float" in active:
+        return FIX_RTK_FLOAT, H_ACC_FLOAT_MM
+    return FIX_RTK_FIXED, H_ACC_FIXED_MM
 
 
 @dataclass(frozen=True)

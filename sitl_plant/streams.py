@@ -26,14 +26,15 @@ EKF_STATUS_REPORT = 193     # off until asked (the companion asks for it at 5 Hz
 GPS_GLOBAL_ORIGIN = 49       # not streams: sent on MAV_CMD_REQUEST_MESSAGE
 HOME_POSITION = 242
 MISSION_CURRENT = 42         # a stream once asked for (and sent whenever the item changes)
+GPS_RAW_INT = 24             # the receiver's fix type and claimed accuracy (sitl_plant.status)
 
 # Emission order within one tick: ATTITUDE just before LOCAL_POSITION_NED.
-STREAM_ORDER = (HEARTBEAT, SYS_STATUS, EKF_STATUS_REPORT, ATTITUDE, LOCAL_POSITION_NED,
-                GLOBAL_POSITION_INT, MISSION_CURRENT)
+STREAM_ORDER = (HEARTBEAT, SYS_STATUS, EKF_STATUS_REPORT, GPS_RAW_INT, ATTITUDE,
+                LOCAL_POSITION_NED, GLOBAL_POSITION_INT, MISSION_CURRENT)
 DEFAULT_INTERVAL_US = {HEARTBEAT: 1_000_000, SYS_STATUS: 1_000_000,
                        ATTITUDE: 1_000_000, LOCAL_POSITION_NED: 1_000_000,
                        GLOBAL_POSITION_INT: 1_000_000, EKF_STATUS_REPORT: 1_000_000,
-                       MISSION_CURRENT: 1_000_000}
+                       MISSION_CURRENT: 1_000_000, GPS_RAW_INT: 1_000_000}
 RATE_CAP_FRACTION = 0.8
 
 ACCEPTED, DENIED, FAILED = 0, 2, 4   # MAV_RESULT

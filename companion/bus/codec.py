@@ -27,8 +27,11 @@ positions are LOCAL_NED (x north, y east), yaw from north towards east.
 
     {"schema": "pzc-rover/status/1", "vehicle_id": "rover1", "seq": 3, "sent_at": ..,
      "kind": "connected" | "tracking" | "paused" | "resumed" | "mission_loaded" | "mission_done"
-             | "failsafe" | "pilot_override" | "stopped",
+             | "failsafe" | "pilot_override" | "stopped" | "gnss",
      "reason": "free text", "vehicle_time": 12.3 | null, "detail": {..}}
+
+A kind in :data:`NOTICES` says something (the receiver's class, a drop it acted on) without
+changing the vehicle's life-cycle state: a reader keeps the state the last other kind gave.
 
 ``pzc-rover/control-reply/1``: ``{"ok", "verb", "message"}`` (``status`` adds ``"status"``), see
 :mod:`companion.bus.control`.
@@ -94,6 +97,9 @@ def _sanitize(obj: Any) -> Any:
     if isinstance(obj, (list, tuple)):
         return [_sanitize(v) for v in obj]
     return obj
+
+
+NOTICES = frozenset({"gnss"})     # status kinds that leave the life-cycle state as it was
 
 
 def decode(data: bytes, kind: str | None = None) -> dict[str, Any]:

@@ -87,7 +87,7 @@ class Fleet:
         self.frozen = False     # after the last snapshot: the record holds what it counted
 
     def on_sample(self, sample) -> None:
-        from ..bus.codec import decode
+        from ..bus.codec import NOTICES, decode
         rx_wall, rx = time.time(), time.monotonic()
         key = str(sample.key_expr)
         parts = key.split("/")
@@ -110,7 +110,8 @@ class Fleet:
                 self._state(v, msg, rx)
             else:
                 v.status_msgs += 1
-                v.state, v.reason = msg.get("kind", ""), msg.get("reason", "")
+                if msg.get("kind") not in NOTICES:
+                    v.state, v.reason = msg.get("kind", ""), msg.get("reason", "")
             if self.record is not None:
                 self.record.write(json.dumps({"rx": rx_wall, "key": key, "payload": msg}) + "\n")
 

@@ -70,6 +70,9 @@ class RunnerConfig:
     # --start-on-guided: never ask for the track mode nor arm; wait (without a timeout) until
     # the pilot or a ground station switches the vehicle into it, armed, then track
     wait_for_mode: bool = False
+    # m/s^2: after standing still (a failsafe, a pause) the reference accelerates from the
+    # rover's place on the path at this (companion.core.pacing), not leaping off at full speed
+    rejoin_accel: float = 1.0
     # the mode the pilot leaves the vehicle in while the companion tracks (None: the profile's
     # track mode); --handover: its AUTO, whose guided sub-mode takes the setpoints
     track_mode: str | None = None

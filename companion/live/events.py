@@ -30,6 +30,7 @@ AUTOPILOT_FAILSAFE = "autopilot_failsafe"   # the autopilot's own failsafe took 
 STOPPED = "stopped"
 MISSION_LOADED = "mission_loaded"
 HANDED_BACK = "handed_back"          # --handover: a segment ended, AUTO drives again
+GNSS = "gnss"                        # the receiver's class: the run's, said before moving; a drop
 
 
 @dataclass(slots=True)

@@ -25,6 +25,7 @@ import math
 from dataclasses import dataclass, field
 
 from ..profiles.autopilot import EstimateFacts, FailsafeFacts
+from .gnss_watch import GnssWatch
 
 # Who took the vehicle out of the track mode (FailsafeWatch.who_left).
 AUTOPILOT = "autopilot"     # the autopilot's own failsafe: never taken back on our own
@@ -50,6 +51,7 @@ class EstimateWatch:
     _bad_until: float = -math.inf     # s: unhealthy at least until then
     _last: tuple[float, float, float, float, float] | None = None   # t, x, y, vx, vy
     _shown: int = 0                   # every flag any report has set (facts.once_shown)
+    gnss: GnssWatch | None = None     # the receiver behind the estimate (gnss_watch)
 
     def report(self, flags: int, ratios: dict[str, float], now: float) -> None:
         """An estimator report (its flags and test ratios) read at ``now`` (s)."""

@@ -44,6 +44,7 @@ class Heard:
     heartbeat_lost_said: bool = False     # "no vehicle heartbeat" logged, "back" not yet
     vehicle_t: float = 0.0                # the last valid sample's vehicle time
     pose: tuple[float, float, float] | None = None   # the last valid sample's x, y, yaw
+    velocity: tuple[float, float] = (0.0, 0.0)        # and its vx, vy
     waited: bool = True                   # idle since the last position sample was handled
     loop_wall: float = 0.0                # the loop's last turn
     # After the companion's own stall, the silence is not judged until the socket has been
@@ -60,6 +61,15 @@ class MissionClock:
     offset: float = 0.0                   # the mission time at the segment's start
     segment_t0: float | None = None       # its first sample's vehicle time; None: the next
     #                                       tracked sample starts a segment
+    rate: float = 1.0                     # mission s per vehicle s (below 1: slowed down)
+    ramp_s: float = 0.0                   # the segment's rate ramps from 0 over this (pacing)
+    rejoin: bool = False                  # the rover stood still: the next segment rejoins
+    #                                       the path where it stands, and ramps up
+
+    def restart(self) -> None:
+        """A new mission: its time 0 at the next tracked sample."""
+        self.time, self.offset, self.segment_t0 = 0.0, 0.0, None
+        self.ramp_s, self.rejoin = 0.0, False
 
 
 @dataclass(slots=True)

@@ -20,6 +20,7 @@ from typing import Any
 from ..core import controllers
 from ..core.limits import Limits
 from ..errors import UserError
+from ..profiles.gnss import GPS_RAW_INT_ID
 from . import gcs, policy
 from . import handover as handover_mod
 from . import origin as origin_mod
@@ -91,6 +92,16 @@ def watch_estimate(link: Any, facts: Any, log: Callable[[str], None]) -> None:
             "LOCAL_POSITION_NED steps")
 
 
+def watch_gnss(link: Any, policy: Any, log: Callable[[str], None]) -> None:
+    """Ask for GPS_RAW_INT (the receiver's class: companion.live.gnss_watch) at the policy's
+    rate; one try. Unconfirmed, the class is judged from what arrives (often the vehicle's
+    default stream) or, if nothing does, not at all."""
+    result = link.command_wait(511, GPS_RAW_INT_ID, 1e6 / policy.rate_hz, tries=1)
+    if result != 0:
+        log(f"GPS_RAW_INT at {policy.rate_hz:g} Hz not confirmed (COMMAND_ACK {result}): the "
+            "receiver's class is judged from what arrives")
+
+
 @dataclass
 class Connected:
     """What the set-up learnt of the vehicle, before anything is resolved."""
@@ -137,6 +148,7 @@ def connect(s: RunSettings, link: Any, answers: SetupAnswers, rate: float,
         log(note)
     log(f"telemetry at {accepted:g} Hz" if accepted else "telemetry rate not confirmed")
     watch_estimate(link, vehicle.profile.estimate, log)
+    watch_gnss(link, vehicle.profile.gnss, log)
     return Connected(vehicle, mission, origin, accepted)
 
 
@@ -223,6 +235,7 @@ def fly(s: RunSettings, sinks: Sequence[Sink] = (), control: ControlChannel | No
     extra = {**({"vehicle_preset": flown.preset} if flown.preset is not None else {}),
              **({"vehicle_warning": flown.warning} if flown.warning else {}),
              **({"ekf_origin": found.origin.as_dict()} if found.origin is not None else {}),
+             "gnss": runner.gnss.summary(),
              **({"handovers": [r.as_dict() for r in handover.results]}
                 if handover is not None else {})}
     return result_of(outcome, runner, link, found.vehicle, flown, rate, found.accepted,

@@ -27,6 +27,7 @@ from typing import Any
 
 import numpy as np
 
+from ..core import pacing
 from ..errors import UserError
 from ..live.config import RunnerConfig, segment_gap
 from ..live.flightlog import CSV_FIELDS, STOP_FIELDS
@@ -261,8 +262,11 @@ def _attach_reference(flight: Flight, mission: Any, cmds: dict, ms: np.ndarray,
     The tracked samples are those answered by a moving setpoint; the first anchors the
     trajectory (mission time 0). As in :class:`companion.live.loop_state.MissionClock`, mission time
     runs with vehicle time within a segment and stands still between segments: a new one begins
-    after a failsafe, a pause or a re-engagement (a stop setpoint answered a sample in between)
+    after a failsafe, a pause or a re-engagement (a stop setpoint answered a sample in between:
+    it rejoins the path where the rover stands and ramps up, :mod:`companion.core.pacing`)
     or a gap of more than :func:`companion.live.config.segment_gap` between tracked samples.
+    A run the GNSS policy slowed (``companion.profiles.gnss``) is not replayed as slowed: its
+    flight log's mission_time is the record of that.
     Samples the companion did not track are left out of the metrics, as the live ones are.
     ``answered``: the indices of the samples a setpoint answered (``ms`` in ``cmds``).
     """
@@ -275,25 +279,35 @@ def _attach_reference(flight: Flight, mission: Any, cmds: dict, ms: np.ndarray,
     tracked: list[int] = []
     mt: list[float] = []
     stopped_since = False       # a stop setpoint answered a sample since the last tracked one
+    trajectory = None
+    t0 = offset = ramp_s = 0.0  # the segment's first vehicle s, its mission s, its ramp
     for k in answered:          # (the others: refused by the companion, or never read)
         if not moving(int(ms[k])):
             stopped_since = bool(tracked)
             continue
-        if not tracked:
-            mt.append(0.0)
-        elif stopped_since or flight.t[k] - flight.t[tracked[-1]] > max_gap:
-            mt.append(mt[-1])   # a new segment: the clock resumes where it stood
-        else:
-            mt.append(mt[-1] + float(flight.t[k] - flight.t[tracked[-1]]))
+        t = float(flight.t[k])
+        if trajectory is None:
+            trajectory = mission.anchored(float(flight.x[k]), float(flight.y[k]),
+                                          float(flight.yaw[k]))
+            t0, offset, ramp_s = t, 0.0, 0.0
+        elif stopped_since:
+            # after standing still the live loop rejoins the path where the rover stands and
+            # ramps up to speed (companion.core.pacing): the same rule
+            offset = min(pacing.rejoin_time(trajectory, mt[-1], float(flight.x[k]),
+                                            float(flight.y[k]), pacing.REJOIN_HORIZON),
+                         float(mission.duration))
+            ref = trajectory.sample(offset)
+            t0, ramp_s = t, pacing.ramp_seconds(math.hypot(ref.vx, ref.vy),
+                                                RunnerConfig.rejoin_accel)
+        elif t - float(flight.t[tracked[-1]]) > max_gap:
+            t0, offset, ramp_s = t, mt[-1], 0.0   # a gap: the clock resumes where it stood
+        mt.append(offset + pacing.ramp(t - t0, ramp_s)[0])
         tracked.append(k)
         stopped_since = False
-    if not tracked:
+    if not tracked or trajectory is None:
         return
-    start = tracked[0]
     inside = np.array(mt) <= mission.duration + 1e-9
     keep, mission_t = np.array(tracked)[inside], np.array(mt)[inside]
-    trajectory = mission.anchored(float(flight.x[start]), float(flight.y[start]),
-                                  float(flight.yaw[start]))
     refs = [trajectory.sample(float(m)) for m in mission_t]
     for name in ("t", "x", "y", "yaw", "speed", "yaw_rate", "speed_along"):
         setattr(flight, name, getattr(flight, name)[keep])

@@ -22,7 +22,8 @@ differs (a frontend calls it, one backend per autopilot), no I/O:
   the manoeuvre's headroom);
 * what ``sitl_plant`` emulates differently (:class:`PlantFacts`);
 * how its own failsafes show and how its estimator reports its health (:class:`FailsafeFacts`,
-  :class:`EstimateFacts`): what the companion reads to tell the autopilot's failsafe from a pilot.
+  :class:`EstimateFacts`): what the companion reads to tell the autopilot's failsafe from a pilot;
+* what a drop in the receiver's class does (:class:`~companion.profiles.gnss.GnssPolicy`).
 
 Pure: no pymavlink (the MAVLink numbers it needs are spelled out below, checked against
 pymavlink's by ``tests/profiles/test_profiles.py``).
@@ -34,6 +35,7 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, Protocol
 
+from .gnss import GnssPolicy
 from .priors import Priors
 from .setpoint import SetpointEncoding
 
@@ -283,6 +285,8 @@ class AutopilotProfile:
     # modes the autopilot reports while it starts and leaves on its own (ArduPilot's
     # INITIALISING, then its INITIAL_MODE): nobody's choice (companion.live.runner)
     boot_modes: frozenset[str] = frozenset()
+    # what a drop in the receiver's class (GPS_RAW_INT) does: companion.profiles.gnss
+    gnss: GnssPolicy = GnssPolicy()
 
     def modes_for(self, mav_type: int) -> ModeTable:
         """The mode table for a vehicle of this MAV_TYPE (empty for a type it does not cover)."""

@@ -106,7 +106,8 @@ class Drawing:
                     rr.log(f"setpoint/{r.vehicle_id}/yaw_rate", rr.Scalars(rate))
             rr.set_time("wall", timestamp=now)
             for ev in r.events:
-                level = "WARN" if ev.get("kind") in ("failsafe", "pilot_override") else "INFO"
+                level = ("WARN" if ev.get("kind") in ("failsafe", "pilot_override", "gnss")
+                         else "INFO")
                 rr.log(f"events/{r.vehicle_id}",
                        rr.TextLog(f"{r.vehicle_id}: {ev.get('kind')}: {ev.get('reason', '')}",
                                   level=level))

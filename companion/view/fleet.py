@@ -17,7 +17,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
-from ..bus.codec import decode
+from ..bus.codec import NOTICES, decode
 
 MAX_POINTS = 4000          # per path: ~64 kB a redraw, thinned (never cut) when full
 
@@ -61,8 +61,10 @@ class Rover:
             self.stride *= 2
 
     def add_status(self, msg: dict[str, Any]) -> None:
+        self.events.append(msg)          # (notices too: drawn in the event log)
+        if msg.get("kind") in NOTICES:
+            return
         self.status = msg
-        self.events.append(msg)
         kind = msg.get("kind")
         if kind == "failsafe":
             self.failsafe = str(msg.get("reason", ""))

@@ -51,10 +51,10 @@ def test_state_and_status_of_a_sitl_run_follow_the_schema(tmp_path):
             assert not reply["ok"] and "no reply" in reply["message"]
         heard.wait(lambda: "stopped" in heard.statuses(), 3.0, "stopped status")
         assert not heard.bad
-        assert heard.statuses() == ["connected", "tracking", "mission_done", "stopped"]
+        assert heard.statuses() == ["connected", "gnss", "tracking", "mission_done", "stopped"]
         statuses = [h.msg for h in heard.of("status")]
         assert all(m["schema"] == STATUS_SCHEMA and m["vehicle_id"] == "rover7" for m in statuses)
-        assert [m["seq"] for m in statuses] == [1, 2, 3, 4]
+        assert [m["seq"] for m in statuses] == [1, 2, 3, 4, 5]
         assert statuses[0]["detail"]["sysid"] == 7
         assert statuses[-1]["reason"] == "mission_done" and statuses[-1]["detail"]["exit_code"] == 0
         states = heard.of("state")
@@ -162,8 +162,8 @@ def test_every_control_verb_and_every_refusal(tmp_path, capsys):
     assert result["reason"] == "aborted" and result["hold_confirmed"]
     assert result["mission"] == "loaded"
     kinds = heard.statuses("alpha")
-    assert kinds == ["connected", "tracking", "paused", "resumed", "paused", "mission_loaded",
-                     "tracking", "stopped"], kinds
+    assert kinds == ["connected", "gnss", "tracking", "paused", "resumed", "paused",
+                     "mission_loaded", "tracking", "stopped"], kinds
 
 
 def _main(capsys, *argv) -> tuple[int, str]:
@@ -239,7 +239,7 @@ def test_failsafe_and_recovery_are_published_with_reasons(tmp_path):
     assert "telemetry stale" in by_kind["failsafe"]["reason"], by_kind["failsafe"]
     assert by_kind["resumed"]["reason"] == "telemetry back"
     assert by_kind["stopped"]["reason"] == "SIGTERM"
-    assert heard.statuses()[:4] == ["connected", "tracking", "failsafe", "resumed"]
+    assert heard.statuses()[:5] == ["connected", "gnss", "tracking", "failsafe", "resumed"]
 
 
 def test_no_zenoh_opens_no_session(tmp_path, capsys):

@@ -95,7 +95,8 @@ def test_a_fresh_runner_has_all_its_state(monkeypatch):
 
 # The live modules beneath the loop (its package docstring); session, policy, the ground
 # station's and the setup's modules build on the loop, never the other way.
-BENEATH = {"link", "telemetry", "health", "loop_state", "stats", "events", "config", "handover"}
+BENEATH = {"link", "telemetry", "health", "loop_state", "stats", "events", "config", "handover",
+           "gnss_watch", "gnss_jump"}
 
 
 def test_the_loop_imports_only_what_lies_beneath_it():

@@ -228,7 +228,7 @@ def test_stream_rates_cap_disable_default_and_alignment():
     assert ticks == list(range(25_000, 200_001, 25_000))                  # shared, ordered
     assert s.request(ATTITUDE, -1, 0).result == 0 and s.interval_us(ATTITUDE) == -1
     assert s.request(ATTITUDE, 0, 0).result == 0 and s.interval_us(ATTITUDE) == 1_000_000
-    assert s.request(24, 100_000, 0).result == 2                          # not a stream we have
+    assert s.request(25, 100_000, 0).result == 2                          # not a stream we have
     assert s.request(math.nan, 100_000, 0).result == 4
     assert StreamSchedule(loop_rate_hz=63).request(32, 20_000, 0).result == 0
 

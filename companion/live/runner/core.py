@@ -20,6 +20,7 @@ from ...errors import ExitCode
 from .. import health
 from ..config import RunnerConfig, segment_gap
 from ..events import ControlChannel, Sink, StatusEvent
+from ..gnss_watch import GnssWatch
 from ..link import Link
 from ..loop_state import (
     Counters,
@@ -74,12 +75,19 @@ class LoopCore:
         self.counters = Counters()
         self.estimate = health.EstimateWatch(
             self.profile.estimate, config.estimate_variance, config.estimate_step,
-            config.estimate_healthy_for, max_step_dt=self.clock.max_gap)
+            config.estimate_healthy_for, max_step_dt=self.clock.max_gap,
+            gnss=GnssWatch.of(self.profile.gnss))    # the receiver's class, and its jumps
         self.autopilot_fs = health.FailsafeWatch(self.profile.failsafe)
 
     @property
     def track_mode(self) -> str:
         return self.config.track_mode or self.profile.track_mode
+
+    @property
+    def gnss(self) -> GnssWatch:
+        """The receiver's watch (the estimate's source): its class, and ``.jump``."""
+        assert self.estimate.gnss is not None
+        return self.estimate.gnss
 
     @property
     def hold_mode(self) -> str:
@@ -115,7 +123,8 @@ class LoopCore:
         t = self.telemetry
         return status_fields(self.state.value, self.mission, self.track_mode, self.link.mode,
                              self.link, self.clock.time, self.stats.cycles, t.received,
-                             dict(t.rejected), self.counters.failsafes)
+                             dict(t.rejected), self.counters.failsafes,
+                             gnss=self.gnss.status())
 
     # --- what the parts share ------------------------------------------------------------
     def _start_problem(self, mission: Any, x: float, y: float, yaw: float) -> str | None:
@@ -191,14 +200,15 @@ class LoopCore:
 
 def status_fields(state: str, mission: Any, track_mode: str | None, mode: str | None, link: Any,
                   mission_time: float = 0.0, cycles: int = 0, received: int = 0,
-                  rejected: dict[str, int] | None = None, failsafes: int = 0) -> dict[str, Any]:
+                  rejected: dict[str, int] | None = None, failsafes: int = 0,
+                  gnss: dict[str, Any] | None = None) -> dict[str, Any]:
     """A ``status`` request's answer: the loop's (:meth:`LoopCore.status`) and, with the
     loop's counts at zero, the setup's (:mod:`companion.live.setup_answers`)."""
     return {"state": state, "mission": mission.name, "track_mode": track_mode,
             "mission_time": mission_time, "duration": mission.duration, "mode": mode,
             "armed": link.armed, "cycles": cycles, "telemetry_received": received,
             "telemetry_rejected": rejected or {}, "failsafes": failsafes,
-            "signing_rejected": getattr(link, "signing_rejected", 0)}
+            "signing_rejected": getattr(link, "signing_rejected", 0), "gnss": gnss or {}}
 
 
 def printable(text: str) -> str:

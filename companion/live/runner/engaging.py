@@ -101,6 +101,11 @@ class Engaging(Ending):
                 self.log("waiting for the vehicle to be armed (or pass --arm)")
             return
         target = e.after
+        if not self.gnss.begun:
+            # the run's class, and what to expect of it, said before the rover moves
+            said = self.gnss.begin()
+            self.log(said)
+            self._emit(ev.GNSS, self.gnss.short(), self.gnss.status())
         self.state = target
         if target is State.TRACKING:
             self.log(f"{self.track_mode} and armed: tracking '{self.mission.name}'")

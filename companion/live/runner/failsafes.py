@@ -3,8 +3,9 @@
 The timers judge silence (no valid sample for ``stale_timeout``, no heartbeat for
 ``heartbeat_lost``; not while the companion itself was descheduled and its backlog is unread)
 and retry the HOLD. A FAILSAFE stops the rover (zero setpoint, HOLD) and names its cause:
-telemetry, heartbeat, estimate, link, setpoints, or the autopilot's own failsafe, which is never
-overridden. A mode the companion did not choose is judged by
+telemetry, heartbeat, estimate, gnss (a drop in the receiver's class the profile's policy holds
+for: :mod:`companion.live.gnss_watch`), link, setpoints, or the autopilot's own failsafe, which
+is never overridden. A mode the companion did not choose is judged by
 :meth:`companion.live.health.FailsafeWatch.who_left`: the autopilot's failsafe, a pilot, or
 PX4's offboard loss. Recovery re-engages with the filter and integrators reset; after
 ``--lost-timeout`` the run ends, naming what kept it there.
@@ -12,10 +13,12 @@ PX4's offboard loss. Recovery re-engages with the filter and integrators reset; 
 
 from __future__ import annotations
 
+import math
 import time
 from typing import Any
 
 from ...errors import ExitCode
+from ...profiles import gnss
 from .. import events as ev
 from .. import health
 from ..loop_state import ACTIVE, State
@@ -88,6 +91,7 @@ class Failsafes(Engaging):
             reason = f"telemetry stale: no valid sample for {gap:.2f} s"
         stopping = self.stopping
         stopping.cause = cause
+        self.clock.rejoin = True
         if hold:
             self.log(f"{reason}; stopping the rover (zero setpoint, {self.hold_mode})")
             self.link.send_stop()
@@ -110,6 +114,7 @@ class Failsafes(Engaging):
         stopping = self.stopping
         out = time.perf_counter() - stopping.failsafe_since
         what = {"estimate": "estimate healthy again", "autopilot": "autopilot failsafe cleared",
+                "gnss": f"GNSS back to the run's {gnss.name(self.gnss.start_fix or 0)}",
                 "link": "link back", "setpoints": "the vehicle answers the companion again"
                 }.get(stopping.cause, "telemetry back")
         self.log(f"{what} after {out:.2f} s; "
@@ -120,12 +125,18 @@ class Failsafes(Engaging):
         self.engagement.after_failsafe = True
         stopping.autopilot = None
         self.estimate.forget_position()
+        self.gnss.jump.forget()
         self._emit(ev.RESUMED, what, {"cause": stopping.cause})
 
     def _may_recover(self, now: float) -> bool:
         """In FAILSAFE: the vehicle may be taken back now (heartbeat fresh, estimate healthy,
         no autopilot failsafe holding it unless --retake-after-failsafe and it cleared)."""
         if not self._heartbeat_fresh(now) or not self.estimate.healthy(now):
+            return False
+        if self.gnss.verdict(now)[0] == gnss.HOLD:
+            return False
+        if self.stopping.cause == "gnss" and not (
+                self.gnss.back(now) and math.hypot(*self.heard.velocity) < self.gnss.policy.rest_speed):
             return False
         if self.stopping.cause == "setpoints" and not self.stopping.hold_confirmed:
             return False   # until the vehicle has our HOLD: our messages reach it again
@@ -154,6 +165,40 @@ class Failsafes(Engaging):
             self._bad_estimate(problem, now)
         # Engaging the first time, and --start-on-guided / --handover before it is engaged:
         # not yet the companion's vehicle to stop; _engage waits for a healthy estimate
+
+    def _on_gnss(self, msg: Any, now: float) -> None:
+        """The receiver's report (GPS_RAW_INT): the profile's policy for its class
+        (companion.profiles.gnss): carry on, slow the reference, or hold on the path."""
+        news = self.gnss.report(msg.fix_type, getattr(msg, "h_acc", 0), now)
+        if news is not None:
+            self.log(news)
+        jumped = self.gnss.jump.fix(msg.time_usec * 1e-6, msg.lat, msg.lon, self.gnss.h_acc)
+        if jumped is not None and self.state is State.TRACKING:
+            self.log(jumped)
+            if self.gnss.jump.riding_since is not None:
+                self._emit(ev.GNSS, "jump: riding through", self.gnss.status())
+        act, why = self.gnss.verdict(now)
+        rate = self.gnss.policy.slow_factor if act == gnss.SLOW else 1.0
+        if rate != self.clock.rate:
+            self._pace(rate, why)
+        if act == gnss.HOLD and (self.state is State.TRACKING or (
+                self.state is State.ENGAGING and not self.engagement.first(self.state))):
+            self.gnss.noted(act, now)
+            self._failsafe(now, f"{why}: holding on the path until it is back for "
+                                f"{self.gnss.policy.back_for:g} s", cause="gnss")
+
+    def _pace(self, rate: float, why: str) -> None:
+        """The reference runs at ``rate`` times its speed from the last tracked sample on."""
+        clock = self.clock
+        if clock.segment_t0 is not None:
+            clock.offset, clock.segment_t0 = clock.time, self.heard.vehicle_t
+        clock.rate, clock.ramp_s = rate, 0.0
+        if rate < 1.0:
+            self.gnss.noted(gnss.SLOW, self.heard.vehicle_t)
+            self._emit(ev.GNSS, f"{self.gnss.short()}: slow", self.gnss.status())
+            self.log(f"{why}: the reference slowed to {rate:.0%} of its speed")
+        else:
+            self.log("GNSS back to the run's class: the reference at full speed again")
 
     def _bad_estimate(self, problem: str, now: float, time_boot_ms: int = 0) -> None:
         """The position estimate is unfit to steer by: pause (or end, --on-bad-estimate)."""
@@ -235,6 +280,9 @@ class Failsafes(Engaging):
             self._finish(f"autopilot_failsafe: {stopping.autopilot} and not cleared within "
                          f"{cfg.lost_timeout:g} s", ExitCode.AUTOPILOT_FAILSAFE, hold=False,
                          stop=False)
+        elif stopping.cause == "gnss":
+            self._finish(f"estimate_unhealthy: {self.gnss.verdict(now)[1] or 'GNSS below the run'}"
+                         f"'s class for {cfg.lost_timeout:g} s", ExitCode.ESTIMATE_UNHEALTHY)
         elif stopping.cause == "setpoints":
             self._finish(f"failsafe: the vehicle did not answer the companion for "
                          f"{cfg.lost_timeout:g} s (its setpoints stopped arriving)",

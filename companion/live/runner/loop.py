@@ -19,6 +19,10 @@ measures silence (stale telemetry), latency and retry intervals.
              no further setpoint, no mode request (never fight the pilot), PILOT_OVERRIDE event
     TRACKING / ENGAGING --the estimate flagged or stepped (companion.live.health)--> FAILSAFE
              (cause "estimate"); back once healthy for --estimate-healthy-for, or DONE
+    TRACKING / ENGAGING --the receiver below the run's class, the profile's policy "hold"
+             (companion.live.gnss_watch)--> FAILSAFE (cause "gnss"); back once the class has
+             been back for the policy's back_for, the mission clock where it stopped
+    TRACKING --the policy's "slow"--> TRACKING with the mission clock at slow_factor
     ENGAGING the first time asks nothing of the vehicle until the estimate is healthy (a
              vehicle just powered on has no position yet); DONE after --estimate-wait
     any state --the autopilot's own failsafe takes the vehicle--> DONE (AUTOPILOT_FAILSAFE: no
@@ -55,6 +59,7 @@ import time
 from collections.abc import Callable
 from typing import Any
 
+from ...core import pacing
 from ...core.signals import Command, Measurement, Reference
 from ...errors import ExitCode
 from .. import events as ev
@@ -164,6 +169,8 @@ class Runner(Failsafes, Requests):
                 self.ground.handover.on_message(msg, self)
             elif kind in ("COMMAND_LONG", "COMMAND_INT") and self.ground.gcs is not None:
                 self.ground.gcs.on_command(msg, self._on_request)   # DO_PAUSE_CONTINUE, ACKed
+            elif kind == "GPS_RAW_INT" and link.is_vehicle(msg):
+                self._on_gnss(msg, t_read)
             elif kind == "STATUSTEXT" and link.is_vehicle(msg):
                 cause = self._autopilot_says(msg, t_read)
                 if self.state is State.TRACKING and self.autopilot_fs.setpoints_lost(cause):
@@ -188,8 +195,10 @@ class Runner(Failsafes, Requests):
         heard.sample_wall = t_read
         prev_vt, heard.vehicle_t = heard.vehicle_t, s.t
         heard.pose = (s.x, s.y, s.yaw)
+        heard.velocity = (s.vx, s.vy)
         state = self.state
         step = self.estimate.position(s.t, s.x, s.y, s.vx, s.vy, t_read)
+        steer = self.gnss.jump.position(s.t, s.x, s.y, s.vx, s.vy)
         if (step is not None and state in (State.TRACKING, State.ENGAGING)
                 and not self.engagement.first(state)):
             # The stepped sample never reaches the controller as an error to chase.
@@ -201,7 +210,10 @@ class Runner(Failsafes, Requests):
             clock = self.clock
             if clock.segment_t0 is not None and s.t - prev_vt > clock.max_gap:
                 self._new_segment(s.t - prev_vt)
-            self._track(s, t_read)
+            if self.gnss.jump.overdue(s.t):
+                self._jump_overdue(t_read)
+                return
+            self._track(s, t_read, steer)
         else:
             if state is State.FAILSAFE and self._may_recover(t_read):
                 self._recover()
@@ -271,6 +283,8 @@ class Runner(Failsafes, Requests):
         self.counters.tracker_resets += 1
         self.stats.lost(gap)
         self.clock.segment_t0 = None
+        self.clock.ramp_s = 0.0      # (the rover was moving: no ramp from rest)
+        self.gnss.jump.forget()           # (no dead reckoning across the gap)
         self.log(f"{gap:.3f} s of vehicle time without a sample: filter and integrators reset")
 
     def _log_refusals(self, now: float) -> None:
@@ -281,15 +295,33 @@ class Runner(Failsafes, Requests):
             self.counters.refusals_logged = counts
             self.log(f"refused telemetry so far (never used): {counts}")
 
-    def _track(self, s: Sample, t_read: float) -> None:
+    def _jump_overdue(self, now: float) -> None:
+        """Ridden through a receiver's jump for jump_max_ride: hold, then trust the estimate."""
+        self.gnss.jump.forget()
+        self.gnss.noted("hold", now)
+        self._failsafe(now, f"the receiver's jump did not come back within "
+                            f"{self.gnss.jump.max_ride:g} s of riding through: holding on the path",
+                       cause="gnss")
+
+    def _track(self, s: Sample, t_read: float, steer: tuple[float, float]) -> None:
         clock = self.clock
         if clock.segment_t0 is None:
             if self.trajectory is None:
                 self.trajectory = self.mission.anchored(s.x, s.y, s.yaw)
+            if clock.rejoin:
+                self._rejoin(s)
             clock.segment_t0 = s.t
             clock.offset = clock.time
             self.stats.segment_start()
-        mt = clock.offset + (s.t - clock.segment_t0)
+        if clock.ramp_s > 0.0:
+            advanced, ramp_rate, ramp_dot = pacing.ramp(s.t - clock.segment_t0, clock.ramp_s)
+            if ramp_rate >= 1.0:
+                clock.ramp_s = 0.0
+                clock.offset, clock.segment_t0 = clock.offset + clock.rate * advanced, s.t
+                advanced = 0.0
+        else:
+            advanced, ramp_rate, ramp_dot = s.t - clock.segment_t0, 1.0, 0.0
+        mt = clock.offset + clock.rate * advanced
         clock.time = mt
         if mt >= self.mission.duration - 1e-9 and self.ground.handover is not None:
             self._hand_back(s.time_boot_ms)
@@ -304,7 +336,11 @@ class Runner(Failsafes, Requests):
             return
         assert self.trajectory is not None   # anchored when tracking began
         ref = self.trajectory.sample(mt)
-        cmd = self.tracker.step(s.t, Measurement(s.x, s.y, s.yaw, s.vx, s.vy, s.yaw_rate), ref)
+        if clock.rate != 1.0 or ramp_rate != 1.0:
+            ref = pacing.paced(ref, clock.rate * ramp_rate, clock.rate * ramp_dot)
+        # (steer: the estimate's position, or the rover's own motion through a receiver's jump)
+        cmd = self.tracker.step(s.t, Measurement(steer[0], steer[1], s.yaw, s.vx, s.vy,
+                                                 s.yaw_rate), ref)
         problem = self._check(cmd)
         if problem is not None:
             self._emit(ev.FAILSAFE, problem)
@@ -317,6 +353,23 @@ class Runner(Failsafes, Requests):
         self.stats.add(mt, s.t, e2, latency, not self.heard.waited)
         if self.sinks:
             self._record(s, mt, ref, cmd, e2)
+
+    def _rejoin(self, s: Sample) -> None:
+        """After standing still: the mission time of the rover's place on the path (at or
+        after where the clock stood: what it braked through was driven), and a ramp up to the
+        reference's speed there at --rejoin-accel."""
+        clock = self.clock
+        assert self.trajectory is not None
+        clock.rejoin = False
+        held = clock.time
+        clock.time = min(pacing.rejoin_time(self.trajectory, held, s.x, s.y,
+                                                    pacing.REJOIN_HORIZON),
+                         self.mission.duration)
+        ref = self.trajectory.sample(clock.time)
+        clock.ramp_s = pacing.ramp_seconds(math.hypot(ref.vx, ref.vy) * clock.rate,
+                                           self.config.rejoin_accel)
+        self.log(f"rejoining the path at mission time {clock.time:.2f} s (held at {held:.2f} s),"
+                 f" up to speed over {clock.ramp_s:.1f} s")
 
     def _check(self, cmd: Command) -> str | None:
         """Why this command must not be sent, or None. Right before encoding, every cycle."""

@@ -42,6 +42,7 @@ class Requests(Ending):
         elif verb == "pause":
             if state is State.TRACKING:
                 self.state = State.PAUSED
+                self.clock.rejoin = True
                 self._emit(ev.PAUSED, "requested")
                 req.reply(True, f"paused at mission time {self.clock.time:.2f} s")
             else:
@@ -90,7 +91,7 @@ class Requests(Ending):
             req.reply(False, problem)
             return
         self.mission, self.trajectory = new, None
-        self.clock.time, self.clock.offset, self.clock.segment_t0 = 0.0, 0.0, None
+        self.clock.restart()
         self.stats = TrackingStats(new.duration, self.config.period)
         if self.state is State.PAUSED:
             self.state = State.READY
@@ -107,7 +108,7 @@ class Requests(Ending):
     def handover_begin(self, mission: Any) -> None:
         """AUTO reached a NAV_GUIDED_ENABLE: track ``mission`` (from the rover's pose) now."""
         self.mission, self.trajectory = mission, None
-        self.clock.time, self.clock.offset, self.clock.segment_t0 = 0.0, 0.0, None
+        self.clock.restart()
         self.stats = TrackingStats(mission.duration, self.config.period)
         self.tracker.reset()
         self.state = State.TRACKING

@@ -1,0 +1,88 @@
+"""Riding through a receiver's jump (companion.live.gnss_jump.JumpGuard): a step of the fixes
+that the rover's own motion does not explain starts a ride on dead reckoning; the estimate is
+handed back once the receiver has stepped back and the estimate has followed it back."""
+
+from __future__ import annotations
+
+import math
+
+from companion.live.gnss_jump import EARTH, JumpGuard
+
+LAT0 = 47.0
+SPEED = 1.0          # m/s east
+RATE, FIX = 40.0, 10.0
+
+
+def fly(guard: JumpGuard, jump: float, at: float, until: float, slide: float = 0.7,
+        seconds: float = 12.0):
+    """A rover driving east at 1 m/s; the receiver jumps ``jump`` m north from ``at`` to
+    ``until`` s; the estimate slides after it with time constant ``slide``. (t, steered y-error
+    north of the truth, estimate's north error) at each estimate sample."""
+    out, estimate_off = [], 0.0
+    for k in range(int(seconds * RATE)):
+        t = k / RATE
+        target = jump if at <= t < until else 0.0
+        estimate_off += (target - estimate_off) * (1 - math.exp(-1 / (RATE * slide)))
+        east = SPEED * t
+        if k % int(RATE / FIX) == 0:
+            north = target
+            lat = LAT0 + math.degrees(north / EARTH)
+            lon = math.degrees(east / (EARTH * math.cos(math.radians(LAT0))))
+            guard.fix(t, round(lat * 1e7), round(lon * 1e7), 0.014)
+        x, y = guard.position(t, estimate_off, east, 0.0, SPEED)
+        out.append((t, x, estimate_off))
+    return out
+
+
+def test_a_jump_is_ridden_through_and_the_estimate_handed_back_once_it_returned():
+    g = JumpGuard()
+    trace = fly(g, 0.25, at=3.0, until=7.0)
+    # the steered position stays true (handed back within ``settle`` of the dead reckoning)
+    assert max(abs(x) for _, x, _ in trace) <= g.settle
+    assert max(off for _, _, off in trace) > 0.24            # while the estimate went off
+    assert g.jumps == 1 and g.riding_since is None            # handed back
+    t_back = next(t for t, x, off in trace if t > 7.0 and x == off)
+    assert t_back < 10.0
+
+
+def test_a_rover_speeding_up_is_no_jump():
+    g = JumpGuard()
+    for k in range(400):
+        t = k / RATE
+        v = min(5.0, 10.0 * t)                       # 10 m/s^2 up to 5 m/s
+        east = 5.0 * t - 1.25 if t > 0.5 else 5.0 * t * t
+        if k % 4 == 0:
+            lon = math.degrees(east / (EARTH * math.cos(math.radians(LAT0))))
+            g.fix(t, round(LAT0 * 1e7), round(lon * 1e7), 0.014)
+        g.position(t, 0.0, east, 0.0, v)
+    assert g.jumps == 0
+
+
+def test_a_step_the_estimate_never_follows_is_handed_back_after_confirm():
+    g = JumpGuard(confirm=1.5)
+    trace = fly(g, 0.25, at=3.0, until=99.0, slide=1e9)    # the estimator refused the step
+    assert g.false_alarms == 1 and g.riding_since is None and g.jumps == 0
+    assert all(x == off for t, x, off in trace if t > 3.0 + 1.5 + 0.1)
+
+
+def test_a_one_off_fix_is_ridden_for_as_long_as_it_lasts():
+    g = JumpGuard()
+    trace = fly(g, 0.25, at=3.0, until=3.05)
+    assert g.jumps == 1 and g.riding_since is None
+    assert max(abs(x) for _, x, _ in trace) <= g.settle
+
+
+def test_a_jump_that_never_returns_is_overdue_after_max_ride():
+    g = JumpGuard(max_ride=4.0)
+    fly(g, 0.25, at=3.0, until=99.0, seconds=7.5)
+    assert g.riding_since is not None and g.overdue(7.5) and not g.overdue(6.9)
+    g.forget()
+    assert g.riding_since is None and not g.overdue(8.0)
+
+
+def test_plain_gps_is_not_judged():
+    g = JumpGuard()
+    lon = round(math.degrees(1.0 / (EARTH * math.cos(math.radians(LAT0)))) * 1e7)
+    g.position(0.0, 0.0, 0.0, 0.0, 0.0)
+    g.fix(0.0, round(LAT0 * 1e7), 0, 0.7)
+    assert g.fix(0.2, round(LAT0 * 1e7), lon, 0.7) is None and g.riding_since is None
