@@ -30,96 +30,19 @@ asserts nothing.
 from __future__ import annotations
 
 import argparse
-import bisect
-import csv
 import json
 import math
 import sys
 import tempfile
-import threading
 from pathlib import Path
 
-from shapely import LineString, Point
-
 from testbed.gnss import SCENARIOS, Scenario
-from testbed.gnss_input import GnssInjector, sitl_params
-from testbed.missions import PAPER_ELLIPSES, wait_ready
+from testbed.gnss_flight import STEADY_S, Truth, companion_trace, gnss_vehicle, score
+from testbed.gnss_input import sitl_params
+from testbed.missions import PAPER_ELLIPSES
 from testbed.process import ROOT, companion_json
-from testbed.safety import read_tlog
 
 VEHICLES = {"rover-skid": ROOT / "companion" / "sim" / "vehicles" / "ardupilot_skid.toml"}
-STEADY_S = 30.0
-AFTER_S = 5.0
-
-
-class Truth:
-    """The injector's truth (wall s, north, east), interpolated at a wall time."""
-
-    def __init__(self, samples: list[tuple[float, float, float]]):
-        self.walls = [w for w, _, _ in samples]
-        self.samples = samples
-
-    def at(self, wall: float) -> tuple[float, float] | None:
-        i = bisect.bisect_right(self.walls, wall)
-        if i == 0 or i == len(self.walls):
-            return None
-        (w0, n0, e0), (w1, n1, e1) = self.samples[i - 1], self.samples[i]
-        a = (wall - w0) / (w1 - w0) if w1 > w0 else 0.0
-        return n0 + a * (n1 - n0), e0 + a * (e1 - e0)
-
-
-def companion_trace(result: dict) -> list[tuple[float, float, float, float, float, float]]:
-    """(wall, mission s, reference x, y, estimate x, y) of each tracked cycle of a companion
-    run: its CSV's rows, timed by the arrival of their LOCAL_POSITION_NED in its .tlog."""
-    frames, _ = read_tlog(Path(result["tlog"]))
-    arrival = {}
-    for wall, m in frames:
-        if m.get_type() == "LOCAL_POSITION_NED" and m.get_srcComponent() == 1:
-            arrival.setdefault(m.time_boot_ms, wall)
-    out = []
-    with open(result["csv"], newline="") as f:
-        for row in csv.DictReader(f):
-            if not row["mission_time"] or not row["x_ref"]:
-                continue
-            wall = arrival.get(round(float(row["vehicle_time"]) * 1000))
-            if wall is not None:
-                out.append((wall, float(row["mission_time"]), float(row["x_ref"]),
-                            float(row["y_ref"]), float(row["x"]), float(row["y"])))
-    return out
-
-
-def score(trace, truth: Truth, scenario: Scenario, duration: float, t0_wall: float) -> dict:
-    """The figures of one flight (module docstring). ``t0_wall``: when the scenario's fixes
-    began (its windows are timed from there)."""
-    rows = [(r, truth.at(r[0])) for r in trace]
-    rows = [(r, p) for r, p in rows if p is not None]
-    if not rows:
-        return {"error": "no truth matched the flight's samples"}
-    (_, _, _, _, ex0, ey0), (tn0, te0) = rows[0]
-    path = LineString([(r[2], r[3]) for r, _ in rows])    # where the reference went
-    truth_err, est_err, floor, by_wall, by_mt = [], [], [], [], []
-    for (wall, mt, xr, yr, xe, ye), (tn, te) in rows:
-        xt, yt = tn - tn0 + ex0, te - te0 + ey0          # the truth in the estimate's frame
-        e_truth = math.hypot(xr - xt, yr - yt)
-        by_wall.append((wall - t0_wall, e_truth, path.distance(Point(xt, yt))))
-        by_mt.append((e_truth, mt))
-        if mt >= duration - STEADY_S:
-            truth_err.append(e_truth)
-            est_err.append(math.hypot(xr - xe, yr - ye))
-            floor.append(math.hypot(xe - xt, ye - yt))
-
-    def rms(v: list[float]) -> float:
-        return math.sqrt(sum(x * x for x in v) / len(v)) if v else math.nan
-    faults = []
-    for w in scenario.windows:
-        inside = [(e, d) for t, e, d in by_wall if w.start <= t < w.start + w.duration]
-        end = w.start + w.duration
-        after = [e for t, e, _ in by_wall if end + AFTER_S <= t < end + AFTER_S + 0.5]
-        faults.append({"start": w.start, "worst": max((e for e, _ in inside), default=math.nan),
-                       "from_path": max((d for _, d in inside), default=math.nan),
-                       "after": max(after, default=math.nan)})
-    return {"truth": rms(truth_err), "estimate": rms(est_err), "floor": rms(floor),
-            "worst": max(by_mt), "faults": faults, "samples": len(rows)}
 
 
 def fly_scenario(scenario: Scenario, seed: int, f_r: float, model: str, vehicle: Path,
@@ -133,15 +56,7 @@ def fly_scenario(scenario: Scenario, seed: int, f_r: float, model: str, vehicle:
                          model=model).start()
     try:
         url = sitl.url(0)
-        ready: dict = {}
-        waiter = threading.Thread(target=lambda: ready.update(s=wait_ready(url, work / "logs")),
-                                  daemon=True)
-        waiter.start()                    # SITL opens SERIAL2 once SERIAL0 has a client
-        sitl.wait_log("SERIAL2 on TCP port", 60)
-        with GnssInjector(sitl.url(2), scenario, seed) as inj:
-            waiter.join(400)
-            if "s" not in ready:
-                raise SystemExit(f"{scenario.name}: the vehicle never became ready")
+        with gnss_vehicle(sitl, scenario, seed, work / "logs") as inj:
             mission = PAPER_ELLIPSES[f_r]
             began = inj.begin()           # the windows, timed from the launch of the run
             r = companion_json(["run", "--connect", url, "--vehicle", str(vehicle), "--mission",

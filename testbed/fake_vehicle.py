@@ -33,7 +33,7 @@ class FakeVehicle(LinkThread):
     ``restart`` (reboot: back to MANUAL, disarmed), ``reboot`` (the same as a real autopilot does it:
     its clock from ``ms``, no heartbeat for ``reboot_gap`` s, then heartbeats only: nothing
     streamed until asked again; it answers MAV_CMD_REQUEST_MESSAGE for SYSTEM_TIME); the autopilot's own doings: ``ekf`` (an
-    EKF_STATUS_REPORT with these flags), ``text`` (a STATUSTEXT), ``status`` (the heartbeat's
+    EKF_STATUS_REPORT with these flags), ``gps`` (a GPS_RAW_INT: (fix type, h_acc mm)), ``text`` (a STATUSTEXT), ``status`` (the heartbeat's
     system_status from now on), ``mode`` (it switches mode itself), ``silent`` (no pose this
     tick), ``attitude`` (False: a LOCAL_POSITION_NED without an ATTITUDE this tick); the link:
     ``deaf`` (nothing the companion sends arrives this tick: kept in ``lost``).
@@ -146,6 +146,10 @@ class FakeVehicle(LinkThread):
                 self._heartbeat()
             if "ekf" in tick:
                 mav.ekf_status_report_send(tick["ekf"], 0.1, 0.1, 0.1, 0.1, 0.0)
+            if "gps" in tick:                   # (fix_type, h_acc mm): the receiver's class
+                fix, h_acc = tick["gps"]
+                mav.gps_raw_int_send(tick["ms"] * 1000, fix, 473977420, 85455940, 0, 80, 120, 0,
+                                     0, 20, 0, h_acc, 2 * h_acc, 50, 0)
             if tick.get("silent"):
                 self._pump(self.tick_timeout)
                 ms += self.step_ms

@@ -55,3 +55,47 @@ def test_status_says_the_class_now_and_the_runs():
     s = w.status()
     assert s["fix"] == "RTK float" and s["run_fix"] == "RTK fixed" and s["h_acc"] == 0.4
     assert s["drops"] == 1 and w.summary()["drop_log"][0]["action"] == HOLD
+
+
+def test_a_drop_below_a_dgps_run_slows_the_reference_to_half_and_back(tmp_path):
+    """Through a real companion process: a scripted vehicle (testbed.fake_vehicle) reports DGPS,
+    then a 3D fix for 2 s of its time, then DGPS again. Mission time runs at half the vehicle's
+    clock while the fix is 3D, at full speed before and after; the drop is said and logged."""
+    import csv
+
+    from sitl_plant.testing import free_udp_port
+    from testbed.fake_vehicle import FakeVehicle
+    from testbed.missions import ellipse_mission
+    from testbed.process import Companion
+
+    step = 25                                        # ms: 40 Hz ticks
+    slow_from, slow_to = 104_000, 106_000            # vehicle ms of the 3D fix
+
+    def script(k: int, ms: int) -> dict:
+        tick: dict = {"ms": ms}
+        if k % 4 == 0:                               # 10 Hz
+            tick["gps"] = (3, 1500) if slow_from <= ms < slow_to else (4, 600)
+        return tick
+
+    mission = ellipse_mission(tmp_path / "m.toml", 8.0, f_r=0.05)
+    port = free_udp_port()
+    with Companion(port, "--arm", "--no-zenoh", "--json", "--log-dir", str(tmp_path),
+                   "--mission", str(mission)) as comp, \
+            FakeVehicle(port, script=script, start_ms=100_000, step_ms=step):
+        code = comp.wait(60.0)
+        r = comp.result()
+    assert code == 0 and r["reason"] == "mission_done", comp.stderr
+    assert "GNSS DGPS (the receiver claims 0.60 m)" in comp.stderr
+    assert "GNSS 3D fix (claims 1.50 m), below the run's DGPS: the reference slowed to 50%" \
+        in comp.stderr and "the reference at full speed again" in comp.stderr
+    assert [d["action"] for d in r["gnss"]["drop_log"]] == ["slow"]
+    rows = [(float(x["vehicle_time"]), float(x["mission_time"]))
+            for x in csv.DictReader(open(r["csv"], newline="")) if x["mission_time"]]
+
+    def rate(t0: float, t1: float) -> float:
+        inside = [(t, m) for t, m in rows if t0 <= t <= t1]
+        (ta, ma), (tb, mb) = inside[0], inside[-1]
+        return (mb - ma) / (tb - ta)
+
+    assert abs(rate(slow_from / 1e3 + 0.3, slow_to / 1e3 - 0.1) - 0.5) < 0.01
+    assert abs(rate(slow_to / 1e3 + 0.3, slow_to / 1e3 + 2.0) - 1.0) < 0.01
