@@ -31,8 +31,8 @@ class ExitCode(IntEnum):
     AUTOPILOT_FAILSAFE = 5   # the autopilot's own failsafe (EKF, GCS, battery, fence, radio,
                         # crash) took the vehicle out of GUIDED / OFFBOARD: not taken back
     ESTIMATE_UNHEALTHY = 6   # the position estimate was flagged or stepped (GPS glitch or loss,
-                        # EKF reset) and --on-bad-estimate end, or it stayed unhealthy for
-                        # --lost-timeout
+                        # EKF reset) and --on-bad-estimate end, or it stayed unhealthy (or the
+                        # receiver below the run's class: docs/gnss.md) for --lost-timeout
     VEHICLE_RESTARTED = 7    # the autopilot rebooted mid-mission (its clock went back): never
                         # resumed on a rebooted vehicle
     INTERRUPTED = 130   # Ctrl-C before anything was flying (128 + SIGINT, as a shell reports)
