@@ -172,7 +172,7 @@ class Failsafes(Engaging):
         news = self.gnss.report(msg.fix_type, getattr(msg, "h_acc", 0), now)
         if news is not None:
             self.log(news)
-        jumped = self.gnss.jump.fix(msg.time_usec * 1e-6, msg.lat, msg.lon, self.gnss.h_acc)
+        jumped = self.gnss.jump.fix(msg.lat, msg.lon, self.gnss.h_acc)
         if jumped is not None and self.state is State.TRACKING:
             self.log(jumped)
             if self.gnss.jump.riding_since is not None:
