@@ -14,9 +14,10 @@ tell from driving in one sample; the receiver's own step is not. :class:`JumpGua
   gets is dead-reckoned with the estimate's velocity from the estimate before the jump, not the
   estimate sliding after the receiver;
 * once two fixes in a row sit back on the baseline against the dead reckoning, and the estimate
-  has come back to the dead-reckoned position (within ``settle``), hands the estimate back;
-  an estimate that has not left the dead reckoning by half the jump in ``confirm`` s never
-  followed one, and is handed back at once;
+  has come back to the dead-reckoned position (within ``settle``) or had ``back_wait`` s to,
+  hands the estimate back, fading what the dead reckoning drifted out over ``blend_s`` (no
+  step); an estimate that has not left the dead reckoning by a quarter of the jump in
+  ``confirm`` s never followed one, and is handed back at once;
 * after ``max_ride`` s of riding it gives up (:meth:`overdue`): the runner then holds the rover,
   and starts again from the estimate.
 
@@ -40,9 +41,9 @@ class JumpGuard:
 
     threshold: float = 0.12            # m a fix may leave the baseline
     settle: float = 0.03               # m: the estimate back on the dead-reckoned position
-    max_ride: float = 8.0              # s of riding through before giving up
+    max_ride: float = 10.0             # s of riding through before giving up
     max_h_acc: float = 0.2             # m: a receiver claiming more is not judged
-    confirm: float = 1.5               # s: an estimate that has not left the dead reckoning
+    confirm: float = 3.0               # s: an estimate that has not left the dead reckoning
     baseline_fixes: int = 7
     jumps: int = 0                     # jumps ridden through
     false_alarms: int = 0
@@ -59,6 +60,12 @@ class JumpGuard:
     _calm: int = 0                     # fixes in a row back on the baseline while riding
     _anchor: tuple[float, float, float, float, float] | None = None   # the estimate before
     _size: float = 0.0                 # m: the jump ridden through
+    _back_at: float = 0.0              # vehicle s the receiver came back
+    _blend: tuple[float, tuple[float, float]] | None = None   # (s, offset) handing back
+    back_wait: float = 3.0             # s after the receiver is back before the estimate is
+    #                                    handed back however far it is (ArduPilot's EKF slides
+    #                                    back over 1-3 s)
+    blend_s: float = 2.0               # s the dead reckoning's drift fades out over
     stamp_slack: float = 0.1           # s: a fix's stamp against the estimate's sample
 
     def __post_init__(self) -> None:
@@ -123,6 +130,7 @@ class JumpGuard:
         self._calm = self._calm + 1 if self._off(dn, de) is None else 0
         if self._calm >= 2 and not self._back:
             self._back = True
+            self._back_at = self._last[0] if self._last is not None else 0.0
             return "the receiver is back: rejoining the estimate once it has followed"
         return None
 
@@ -131,18 +139,29 @@ class JumpGuard:
         dead-reckoned one while riding through)."""
         last, self._last = self._last, (t, x, y, vx, vy)
         if self.riding_since is None:
-            return x, y
+            if self._blend is None:
+                return x, y
+            t_end, (cx, cy) = self._blend       # what the dead reckoning was off, fading out
+            k = 1.0 - (t - t_end) / self.blend_s
+            if k <= 0.0:
+                self._blend = None
+                return x, y
+            return x - k * cx, y - k * cy
         if last is not None and 0.0 < t - last[0] <= 0.5:
             dt = t - last[0]
             self._dead = (self._dead[0] + 0.5 * (vx + last[3]) * dt,
                           self._dead[1] + 0.5 * (vy + last[4]) * dt)
         apart = math.hypot(x - self._dead[0], y - self._dead[1])
         self._apart = max(self._apart, apart)
-        if self._back and apart <= self.settle:
+        if self._back and (apart <= self.settle or t - self._back_at >= self.back_wait):
+            # the estimate has followed the receiver back (or had back_wait to): handed back,
+            # what the dead reckoning drifted meanwhile faded out over blend_s, not stepped
+            self._blend = (t, (x - self._dead[0], y - self._dead[1]))
+            dead = self._dead
             self._end()
-            return x, y
+            return dead
         if t - self.riding_since >= self.confirm and self._apart <= max(self.settle,
-                                                                         0.5 * self._size):
+                                                                         0.25 * self._size):
             # the estimate never followed the receiver's step: nothing to ride through
             self.jumps, self.false_alarms = self.jumps - 1, self.false_alarms + 1
             self._end()
@@ -160,5 +179,6 @@ class JumpGuard:
     def forget(self) -> None:
         """Start again from the estimate (after a hold, a gap): no ride, no baseline."""
         self._end()
+        self._blend = None
         self._history.clear()
         self._last = self._before = None
