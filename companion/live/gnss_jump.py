@@ -2,22 +2,22 @@
 
 ArduPilot's EKF takes any GNSS position as at least 0.5 m uncertain, so a receiver that says
 "RTK fixed" while multipath moves it by decimetres is followed: LOCAL_POSITION_NED slides over
-a second or two to the jumped position, without a flag (docs/gnss.md). The slide is too slow to
-tell from driving in one sample; the receiver's own step is not. :class:`JumpGuard`:
+a second or two to the jumped position, and its velocity leans the same way (measured: 0.05-0.08
+m/s for a 0.25 m jump, docs/gnss.md), so dead reckoning on it follows the jump too. The
+receiver itself is the better witness. :class:`JumpGuard`:
 
-* keeps, at each new fix (GPS_RAW_INT's position), the receiver's position less the estimate's
-  (a constant in good times, whatever the frames' origins: the antenna, the lag at the speed
-  driven) and its median over the last ``baseline_fixes`` fixes;
-* two fixes in a row that leave that baseline by more than ``threshold``, in the same direction,
-  are a jump (one alone is a fix stamped late: the autopilot stamps a fix when it arrives, and
-  a late one sits a speed x delay off); then it **rides through**: the position the controller
-  gets is dead-reckoned with the estimate's velocity from the estimate before the jump, not the
-  estimate sliding after the receiver;
-* once two fixes in a row sit back on the baseline against the dead reckoning, and the estimate
-  has come back to the dead-reckoned position (within ``settle``) or had ``back_wait`` s to,
-  hands the estimate back, fading what the dead reckoning drifted out over ``blend_s`` (no
-  step); an estimate that has not left the dead reckoning by a quarter of the jump in
-  ``confirm`` s never followed one, and is handed back at once;
+* relates each new fix (GPS_RAW_INT's position, arriving with the estimate's latest sample) to
+  the estimate: receiver = estimate + ``c`` - ``lag`` x velocity, ``c`` the frames' offset and
+  ``lag`` the fix's age on arrival, fitted over the last ``fit_fixes`` fixes (least squares);
+  its residual is the receiver's error against the estimate, centimetres in good times;
+* two fixes in a row with a residual over ``threshold`` in the same direction are a jump ``J``
+  (one alone is a fix that arrived late); then it **rides through**: the controller steers by
+  the receiver's own last fix less ``J``, moved on by the estimate's velocity since the fix was
+  taken (a tenth of a second or so of it, not the estimate's sliding position);
+* when the receiver steps back by about ``J`` (two fixes in a row), the jump is over; the ride
+  goes on by the receiver alone until the estimate agrees with it again (residual under
+  ``settle`` for two fixes) or ``back_wait`` s have passed, and the estimate is handed back,
+  any difference faded out over ``blend_s`` (no step);
 * after ``max_ride`` s of riding it gives up (:meth:`overdue`): the runner then holds the rover,
   and starts again from the estimate.
 
@@ -28,157 +28,213 @@ Pure: no I/O, no clock.
 from __future__ import annotations
 
 import math
-import statistics
 from collections import deque
 from dataclasses import dataclass, field
 
 EARTH = 6378137.0                      # m: only differences of nearby fixes are taken
+Vec = tuple[float, float]
 
 
 @dataclass
 class JumpGuard:
     """Ride through receiver jumps (see the module docstring)."""
 
-    threshold: float = 0.12            # m a fix may leave the baseline
-    settle: float = 0.03               # m: the estimate back on the dead-reckoned position
+    threshold: float = 0.12            # m: a fix's residual beyond this is off
+    settle: float = 0.03               # m: the estimate agrees with the receiver again
     max_ride: float = 10.0             # s of riding through before giving up
     max_h_acc: float = 0.2             # m: a receiver claiming more is not judged
-    confirm: float = 3.0               # s: an estimate that has not left the dead reckoning
-    baseline_fixes: int = 7
+    back_wait: float = 3.0             # s after the jump ends before the estimate is handed back
+    blend_s: float = 2.0               # s a difference at hand-back fades out over
+    fit_fixes: int = 60                # fixes the receiver-estimate relation is fitted over
+    min_fit_fixes: int = 20
     jumps: int = 0                     # jumps ridden through
-    false_alarms: int = 0
     riding_since: float | None = None  # vehicle s the ride began (None: not riding)
-    _origin: tuple[float, float] | None = None          # lat, lon (degrees) of the first fix
+    _origin: Vec | None = None         # lat, lon (degrees) of the first fix
     _last_fix: tuple[int, int] | None = None
-    _history: deque = field(default_factory=lambda: deque(maxlen=7))   # receiver - estimate
-    _pending: tuple[float, float] | None = None          # one fix off the baseline (n, e)
-    _last: tuple[float, float, float, float, float] | None = None   # t, x, y, vx, vy
-    _before: tuple[float, float, float, float, float] | None = None  # the estimate at the last fix
-    _dead: tuple[float, float] = (0.0, 0.0)              # the dead-reckoned position
-    _back: bool = False                # the receiver is back on its baseline
-    _apart: float = 0.0                # m: the most the estimate left the dead reckoning
-    _calm: int = 0                     # fixes in a row back on the baseline while riding
-    _anchor: tuple[float, float, float, float, float] | None = None   # the estimate before
-    _size: float = 0.0                 # m: the jump ridden through
-    _back_at: float = 0.0              # vehicle s the receiver came back
-    _blend: tuple[float, tuple[float, float]] | None = None   # (s, offset) handing back
-    back_wait: float = 3.0             # s after the receiver is back before the estimate is
-    #                                    handed back however far it is (ArduPilot's EKF slides
-    #                                    back over 1-3 s)
-    blend_s: float = 2.0               # s the dead reckoning's drift fades out over
-    stamp_slack: float = 0.1           # s: a fix's stamp against the estimate's sample
+    _pairs: deque = field(default_factory=deque)       # (d_n, d_e, v_n, v_e): receiver - estimate
+    _track: deque = field(default_factory=lambda: deque(maxlen=80))   # (t, x, y, vx, vy): estimate
+    _last: tuple[float, float, float, float, float] | None = None    # t, x, y, vx, vy
+    _fit: tuple[float, float, float] | None = None     # c_n, c_e, lag
+    _pending: Vec | None = None        # one fix off
+    _jump: Vec = (0.0, 0.0)            # J
+    _fix_at: tuple[float, float, float] | None = None  # the ride's fix: taken at (s), n, e
+    _ended_at: float | None = None     # s the receiver stepped back (None: still jumped)
+    _calm: int = 0                     # fixes in a row agreeing with the estimate after it
+    _blend: tuple[float, Vec] | None = None            # (s, offset) handing back
 
     def __post_init__(self) -> None:
-        self._history = deque(maxlen=self.baseline_fixes)
+        self._pairs = deque(maxlen=self.fit_fixes)
 
+    # --- the receiver ---------------------------------------------------------------------------
     def fix(self, lat_e7: int, lon_e7: int, h_acc: float | None) -> str | None:
-        """A GPS_RAW_INT: a line when a ride begins or the receiver is back, else None."""
+        """A GPS_RAW_INT: a line when a ride begins or the jump ends, else None."""
         if (lat_e7 == 0 and lon_e7 == 0) or (lat_e7, lon_e7) == self._last_fix:
             return None                 # no fix, or the same fix again
         self._last_fix = (lat_e7, lon_e7)
         if self._last is None or (h_acc is not None and h_acc > self.max_h_acc):
-            self._history.clear()
+            self.forget()
             return None
         lat, lon = lat_e7 * 1e-7, lon_e7 * 1e-7
         if self._origin is None:
             self._origin = (lat, lon)
-        north = math.radians(lat - self._origin[0]) * EARTH
-        east = math.radians(lon - self._origin[1]) * EARTH * math.cos(math.radians(lat))
-        before, self._before = self._before, self._last
+        n = math.radians(lat - self._origin[0]) * EARTH
+        e = math.radians(lon - self._origin[1]) * EARTH * math.cos(math.radians(lat))
+        t, x, y, vx, vy = self._last
         if self.riding_since is None:
-            return self._watch(north - self._last[1], east - self._last[2], before)
-        return self._riding(north - self._dead[0], east - self._dead[1])
+            return self._watch(t, n, e, x, y, vx, vy)
+        return self._riding(t, n, e)
 
-    def _off(self, dn: float, de: float) -> tuple[float, float] | None:
-        """(n, e) this fix leaves the baseline by, if more than the threshold and what a change
-        of speed since the baseline's fixes explains (the fix's stamp and the estimate's sample
-        differ by up to ``stamp_slack`` s: at a new speed the difference moves by that much)."""
-        if len(self._history) < self._history.maxlen:     # type: ignore[operator]
+    def _residual(self, t: float, n: float, e: float) -> tuple[Vec, float] | None:
+        """The fix's residual against the estimate where the fit says it was taken, and when."""
+        if self._fit is None:
             return None
-        h = self._history
-        bn, be = statistics.median(x[0] for x in h), statistics.median(x[1] for x in h)
-        bvx, bvy = statistics.median(x[2] for x in h), statistics.median(x[3] for x in h)
-        assert self._last is not None
-        doubt = self.stamp_slack * math.hypot(self._last[3] - bvx, self._last[4] - bvy)
-        on, oe = dn - bn, de - be
-        return (on, oe) if math.hypot(on, oe) > self.threshold + doubt else None
+        cn, ce, lag = self._fit
+        then = self._estimate_at(t - lag)
+        if then is None:
+            return None
+        return (n - cn - then[0], e - ce - then[1]), t - lag
 
-    def _watch(self, dn: float, de: float, before: tuple | None) -> str | None:
-        off = self._off(dn, de)
+    def _watch(self, t: float, n: float, e: float, x: float, y: float, vx: float,
+               vy: float) -> str | None:
+        got = self._residual(t, n, e)
+        off = got[0] if got is not None and math.hypot(*got[0]) > self.threshold else None
         pending, self._pending = self._pending, off
         if off is None:
-            assert self._last is not None
-            self._history.append((dn, de, self._last[3], self._last[4]))
+            self._pairs.append((n - x, e - y, vx, vy))
+            self._refit()
             return None
-        if pending is None or self._anchor is None or \
-                math.hypot(off[0] - pending[0], off[1] - pending[1]) > self.threshold:
-            self._anchor = before   # one fix off: a late one, or the first of a jump
-            return None
-        # two in a row, the same way: a jump. Dead reckoning from the estimate of the fix
-        # before the first of them (the estimate had not yet slid after it)
-        self._pending, self.jumps, self._back, self._apart = None, self.jumps + 1, False, 0.0
-        self._calm, self._size = 0, math.hypot(*off)
-        t0, x0, y0, vx0, vy0 = self._anchor
-        t, _, _, vx, vy = self._last  # type: ignore[misc]
-        self._dead = (x0 + 0.5 * (vx0 + vx) * (t - t0), y0 + 0.5 * (vy0 + vy) * (t - t0))
-        self.riding_since = t
-        return (f"the receiver jumped {math.hypot(*off):.2f} m, still claiming its class: riding "
-                f"through on the rover's own motion (at most {self.max_ride:g} s)")
+        if pending is None or math.hypot(off[0] - pending[0], off[1] - pending[1]) > self.threshold:
+            return None                 # one fix off: a late one, or the first of a jump
+        assert got is not None
+        self._pending, self.jumps, self.riding_since = None, self.jumps + 1, self._last[0]  # type: ignore[index]
+        self._jump = pending            # the first: the estimate had hardly slid yet
+        self._ended_at, self._calm, self._blend = None, 0, None
+        self._fix_at = (got[1], n - self._fit[0] - self._jump[0],      # type: ignore[index]
+                        e - self._fit[1] - self._jump[1])               # type: ignore[index]
+        return (f"the receiver jumped {math.hypot(*self._jump):.2f} m, still claiming its "
+                f"class: riding through on the receiver less the jump (at most "
+                f"{self.max_ride:g} s)")
 
-    def _riding(self, dn: float, de: float) -> str | None:
-        # against the dead reckoning: the jump itself, until two fixes in a row are back
-        self._calm = self._calm + 1 if self._off(dn, de) is None else 0
-        if self._calm >= 2 and not self._back:
-            self._back = True
-            self._back_at = self._last[0] if self._last is not None else 0.0
-            return "the receiver is back: rejoining the estimate once it has followed"
+    def _riding(self, t: float, n: float, e: float) -> str | None:
+        got = self._residual(t, n, e)
+        if got is None:
+            return None
+        (rn, re), taken = got
+        cn, ce, _ = self._fit  # type: ignore[misc]
+        if self._ended_at is None:
+            # still jumped: the ride goes on from this fix less J, until two fixes in a row
+            # sit where the ride is (J back); the first of them leaves the ride's fix as it was
+            here = self._steer_at(taken)
+            if here is not None and math.hypot(n - cn - here[0], e - ce - here[1]) <= self.threshold:
+                self._calm += 1
+                if self._calm >= 2:
+                    self._ended_at, self._calm = self._last[0], 0  # type: ignore[index]
+                    self._fix_at = (taken, n - cn, e - ce)
+                    return "the receiver is back: rejoining the estimate once it agrees again"
+                return None
+            self._calm = 0
+            self._fix_at = (taken, n - cn - self._jump[0], e - ce - self._jump[1])
+            return None
+        # the jump is over: on the receiver alone until the estimate agrees with it again
+        self._fix_at = (taken, n - cn, e - ce)
+        self._calm = self._calm + 1 if math.hypot(rn, re) <= self.settle else 0
         return None
 
-    def position(self, t: float, x: float, y: float, vx: float, vy: float) -> tuple[float, float]:
+    def _refit(self) -> None:
+        """receiver - estimate = c - lag x velocity, least squares over the pairs kept."""
+        pairs = self._pairs
+        if len(pairs) < self.min_fit_fixes:
+            return
+        k = len(pairs)
+        mdn = sum(p[0] for p in pairs) / k
+        mde = sum(p[1] for p in pairs) / k
+        mvn = sum(p[2] for p in pairs) / k
+        mve = sum(p[3] for p in pairs) / k
+        num = den = 0.0
+        for dn, de, vn, ve in pairs:
+            an, ae = vn - mvn, ve - mve
+            num += (dn - mdn) * an + (de - mde) * ae
+            den += an * an + ae * ae
+        # (negative: the fix is younger than the estimate's sample it arrived with)
+        lag = min(max(-num / den, -0.5), 0.5) if den > 1e-6 else (self._fit[2] if self._fit else 0.0)
+        self._fit = (mdn + lag * mvn, mde + lag * mve, lag)
+
+    # --- the estimate ---------------------------------------------------------------------------
+    def _estimate_at(self, when: float) -> Vec | None:
+        """The estimate's position at ``when`` (linear between its samples)."""
+        track = self._track
+        if not track or when < track[0][0]:
+            return None
+        for i in range(len(track) - 1, 0, -1):
+            t1, x1, y1 = track[i][:3]
+            t0, x0, y0 = track[i - 1][:3]
+            if t0 <= when <= t1:
+                a = (when - t0) / (t1 - t0) if t1 > t0 else 0.0
+                return x0 + a * (x1 - x0), y0 + a * (y1 - y0)
+        t1, x1, y1, vx1, vy1 = track[-1]       # after the last sample: carried on its velocity
+        return (x1 + vx1 * (when - t1), y1 + vy1 * (when - t1)) if when >= t1 else None
+
+    def _moved(self, since: float, now: float) -> Vec | None:
+        """How far the estimate's velocity carried the rover from ``since`` to ``now`` (its
+        velocity, not its position: the position slides after the receiver, the velocity
+        hardly)."""
+        track = self._track
+        if not track or min(since, now) < track[0][0]:
+            return None
+        if since > now:                          # a fix younger than the sample: back along it
+            back = self._moved(now, since)
+            return None if back is None else (-back[0], -back[1])
+        mn = me = 0.0
+        t_end, _, _, vx_end, vy_end = track[-1]
+        if now > t_end:                          # beyond the last sample: on its velocity
+            mn, me = vx_end * (now - max(t_end, since)), vy_end * (now - max(t_end, since))
+        for (t0, _, _, vx0, vy0), (t1, _, _, vx1, vy1) in zip(
+                list(track)[:-1], list(track)[1:], strict=True):
+            a, b = max(t0, since), min(t1, now)
+            if b > a:
+                mn += 0.5 * (vx0 + vx1) * (b - a)
+                me += 0.5 * (vy0 + vy1) * (b - a)
+        return mn, me
+
+    def _steer_at(self, now: float) -> Vec | None:
+        """The ride's position at ``now``: the ride's fix, moved on by the rover's motion."""
+        if self._fix_at is None:
+            return None
+        taken, n, e = self._fix_at
+        moved = self._moved(taken, now)
+        if moved is None:
+            return None
+        return n + moved[0], e + moved[1]
+
+    def position(self, t: float, x: float, y: float, vx: float, vy: float) -> Vec:
         """An accepted LOCAL_POSITION_NED: the position to steer by (the estimate's, or the
-        dead-reckoned one while riding through)."""
-        last, self._last = self._last, (t, x, y, vx, vy)
+        receiver's through a jump)."""
+        self._last = (t, x, y, vx, vy)
+        self._track.append((t, x, y, vx, vy))
         if self.riding_since is None:
             if self._blend is None:
                 return x, y
-            t_end, (cx, cy) = self._blend       # what the dead reckoning was off, fading out
+            t_end, (cx, cy) = self._blend       # the difference at hand-back, fading out
             k = 1.0 - (t - t_end) / self.blend_s
             if k <= 0.0:
                 self._blend = None
                 return x, y
             return x - k * cx, y - k * cy
-        if last is not None and 0.0 < t - last[0] <= 0.5:
-            dt = t - last[0]
-            self._dead = (self._dead[0] + 0.5 * (vx + last[3]) * dt,
-                          self._dead[1] + 0.5 * (vy + last[4]) * dt)
-        apart = math.hypot(x - self._dead[0], y - self._dead[1])
-        self._apart = max(self._apart, apart)
-        if self._back and (apart <= self.settle or t - self._back_at >= self.back_wait):
-            # the estimate has followed the receiver back (or had back_wait to): handed back,
-            # what the dead reckoning drifted meanwhile faded out over blend_s, not stepped
-            self._blend = (t, (x - self._dead[0], y - self._dead[1]))
-            dead = self._dead
-            self._end()
-            return dead
-        if t - self.riding_since >= self.confirm and self._apart <= max(self.settle,
-                                                                         0.25 * self._size):
-            # the estimate never followed the receiver's step: nothing to ride through
-            self.jumps, self.false_alarms = self.jumps - 1, self.false_alarms + 1
-            self._end()
-            self._history.clear()      # the receiver's new place is its baseline
+        steer = self._steer_at(t)
+        if steer is None:
             return x, y
-        return self._dead
-
-    def _end(self) -> None:
-        self.riding_since, self._pending, self._back = None, None, False
+        if self._ended_at is not None and (self._calm >= 2 or t - self._ended_at >= self.back_wait):
+            self._blend = (t, (x - steer[0], y - steer[1]))
+            self.riding_since = None
+        return steer
 
     def overdue(self, t: float) -> bool:
         """Riding through for longer than ``max_ride`` at vehicle time ``t``."""
         return self.riding_since is not None and t - self.riding_since > self.max_ride
 
     def forget(self) -> None:
-        """Start again from the estimate (after a hold, a gap): no ride, no baseline."""
-        self._end()
-        self._blend = None
-        self._history.clear()
-        self._last = self._before = None
+        """Start again from the estimate (after a hold, a gap, a receiver not judged)."""
+        self.riding_since, self._pending, self._blend, self._fix_at = None, None, None, None
+        self._pairs.clear()
+        self._track.clear()
+        self._fit = None

@@ -125,4 +125,4 @@ class GnssWatch:
 
     def summary(self) -> dict[str, Any]:
         return {**self.status(), "reports": self.reports, "drop_log": list(self.drops),
-                "jumps_ridden": self.jump.jumps, "jump_false_alarms": self.jump.false_alarms}
+                "jumps_ridden": self.jump.jumps}

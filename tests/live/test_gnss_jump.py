@@ -62,13 +62,6 @@ def test_a_rover_speeding_up_is_no_jump():
     assert g.jumps == 0
 
 
-def test_a_step_the_estimate_never_follows_is_handed_back_after_confirm():
-    g = JumpGuard(confirm=1.5)
-    trace = fly(g, 0.25, at=3.0, until=99.0, slide=1e9)    # the estimator refused the step
-    assert g.false_alarms == 1 and g.riding_since is None and g.jumps == 0
-    assert all(x == off for t, x, off in trace if t > 3.0 + 1.5 + 0.1)
-
-
 def test_one_fix_off_is_a_late_one_not_a_jump():
     g = JumpGuard()
     fly(g, 0.25, at=3.0, until=3.05)

@@ -175,8 +175,8 @@ class Failsafes(Engaging):
         jumped = self.gnss.jump.fix(msg.lat, msg.lon, self.gnss.h_acc)
         if jumped is not None and self.state is State.TRACKING:
             self.log(jumped)
-            if self.gnss.jump.riding_since is not None:
-                self._emit(ev.GNSS, "jump: riding through", self.gnss.status())
+            self._emit(ev.GNSS, "jump: riding through" if "jumped" in jumped else "jump over",
+                       self.gnss.status())
         act, why = self.gnss.verdict(now)
         rate = self.gnss.policy.slow_factor if act == gnss.SLOW else 1.0
         if rate != self.clock.rate:
