@@ -43,7 +43,7 @@ class JumpGuard:
     settle: float = 0.03               # m: the estimate agrees with the receiver again
     max_ride: float = 10.0             # s of riding through before giving up
     max_h_acc: float = 0.2             # m: a receiver claiming more is not judged
-    back_wait: float = 3.0             # s after the jump ends before the estimate is handed back
+    back_wait: float = 8.0             # s after the jump ends before the estimate is handed back
     blend_s: float = 2.0               # s a difference at hand-back fades out over
     fit_fixes: int = 60                # fixes the receiver-estimate relation is fitted over
     min_fit_fixes: int = 20
@@ -61,6 +61,7 @@ class JumpGuard:
     _ended_at: float | None = None     # s the receiver stepped back (None: still jumped)
     _calm: int = 0                     # fixes in a row agreeing with the estimate after it
     _blend: tuple[float, Vec] | None = None            # (s, offset) handing back
+    _unjudged: bool = False            # the last fix claimed too much to be judged (float)
 
     def __post_init__(self) -> None:
         self._pairs = deque(maxlen=self.fit_fixes)
@@ -71,8 +72,11 @@ class JumpGuard:
         if (lat_e7 == 0 and lon_e7 == 0) or (lat_e7, lon_e7) == self._last_fix:
             return None                 # no fix, or the same fix again
         self._last_fix = (lat_e7, lon_e7)
-        if self._last is None or (h_acc is not None and h_acc > self.max_h_acc):
-            self.forget()
+        if self._last is None:
+            return None
+        if h_acc is not None and h_acc > self.max_h_acc:
+            self._end_ride()              # float, plain GPS: not judged, nor steered by
+            self._unjudged = True
             return None
         lat, lon = lat_e7 * 1e-7, lon_e7 * 1e-7
         if self._origin is None:
@@ -80,6 +84,14 @@ class JumpGuard:
         n = math.radians(lat - self._origin[0]) * EARTH
         e = math.radians(lon - self._origin[1]) * EARTH * math.cos(math.radians(lat))
         t, x, y, vx, vy = self._last
+        if self._unjudged:
+            self._unjudged = False
+            if self._fit is not None and self._residual(t, n, e) is not None:
+                # back to its class after float: the receiver is right and the estimate, which
+                # followed the float, re-converges for seconds: steer by the receiver till then
+                self._receiver_mode(t, n, e)
+                return ("the receiver is back in its class: steering by it until the estimate "
+                        "agrees again")
         if self.riding_since is None:
             return self._watch(t, n, e, x, y, vx, vy)
         return self._riding(t, n, e)
@@ -114,6 +126,17 @@ class JumpGuard:
         return (f"the receiver jumped {math.hypot(*self._jump):.2f} m, still claiming its "
                 f"class: riding through on the receiver less the jump (at most "
                 f"{self.max_ride:g} s)")
+
+    def _receiver_mode(self, t: float, n: float, e: float) -> None:
+        got = self._residual(t, n, e)
+        assert got is not None and self._fit is not None
+        self.riding_since = self._ended_at = t
+        self._jump, self._calm, self._blend, self._pending = (0.0, 0.0), 0, None, None
+        self._fix_at = (got[1], n - self._fit[0], e - self._fit[1])
+
+    def steering(self) -> bool:
+        """Steering by the receiver now (a ride, or after float until the estimate agrees)."""
+        return self.riding_since is not None
 
     def _riding(self, t: float, n: float, e: float) -> str | None:
         got = self._residual(t, n, e)
@@ -229,12 +252,15 @@ class JumpGuard:
         return steer
 
     def overdue(self, t: float) -> bool:
-        """Riding through for longer than ``max_ride`` at vehicle time ``t``."""
-        return self.riding_since is not None and t - self.riding_since > self.max_ride
+        """Still jumped after ``max_ride`` s of riding through, at vehicle time ``t``."""
+        return (self.riding_since is not None and self._ended_at is None
+                and t - self.riding_since > self.max_ride)
+
+    def _end_ride(self) -> None:
+        self.riding_since, self._pending, self._blend, self._fix_at = None, None, None, None
 
     def forget(self) -> None:
-        """Start again from the estimate (after a hold, a gap, a receiver not judged)."""
-        self.riding_since, self._pending, self._blend, self._fix_at = None, None, None, None
-        self._pairs.clear()
+        """Start again from the estimate (after a gap, or a hold's re-engagement): no ride, no
+        history of the estimate; the receiver's relation to it (the frames, the lag) is kept."""
+        self._end_ride()
         self._track.clear()
-        self._fit = None

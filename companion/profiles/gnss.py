@@ -60,9 +60,11 @@ class GnssPolicy:
     otherwise: str = SLOW            # a drop from a lesser class, still a 3D fix or better
     no_fix: str = HOLD               # below a 3D fix
     slow_factor: float = 0.5         # the reference's speed while slowed
-    back_for: float = 3.0            # s the run's class must be back before resuming
-    # m/s: and the estimate must show the held rover at rest (ArduPilot's EKF, re-converging
-    # after float, moves its position and velocity for seconds: measured in docs/gnss.md)
+    back_for: float = 1.5            # s the run's class must be back before resuming
+    # m/s: and the companion steers by the receiver until the estimate agrees with it again
+    # (companion.live.gnss_jump), or, knowing no relation to the receiver yet, the estimate
+    # must show the held rover at rest (ArduPilot's EKF, re-converging after float, moves its
+    # position and velocity for seconds: measured in docs/gnss.md)
     rest_speed: float = 0.05
     # a fix stepping this far (m) beyond the rover's own motion is a jump, ridden through on
     # that motion for at most jump_max_ride s (companion.live.gnss_jump), then held

@@ -125,7 +125,6 @@ class Failsafes(Engaging):
         self.engagement.after_failsafe = True
         stopping.autopilot = None
         self.estimate.forget_position()
-        self.gnss.jump.forget()
         self._emit(ev.RESUMED, what, {"cause": stopping.cause})
 
     def _may_recover(self, now: float) -> bool:
@@ -135,8 +134,12 @@ class Failsafes(Engaging):
             return False
         if self.gnss.verdict(now)[0] == gnss.HOLD:
             return False
-        if self.stopping.cause == "gnss" and not (
-                self.gnss.back(now) and math.hypot(*self.heard.velocity) < self.gnss.policy.rest_speed):
+        if self.stopping.cause == "gnss" and not (self.gnss.back(now) and (
+                self.gnss.jump.steering()
+                or math.hypot(*self.heard.velocity) < self.gnss.policy.rest_speed)):
+            # back for back_for, and either steering by the receiver until the estimate agrees
+            # or (no relation to the receiver known yet) the estimate settled: the held rover
+            # at rest in it
             return False
         if self.stopping.cause == "setpoints" and not self.stopping.hold_confirmed:
             return False   # until the vehicle has our HOLD: our messages reach it again

@@ -309,7 +309,7 @@ class Runner(Failsafes, Requests):
             if self.trajectory is None:
                 self.trajectory = self.mission.anchored(s.x, s.y, s.yaw)
             if clock.rejoin:
-                self._rejoin(s)
+                self._rejoin(steer)
             clock.segment_t0 = s.t
             clock.offset = clock.time
             self.stats.segment_start()
@@ -354,7 +354,7 @@ class Runner(Failsafes, Requests):
         if self.sinks:
             self._record(s, mt, ref, cmd, e2)
 
-    def _rejoin(self, s: Sample) -> None:
+    def _rejoin(self, at: tuple[float, float]) -> None:
         """After standing still: the mission time of the rover's place on the path (at or
         after where the clock stood: what it braked through was driven), and a ramp up to the
         reference's speed there at --rejoin-accel."""
@@ -362,7 +362,7 @@ class Runner(Failsafes, Requests):
         assert self.trajectory is not None
         clock.rejoin = False
         held = clock.time
-        clock.time = min(pacing.rejoin_time(self.trajectory, held, s.x, s.y,
+        clock.time = min(pacing.rejoin_time(self.trajectory, held, at[0], at[1],
                                                     pacing.REJOIN_HORIZON),
                          self.mission.duration)
         ref = self.trajectory.sample(clock.time)
