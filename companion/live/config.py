@@ -71,8 +71,10 @@ class RunnerConfig:
     # the pilot or a ground station switches the vehicle into it, armed, then track
     wait_for_mode: bool = False
     # m/s^2: after standing still (a failsafe, a pause) the reference accelerates from the
-    # rover's place on the path at this (companion.core.pacing), not leaping off at full speed
-    rejoin_accel: float = 1.0
+    # rover's place on the path at this (companion.core.pacing), not leaping off at full speed;
+    # gentle, so the rover follows it on the path (1 m/s^2 left ArduPilot's skid rover 0.3 m
+    # behind on a ramp to 2 m/s: docs/gnss.md)
+    rejoin_accel: float = 0.5
     # the mode the pilot leaves the vehicle in while the companion tracks (None: the profile's
     # track mode); --handover: its AUTO, whose guided sub-mode takes the setpoints
     track_mode: str | None = None

@@ -83,3 +83,28 @@ def test_plain_gps_is_not_judged():
     for k in range(20):
         assert g.fix(round(LAT0 * 1e7) + k % 2 * 50, lon, 0.7) is None   # 0.55 m steps
     assert g.riding_since is None
+
+
+def test_back_in_its_class_after_float_the_receiver_is_steered_by_until_the_estimate_agrees():
+    """Float (h_acc 0.4: not judged) from 3 to 6 s: the estimate wanders 0.3 m north with it;
+    fixed again at 6 s, the receiver is right at once while the estimate slides back over about
+    a second: the steered position follows the receiver, then the estimate once they agree."""
+    g = JumpGuard()
+    out, est = [], 0.0
+    for k in range(int(12 * RATE)):
+        t = k / RATE
+        floating = 3.0 <= t < 6.0
+        target = 0.3 if floating else 0.0
+        est += (target - est) * (1 - math.exp(-1 / (RATE * 0.7)))
+        east = SPEED * t
+        if k % 4 == 0:
+            north = 0.3 if floating else 0.0
+            lat = LAT0 + math.degrees(north / EARTH)
+            lon = math.degrees(east / (EARTH * math.cos(math.radians(LAT0))))
+            g.fix(round(lat * 1e7), round(lon * 1e7), 0.4 if floating else 0.014)
+        x, _ = g.position(t, est, east, 0.0, SPEED)
+        out.append((t, x, est))
+    after = [(t, x, e) for t, x, e in out if 6.15 <= t < 7.5]
+    assert max(e for _, _, e in after) > 0.1                   # the estimate is still off
+    assert max(abs(x) for _, x, _ in after) < 0.02             # the steered position is not
+    assert not g.steering() and out[-1][1] == out[-1][2]       # handed back by the end
