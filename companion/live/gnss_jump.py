@@ -10,7 +10,8 @@ receiver itself is the better witness. :class:`JumpGuard`:
   the estimate: receiver = estimate + ``c`` - ``lag`` x velocity, ``c`` the frames' offset and
   ``lag`` the fix's age on arrival, fitted over the last ``fit_fixes`` fixes (least squares);
   its residual is the receiver's error against the estimate, centimetres in good times;
-* two fixes in a row with a residual over ``threshold`` in the same direction are a jump ``J``
+* two fixes in a row with a residual over ``threshold``, within half of it of each other, are a
+  jump ``J``
   (one alone is a fix that arrived late); then it **rides through**: the controller steers by
   the receiver's own last fix less ``J``, moved on by the estimate's velocity since the fix was
   taken (a tenth of a second or so of it, not the estimate's sliding position);
@@ -39,8 +40,9 @@ Vec = tuple[float, float]
 class JumpGuard:
     """Ride through receiver jumps (see the module docstring)."""
 
-    threshold: float = 0.12            # m: a fix's residual beyond this is off
-    settle: float = 0.03               # m: the estimate agrees with the receiver again
+    threshold: float = 0.15            # m: a fix's residual beyond this is off
+    settle: float = 0.06               # m: the estimate agrees with the receiver again (the
+    #                                    residual's own scatter on SITL under load: 2-5 cm)
     max_ride: float = 10.0             # s of riding through before giving up
     max_h_acc: float = 0.2             # m: a receiver claiming more is not judged
     back_wait: float = 8.0             # s after the jump ends before the estimate is handed back
@@ -115,7 +117,8 @@ class JumpGuard:
             self._pairs.append((n - x, e - y, vx, vy))
             self._refit()
             return None
-        if pending is None or math.hypot(off[0] - pending[0], off[1] - pending[1]) > self.threshold:
+        if pending is None or \
+                math.hypot(off[0] - pending[0], off[1] - pending[1]) > 0.5 * self.threshold:
             return None                 # one fix off: a late one, or the first of a jump
         assert got is not None
         self._pending, self.jumps, self.riding_since = None, self.jumps + 1, self._last[0]  # type: ignore[index]

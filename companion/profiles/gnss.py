@@ -68,7 +68,7 @@ class GnssPolicy:
     rest_speed: float = 0.05
     # a fix stepping this far (m) beyond the rover's own motion is a jump, ridden through on
     # that motion for at most jump_max_ride s (companion.live.gnss_jump), then held
-    jump_threshold: float = 0.12
+    jump_threshold: float = 0.15
     jump_max_ride: float = 10.0
     rate_hz: float = 10.0            # GPS_RAW_INT asked for at this rate
     stale_after: float = 2.0         # s without GPS_RAW_INT: the class is unknown (continue)
