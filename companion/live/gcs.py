@@ -59,7 +59,7 @@ _EVENT_TEXT = {
     ev.PILOT_OVERRIDE: (WARNING, "pilot took over"),
     ev.AUTOPILOT_FAILSAFE: (CRITICAL, "autopilot failsafe"),
     ev.HANDED_BACK: (NOTICE, "hand-back"),
-    ev.GNSS: (WARNING, "GNSS"),
+    ev.GNSS: (NOTICE, "GNSS"),
 }
 
 
