@@ -25,7 +25,9 @@ import math
 from .signals import Reference
 from .trajectory import Trajectory
 
-REJOIN_HORIZON = 3.0   # mission s after the held time searched for the stopped rover's place
+# mission s after the held time searched for the stopped rover's place (a car in HOLD coasts
+# 3 m and more: docs/gnss.md)
+REJOIN_HORIZON = 10.0
 REJOIN_NEAR = 0.3      # m: a rover further from the path than this is not on it
 
 
