@@ -28,7 +28,8 @@ from .trajectory import Trajectory
 # mission s after the held time searched for the stopped rover's place (a car in HOLD coasts
 # 3 m and more: docs/gnss.md)
 REJOIN_HORIZON = 10.0
-REJOIN_NEAR = 0.3      # m: a rover further from the path than this is not on it
+REJOIN_NEAR = 0.5      # m: a rover further from the path than this is not on it (a car
+#                        coasting in HOLD ends 0.4 m off it: docs/gnss.md)
 
 
 def paced(ref: Reference, rate: float, rate_dot: float = 0.0) -> Reference:
