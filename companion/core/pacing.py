@@ -68,6 +68,17 @@ def rejoin_time(trajectory: Trajectory, held: float, x: float, y: float, horizon
     return best_t if best_d <= near else held
 
 
+def rejoin(trajectory: Trajectory, held: float, x: float, y: float, duration: float,
+           accel: float, rate: float = 1.0) -> tuple[float, float]:
+    """Where a rover standing at (x, y) after a stop takes the path up again: (the mission
+    time of its place, :func:`rejoin_time`, no later than ``duration``; the seconds its ramp to
+    the reference's speed there, times ``rate``, takes at ``accel``). The live loop's rule, and
+    the one ``companion plot`` replays a .tlog's mission clock with."""
+    time = min(rejoin_time(trajectory, held, x, y, REJOIN_HORIZON), duration)
+    ref = trajectory.sample(time)
+    return time, ramp_seconds(math.hypot(ref.vx, ref.vy) * rate, accel)
+
+
 def ramp_seconds(speed: float, accel: float) -> float:
     """How long a ramp from rest to ``speed`` (m/s) takes at ``accel`` (m/s^2; 0 or less: none)."""
     if not (accel > 0.0 and math.isfinite(speed)) or speed <= 0.0:

@@ -293,12 +293,10 @@ def _attach_reference(flight: Flight, mission: Any, cmds: dict, ms: np.ndarray,
         elif stopped_since:
             # after standing still the live loop rejoins the path where the rover stands and
             # ramps up to speed (companion.core.pacing): the same rule
-            offset = min(pacing.rejoin_time(trajectory, mt[-1], float(flight.x[k]),
-                                            float(flight.y[k]), pacing.REJOIN_HORIZON),
-                         float(mission.duration))
-            ref = trajectory.sample(offset)
-            t0, ramp_s = t, pacing.ramp_seconds(math.hypot(ref.vx, ref.vy),
-                                                RunnerConfig.rejoin_accel)
+            offset, ramp_s = pacing.rejoin(trajectory, mt[-1], float(flight.x[k]),
+                                           float(flight.y[k]), float(mission.duration),
+                                           RunnerConfig.rejoin_accel)
+            t0 = t
         elif t - float(flight.t[tracked[-1]]) > max_gap:
             t0, offset, ramp_s = t, mt[-1], 0.0   # a gap: the clock resumes where it stood
         mt.append(offset + pacing.ramp(t - t0, ramp_s)[0])

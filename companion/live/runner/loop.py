@@ -357,17 +357,14 @@ class Runner(Failsafes, Requests):
     def _rejoin(self, at: tuple[float, float]) -> None:
         """After standing still: the mission time of the rover's place on the path (at or
         after where the clock stood: what it braked through was driven), and a ramp up to the
-        reference's speed there at --rejoin-accel."""
+        reference's speed there at RunnerConfig.rejoin_accel (no flag sets it)."""
         clock = self.clock
         assert self.trajectory is not None
         clock.rejoin = False
         held = clock.time
-        clock.time = min(pacing.rejoin_time(self.trajectory, held, at[0], at[1],
-                                                    pacing.REJOIN_HORIZON),
-                         self.mission.duration)
-        ref = self.trajectory.sample(clock.time)
-        clock.ramp_s = pacing.ramp_seconds(math.hypot(ref.vx, ref.vy) * clock.rate,
-                                           self.config.rejoin_accel)
+        clock.time, clock.ramp_s = pacing.rejoin(self.trajectory, held, at[0], at[1],
+                                                 self.mission.duration,
+                                                 self.config.rejoin_accel, clock.rate)
         self.log(f"rejoining the path at mission time {clock.time:.2f} s (held at {held:.2f} s),"
                  f" up to speed over {clock.ramp_s:.1f} s")
 
