@@ -11,8 +11,7 @@ receiver itself is the better witness. :class:`JumpGuard`:
   ``lag`` the fix's age on arrival, fitted over the last ``fit_fixes`` fixes (least squares);
   its residual is the receiver's error against the estimate, centimetres in good times;
 * two fixes in a row with a residual over ``threshold``, within half of it of each other, are a
-  jump ``J``
-  (one alone is a fix that arrived late); then it **rides through**: the controller steers by
+  jump ``J`` (one alone is a fix that arrived late); then it **rides through**: the controller steers by
   the receiver's own last fix less ``J``, moved on by the estimate's velocity since the fix was
   taken (a tenth of a second or so of it, not the estimate's sliding position);
 * when the receiver steps back by about ``J`` (two fixes in a row), the jump is over; the ride
@@ -31,8 +30,10 @@ from __future__ import annotations
 import math
 from collections import deque
 from dataclasses import dataclass, field
+from itertools import pairwise
 
-EARTH = 6378137.0                      # m: only differences of nearby fixes are taken
+from ..mission.geo import ne_from_latlon
+
 Vec = tuple[float, float]
 
 
@@ -83,8 +84,7 @@ class JumpGuard:
         lat, lon = lat_e7 * 1e-7, lon_e7 * 1e-7
         if self._origin is None:
             self._origin = (lat, lon)
-        n = math.radians(lat - self._origin[0]) * EARTH
-        e = math.radians(lon - self._origin[1]) * EARTH * math.cos(math.radians(lat))
+        n, e = ne_from_latlon(lat, lon, self._origin)   # (as ArduPilot converts them)
         t, x, y, vx, vy = self._last
         if self._unjudged:
             self._unjudged = False
@@ -214,8 +214,7 @@ class JumpGuard:
         t_end, _, _, vx_end, vy_end = track[-1]
         if now > t_end:                          # beyond the last sample: on its velocity
             mn, me = vx_end * (now - max(t_end, since)), vy_end * (now - max(t_end, since))
-        for (t0, _, _, vx0, vy0), (t1, _, _, vx1, vy1) in zip(
-                list(track)[:-1], list(track)[1:], strict=True):
+        for (t0, _, _, vx0, vy0), (t1, _, _, vx1, vy1) in pairwise(track):
             a, b = max(t0, since), min(t1, now)
             if b > a:
                 mn += 0.5 * (vx0 + vx1) * (b - a)

@@ -6,9 +6,10 @@ from __future__ import annotations
 
 import math
 
-from companion.live.gnss_jump import EARTH, JumpGuard
+from companion.live.gnss_jump import JumpGuard
 
 LAT0 = 47.0
+EARTH = 6378137.0    # m: the fixes' flat earth here (the guard converts as ArduPilot does)
 SPEED = 1.0          # m/s east
 RATE, FIX = 40.0, 10.0
 
