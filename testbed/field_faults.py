@@ -17,6 +17,8 @@ import select
 import socket
 import threading
 
+from .link_thread import LinkThread
+
 BOTH, TO_COMPANION, TO_VEHICLE = "both", "to_companion", "to_vehicle"   # what a stall holds
 
 
@@ -114,7 +116,7 @@ class StallProxy:
                 pass
 
 
-class UdpStallProxy:
+class UdpStallProxy(LinkThread):
     """A UDP relay that takes the autopilot's datagrams on ``listen_port`` (where it sends:
     PX4's offboard link 14540 + N) and passes them to the companion on ``companion_port``, and
     the companion's back to the autopilot's address. ``stall()`` drops everything both ways (a
@@ -127,16 +129,9 @@ class UdpStallProxy:
         self.autopilot_addr: tuple[str, int] | None = None
         self.stalled = threading.Event()
         self.dropped = 0
-        self._stop = threading.Event()
-        self._thread = threading.Thread(target=self._run, daemon=True)
+        self._prepare_thread()
 
-    def __enter__(self) -> UdpStallProxy:
-        self._thread.start()
-        return self
-
-    def __exit__(self, *exc) -> None:
-        self._stop.set()
-        self._thread.join(2.0)
+    def _close(self) -> None:
         self.sock.close()
 
     def stall(self) -> None:

@@ -1,6 +1,8 @@
-"""A pymavlink link served by a thread, for a ``with`` block: the test bed's fakes and feeders
+"""A link served by a thread, for a ``with`` block: the test bed's fakes, feeders and relays
 (:class:`~testbed.fake_vehicle.FakeVehicle`, :class:`~testbed.mission_gcs.GroundStation`,
-:class:`~testbed.gnss_input.GnssInjector`) share how they start, stop and close."""
+:class:`~testbed.gnss_input.GnssInjector` on a pymavlink link; :class:`~testbed.udp_proxy.Proxy`
+and :class:`~testbed.field_faults.UdpStallProxy` on a UDP socket) share how they start, stop
+and close."""
 
 from __future__ import annotations
 
@@ -9,9 +11,10 @@ from typing import Any, Self
 
 
 class LinkThread:
-    """Subclasses open ``self.conn``, call :meth:`_prepare_thread` in their constructor and
-    loop in ``_run`` until ``self._stop`` is set; the thread starts on entry and, on exit, is
-    stopped and joined, then the link closed."""
+    """Subclasses open their link, call :meth:`_prepare_thread` in their constructor and loop
+    in ``_run`` until ``self._stop`` is set; the thread starts on entry and, on exit, is stopped
+    and joined, then the link closed (:meth:`_close`: ``self.conn``, a pymavlink link, unless
+    a subclass closes another)."""
 
     conn: Any
 
@@ -29,4 +32,7 @@ class LinkThread:
     def __exit__(self, *exc) -> None:
         self._stop.set()
         self._thread.join(2.0)
+        self._close()
+
+    def _close(self) -> None:
         self.conn.close()

@@ -15,6 +15,8 @@ from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 
 from sitl_plant.testing import free_udp_port
 
+from .link_thread import LinkThread
+
 
 def _parser():
     mav = mavlink2.MAVLink(None)
@@ -28,7 +30,7 @@ class Seen:
     msg: Any
 
 
-class Proxy:
+class Proxy(LinkThread):
     """UDP relay: the plant sends to ``plant_port``, the companion listens on ``companion_port``.
 
     Every message both ways is parsed and kept with the wall time it passed (``from_plant``,
@@ -45,17 +47,10 @@ class Proxy:
         self.from_plant: list[Seen] = []
         self.from_companion: list[Seen] = []
         self._parse_plant, self._parse_companion = _parser(), _parser()
-        self._stop = threading.Event()
-        self._thread = threading.Thread(target=self._run, daemon=True)
+        self._prepare_thread()
         self.lock = threading.Lock()
 
-    def __enter__(self) -> Proxy:
-        self._thread.start()
-        return self
-
-    def __exit__(self, *exc) -> None:
-        self._stop.set()
-        self._thread.join(2.0)
+    def _close(self) -> None:
         self.sock.close()
 
     def _run(self) -> None:
