@@ -47,14 +47,16 @@ def largest_error(csv_path: str, after_s: float) -> float:
     return max((e for _, mt, e in _tracked_rows(csv_path) if mt >= after_s), default=math.nan)
 
 
-def held_reference(csv_path: str) -> tuple[float, float]:
+def held_reference(csv_path: str) -> tuple[float, float, float]:
     """Across the longest pause in tracking (between two tracked cycles of the companion's csv):
-    (vehicle seconds it lasted, mission seconds the reference moved meanwhile). A reference
-    held while the rover was stopped moves by one cycle at most; one that ran on moves as far
-    as the vehicle's clock."""
+    (vehicle seconds it lasted, mission seconds the reference moved meanwhile, the position
+    error on the first cycle after it). A reference held while the rover stood moves by one
+    cycle, or on to where the rover came to rest on the path (``core.pacing.rejoin``: what it
+    braked or ran on through counts as driven), so the error after it is small; one that ran on
+    moves as far as the vehicle's clock and leaves the rover behind."""
     rows = _tracked_rows(csv_path)
-    gaps = [(b[0] - a[0], b[1] - a[1]) for a, b in zip(rows, rows[1:], strict=False)]
-    return max(gaps, default=(0.0, 0.0))
+    gaps = [(b[0] - a[0], b[1] - a[1], b[2]) for a, b in zip(rows, rows[1:], strict=False)]
+    return max(gaps, default=(0.0, 0.0, math.nan))
 
 
 def at_limit_share(csv_path: str, limit: float, duration: float = 60.0) -> float:
