@@ -16,9 +16,9 @@ from pathlib import Path
 import pytest
 from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 
+from companion.core.pacing import REJOIN_NEAR
 from companion.errors import UserError
 from companion.mav.connection import DEFAULT_BAUD, serial_target
-from companion.core.pacing import REJOIN_NEAR
 from testbed.scoring import batch_twin
 
 MISSION = "missions/paper_ellipse_012.toml"

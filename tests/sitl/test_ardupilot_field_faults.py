@@ -18,11 +18,11 @@ from pathlib import Path
 
 import pytest
 
+from companion.core.pacing import REJOIN_NEAR
 from testbed.ardupilot import CompanionProcess, GroundStation
 from testbed.field_faults import TO_COMPANION, TO_VEHICLE, StallProxy
 from testbed.missions import circle_mission
 from testbed.safety import read_tlog
-from companion.core.pacing import REJOIN_NEAR
 from testbed.scoring import held_reference, largest_error, simstate_xy
 from testbed.sitl import ground_speed
 
