@@ -37,6 +37,54 @@ from ..mission.geo import ne_from_latlon
 Vec = tuple[float, float]
 
 
+class LagWindow:
+    """The last ``size`` pairs (d_n, d_e, v_n, v_e) of receiver - estimate and the estimate's
+    velocity, and the least-squares fit d = c - lag x v over them (one lag for both axes).
+
+    Kept as running sums, so a fix costs the same whatever the window (the loop takes one at
+    10 Hz beside a 40 Hz control cycle); the sums are rebuilt from the pairs each time the
+    window has turned over, so rounding does not build up over a long run."""
+
+    def __init__(self, size: int) -> None:
+        self.size = size
+        self._pairs: deque[tuple[float, float, float, float]] = deque()
+        self._sums = [0.0] * 8          # dn, de, vn, ve, dn vn, de ve, vn^2, ve^2
+        self._added = 0
+
+    def __len__(self) -> int:
+        return len(self._pairs)
+
+    def add(self, dn: float, de: float, vn: float, ve: float) -> None:
+        self._pairs.append((dn, de, vn, ve))
+        self._count(dn, de, vn, ve, 1.0)
+        if len(self._pairs) > self.size:
+            self._count(*self._pairs.popleft(), -1.0)
+        self._added += 1
+        if self._added % self.size == 0:
+            self._sums = [0.0] * 8
+            for pair in self._pairs:
+                self._count(*pair, 1.0)
+
+    def _count(self, dn: float, de: float, vn: float, ve: float, sign: float) -> None:
+        s = self._sums
+        for i, v in enumerate((dn, de, vn, ve, dn * vn, de * ve, vn * vn, ve * ve)):
+            s[i] += sign * v
+
+    def mean(self, i: int) -> float:
+        """The mean of the pairs' ``i``-th member (0 d_n, 1 d_e, 2 v_n, 3 v_e)."""
+        return self._sums[i] / len(self._pairs)
+
+    def solve(self) -> tuple[float, float, float] | None:
+        """(c_n, c_e, lag), or None when the velocities hardly vary (no lag to tell)."""
+        k = len(self._pairs)
+        dn, de, vn, ve, dnvn, deve, vn2, ve2 = self._sums
+        den = (vn2 - vn * vn / k) + (ve2 - ve * ve / k)
+        if den <= 1e-6:
+            return None
+        lag = -((dnvn - dn * vn / k) + (deve - de * ve / k)) / den
+        return dn / k + lag * vn / k, de / k + lag * ve / k, lag
+
+
 @dataclass
 class JumpGuard:
     """Ride through receiver jumps (see the module docstring)."""
@@ -54,7 +102,7 @@ class JumpGuard:
     riding_since: float | None = None  # vehicle s the ride began (None: not riding)
     _origin: Vec | None = None         # lat, lon (degrees) of the first fix
     _last_fix: tuple[int, int] | None = None
-    _pairs: deque = field(default_factory=deque)       # (d_n, d_e, v_n, v_e): receiver - estimate
+    _pairs: LagWindow = field(default_factory=lambda: LagWindow(60))  # receiver - estimate
     _track: deque = field(default_factory=lambda: deque(maxlen=80))   # (t, x, y, vx, vy): estimate
     _last: tuple[float, float, float, float, float] | None = None    # t, x, y, vx, vy
     _fit: tuple[float, float, float] | None = None     # c_n, c_e, lag
@@ -67,7 +115,7 @@ class JumpGuard:
     _unjudged: bool = False            # the last fix claimed too much to be judged (float)
 
     def __post_init__(self) -> None:
-        self._pairs = deque(maxlen=self.fit_fixes)
+        self._pairs = LagWindow(self.fit_fixes)
 
     # --- the receiver ---------------------------------------------------------------------------
     def fix(self, lat_e7: int, lon_e7: int, h_acc: float | None) -> str | None:
@@ -114,7 +162,7 @@ class JumpGuard:
         off = got[0] if got is not None and math.hypot(*got[0]) > self.threshold else None
         pending, self._pending = self._pending, off
         if off is None:
-            self._pairs.append((n - x, e - y, vx, vy))
+            self._pairs.add(n - x, e - y, vx, vy)
             self._refit()
             return None
         if pending is None or \
@@ -168,22 +216,20 @@ class JumpGuard:
 
     def _refit(self) -> None:
         """receiver - estimate = c - lag x velocity, least squares over the pairs kept."""
-        pairs = self._pairs
-        if len(pairs) < self.min_fit_fixes:
+        if len(self._pairs) < self.min_fit_fixes:
             return
-        k = len(pairs)
-        mdn = sum(p[0] for p in pairs) / k
-        mde = sum(p[1] for p in pairs) / k
-        mvn = sum(p[2] for p in pairs) / k
-        mve = sum(p[3] for p in pairs) / k
-        num = den = 0.0
-        for dn, de, vn, ve in pairs:
-            an, ae = vn - mvn, ve - mve
-            num += (dn - mdn) * an + (de - mde) * ae
-            den += an * an + ae * ae
-        # (negative: the fix is younger than the estimate's sample it arrived with)
-        lag = min(max(-num / den, -0.5), 0.5) if den > 1e-6 else (self._fit[2] if self._fit else 0.0)
-        self._fit = (mdn + lag * mvn, mde + lag * mve, lag)
+        got = self._pairs.solve()
+        if got is None:               # no spread of velocity to tell a lag from an offset by
+            lag = self._fit[2] if self._fit else 0.0
+            self._fit = (self._pairs.mean(0) + lag * self._pairs.mean(2),
+                         self._pairs.mean(1) + lag * self._pairs.mean(3), lag)
+            return
+        cn, ce, lag = got
+        if abs(lag) > 0.5:            # (negative: the fix is younger than the estimate's sample)
+            lag = min(max(lag, -0.5), 0.5)
+            cn = self._pairs.mean(0) + lag * self._pairs.mean(2)
+            ce = self._pairs.mean(1) + lag * self._pairs.mean(3)
+        self._fit = (cn, ce, lag)
 
     # --- the estimate ---------------------------------------------------------------------------
     def _estimate_at(self, when: float) -> Vec | None:

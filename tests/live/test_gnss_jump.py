@@ -109,3 +109,39 @@ def test_back_in_its_class_after_float_the_receiver_is_steered_by_until_the_esti
     assert max(e for _, _, e in after) > 0.1                   # the estimate is still off
     assert max(abs(x) for _, x, _ in after) < 0.02             # the steered position is not
     assert not g.steering() and out[-1][1] == out[-1][2]       # handed back by the end
+
+
+def test_the_lag_fit_over_a_sliding_window_is_the_least_squares_one():
+    """LagWindow's running sums give the fit a least-squares solve of the window's pairs gives,
+    after the window has turned over several times (pairs dropped, sums rebuilt)."""
+    import numpy as np
+
+    from companion.live.gnss_jump import LagWindow
+
+    rng = np.random.default_rng(3)
+    window = LagWindow(60)
+    pairs = []
+    for k in range(437):
+        vn, ve = math.cos(k / 30), math.sin(k / 30)
+        pair = (0.3 - 0.12 * vn + rng.normal(0, 0.01), -0.2 - 0.12 * ve + rng.normal(0, 0.01),
+                vn, ve)
+        window.add(*pair)
+        pairs.append(pair)
+    last = np.array(pairs[-60:])
+    # d_n = c_n - lag v_n, d_e = c_e - lag v_e: unknowns (c_n, c_e, lag)
+    a = np.block([[np.ones((60, 1)), np.zeros((60, 1)), -last[:, 2:3]],
+                  [np.zeros((60, 1)), np.ones((60, 1)), -last[:, 3:4]]])
+    want = np.linalg.lstsq(a, np.concatenate([last[:, 0], last[:, 1]]), rcond=None)[0]
+    got = window.solve()
+    assert got is not None and len(window) == 60
+    assert np.allclose(got, want, atol=1e-9), (got, want)
+    assert abs(got[2] - 0.12) < 0.01
+
+
+def test_the_lag_fit_names_no_lag_when_the_velocity_does_not_vary():
+    from companion.live.gnss_jump import LagWindow
+
+    window = LagWindow(10)
+    for _ in range(10):
+        window.add(0.1, 0.2, 1.0, 0.0)
+    assert window.solve() is None and math.isclose(window.mean(0), 0.1)
