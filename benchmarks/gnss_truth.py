@@ -22,6 +22,7 @@ The truth is SIM_STATE on the injector's link, matched to a flight's samples by 
 
     python -m benchmarks.gnss_truth [--scenario none,rtk-fixed,rtk-float,multipath,plain-gps]
         [--seed 1] [--f-r 0.04] [--model rover-skid] [--vehicle FILE] [--no-native] [--json]
+        [--companion-args "--lambda-f 5"]
 
 Needs ``ARDUPILOT_SITL`` (or ``ARDUPILOT_DIR``); about 4 minutes a scenario; prints figures,
 asserts nothing.
@@ -32,6 +33,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import shlex
 import sys
 import tempfile
 from pathlib import Path
@@ -46,7 +48,7 @@ VEHICLES = {"rover-skid": ROOT / "companion" / "sim" / "vehicles" / "ardupilot_s
 
 
 def fly_scenario(scenario: Scenario, seed: int, f_r: float, model: str, vehicle: Path,
-                 native: bool, work: Path) -> dict:
+                 native: bool, work: Path, extra: list[str] | None = None) -> dict:
     from companion import mission as missions
     from testbed.ardupilot import ArduPilotSITL
     from testbed.baselines import follow
@@ -61,7 +63,7 @@ def fly_scenario(scenario: Scenario, seed: int, f_r: float, model: str, vehicle:
             began = inj.begin()           # the windows, timed from the launch of the run
             r = companion_json(["run", "--connect", url, "--vehicle", str(vehicle), "--mission",
                                 str(mission), "--arm", "--json", "--no-zenoh", "--log-dir",
-                                str(work / "logs")], timeout=600)
+                                str(work / "logs"), *(extra or [])], timeout=600)
             trace = companion_trace(r)
             duration = float(missions.load(str(mission)).duration)
             out["companion"] = score(trace, Truth(list(inj.truth)), scenario, duration, began)
@@ -87,6 +89,8 @@ def main() -> int:
     p.add_argument("--vehicle", type=Path, help="the calibrated vehicle file (default: the "
                    "bundled one for rover-skid)")
     p.add_argument("--no-native", action="store_true", help="skip ArduPilot's own following")
+    p.add_argument("--companion-args", default="", metavar="ARGS",
+                   help='more for `companion run`, e.g. "--lambda-f 5" (the filter sweep)')
     p.add_argument("--keep", metavar="DIR", help="keep the logs here")
     p.add_argument("--json", action="store_true")
     args = p.parse_args()
@@ -104,13 +108,14 @@ def main() -> int:
             work.mkdir(parents=True, exist_ok=True)
             rows.append(fly_scenario(SCENARIOS[name], args.seed, args.f_r, args.model,
                                      args.vehicle or VEHICLES[args.model], not args.no_native,
-                                     work))
+                                     work, shlex.split(args.companion_args)))
             print(json.dumps(rows[-1]), file=sys.stderr, flush=True)
     if args.json:
         print(json.dumps(rows))
         return 0
     print(f"ArduPilot SITL {args.model}, the paper's ellipse at {args.f_r:g} Hz, seed "
-          f"{args.seed}; steady RMS over the last {STEADY_S:g} s, m")
+          f"{args.seed}{'; companion run ' + args.companion_args if args.companion_args else ''}"
+          f"; steady RMS over the last {STEADY_S:g} s, m")
     print(f"{'scenario':12s} {'truth':>7s} {'estimate':>8s} {'floor':>7s} {'worst in fault':>15s} "
           f"{'from path':>15s} {'after':>15s} {'ArduPilot':>9s}")
     for row in rows:

@@ -48,8 +48,18 @@ class Vehicle:
 
     @property
     def tune_settings(self) -> dict[str, Any]:
-        """The robust tuner's settings its autopilot and steering kind add."""
-        return profiles.tune_settings(self.autopilot, self.steering)
+        """The robust tuner's settings its autopilot and steering kind add, and the pose
+        estimate's noise its file records (``[estimate]``, calibrate measures it) where that is
+        more than the tuner's EKF-like default: the gains every shipped figure was tuned with
+        stand for the quiet estimates, a noisier one is tuned for as measured."""
+        from .sim.robust.config import RobustConfig  # (the tuner's: loaded to tune anyway)
+        settings = profiles.tune_settings(self.autopilot, self.steering)
+        measured = {"noise_pos": self.file.estimate.get("position_noise_m", 0.0),
+                    "noise_yaw": self.file.estimate.get("yaw_noise_rad", 0.0)}
+        for name, value in measured.items():
+            if value > settings.get(name, getattr(RobustConfig, name)):
+                settings[name] = value
+        return settings
 
     def gains_at(self, rate: float) -> TunedGains | None:
         """The gains tuned for these very bytes at this loop rate, if any were found beside."""

@@ -155,12 +155,17 @@ def identify_log(paths: str | list[str], fit_opts: FitOptions, autopilot: dict[s
     from .. import profiles
     from ..ident.data import autopilot_params, log_autopilot, read_series
     from ..ident.fit import fit, rms
+    from ..ident.noise import of_flight
     from ..ident.record import Report, vehicle_file
     from ..ident.series import join
     from ..sim.vehicle_file import save
 
     paths = [paths] if isinstance(paths, str) else list(paths)
-    parts = [read_series(path)[0] for path in paths]
+    read = [read_series(path) for path in paths]
+    parts = [series for series, _ in read]
+    # the estimate's noise where the log stood still longest (None: nowhere long enough)
+    noise = max(filter(None, (of_flight(flight) for _, flight in read)),
+                key=lambda n: n.samples, default=None)
     try:
         series = join(parts)
     except ValueError as exc:
@@ -182,7 +187,7 @@ def identify_log(paths: str | list[str], fit_opts: FitOptions, autopilot: dict[s
     report = Report(result, priors, series, label or " + ".join(map(str, paths)),
                     time.perf_counter() - t0, out=fit_opts.out, parts=parts,
                     autopilot=autopilot, command=_command_line(),
-                    fit_cpu_s=time.process_time() - c0, profile=profile)
+                    fit_cpu_s=time.process_time() - c0, profile=profile, noise=noise)
     if check is not None:
         report.check_log, report.check_rms = str(fit_opts.check), rms(result.params, check)
     save(vehicle_file(report, fit_opts.name or Path(path).stem), fit_opts.out)
@@ -241,6 +246,8 @@ def _print(report, as_json: bool, flight: dict[str, Any] | None = None) -> None:
     if report.check_rms is not None:
         lines.append(f"check       speed {report.check_rms[0]:.3f} m/s, turn rate "
                      f"{report.check_rms[1]:.3f} rad/s on {report.check_log}")
+    lines.append("estimate    noise " + (report.noise.describe() if report.noise is not None
+                                         else "not measured: the log never stood still 2 s"))
     loose = undetermined(report)
     lines.append("undetermined " + ("nothing: the log determined every parameter" if not loose
                                     else "by this log: " + "; ".join(loose)))

@@ -5,7 +5,8 @@ reference) -> Command``, ``estimate``), so the live loop flies it with every fai
 ``companion run``. The reference it is given is the start position (the identify mission holds
 the start point), which is all it needs of it: home.
 
-The script, for a vehicle whose setpoints may go up to ``max_speed`` and ``max_yaw_rate``:
+The script, for a vehicle whose setpoints may go up to ``max_speed`` and ``max_yaw_rate``,
+after ``STILL_S`` s standing still (the pose estimate's noise, :mod:`companion.ident.noise`):
 
 1. turn rate, in place: small steps both ways (delay and lag), a step to the limit and a reversal
    at the limit (acceleration, deceleration, clamp), a quicker swing;
@@ -55,6 +56,7 @@ REACTION = 0.5          # s at the current speed before braking bites (delay + l
 STOP_STEP = 0.05        # s, the guard's integration step for the stopping arc
 BRAKE_TURNING = 0.3     # rad/s: turning faster, the guard brakes on the arc (keeps the turn)
 HOME_SPEED = 1.5        # m/s when driving home or out
+STILL_S = 3.0           # s standing still first: the estimate's noise (ident.noise: >= 2 s)
 
 
 @dataclass(frozen=True)
@@ -99,6 +101,7 @@ def script(plan: Plan) -> list[Segment]:
     v_mid = min(HOME_SPEED, 0.4 * v)
     v_turn = 0.85 * plan.expected_top     # near the top: where the mixing takes speed away
     return [
+        Segment("hold", STILL_S, 0.0, 0.0, "still: the estimate's noise"),
         # 1. turn rate in place
         Segment("hold", 1.5, 0.0, ws, "turn: small step"),
         Segment("hold", 1.0, 0.0, 0.0),

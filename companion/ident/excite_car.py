@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import math
 
-from .excite import HOME_SPEED, Excitation, Plan, Segment, wrap
+from .excite import HOME_SPEED, STILL_S, Excitation, Plan, Segment, wrap
 
 CAR_TURN = 1.0          # rad/s a car is counted on to turn at when planning its way back
 CAR_MIN_SPEED = 0.8     # m/s: a car turning home keeps at least this (it cannot turn at rest)
@@ -20,6 +20,7 @@ def car_script(plan: Plan) -> list[Segment]:
     rover): every turn is flown at speed, so each shows the turn rate the steering gives at
     that speed (the turning radius at low speed, the steering and turn-rate limits above):
 
+    0. stand still (the estimate's noise: :mod:`companion.ident.noise`);
     1. off, straight, at a walk; small turn-rate steps both ways (delay and lag at speed);
     2. faster: a speed step, a turn-rate step to the limit and its reversal (the clamp, the
        turn-rate acceleration), a swing;
@@ -39,6 +40,7 @@ def car_script(plan: Plan) -> list[Segment]:
     v_crawl = min(0.5, 0.3 * v)
     home = min(HOME_SPEED, v)
     return [
+        Segment("hold", STILL_S, 0.0, 0.0, "still: the estimate's noise"),
         Segment("hold", 2.5, v_lo, 0.0, "car: off at a walk"),
         Segment("hold", 1.5, v_lo, ws, "car: small turn step"),
         Segment("hold", 1.5, v_lo, -ws, "car: small turn step back"),

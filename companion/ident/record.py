@@ -19,6 +19,7 @@ from ..profiles.autopilot import AutopilotProfile
 from ..sim.plant import RoverParams
 from ..sim.vehicle_file import VehicleFile
 from .fit import Fit
+from .noise import EstimateNoise
 from .priors import COURSE_FIELDS, FILE_NAMES, SPEED_FIELDS, YAW_FIELDS, Priors
 from .series import Series
 
@@ -43,6 +44,7 @@ class Report:
     # the autopilot the log was recorded with (its heartbeat; a log that does not say: the
     # default): its priors, what calibrate holds the fit to
     profile: AutopilotProfile = field(default_factory=profiles.default_autopilot)
+    noise: EstimateNoise | None = None     # the pose estimate's, at a stand still in the log
 
 
 def file_value(params: RoverParams, name: str) -> float:
@@ -162,6 +164,10 @@ def as_dict(report: Report) -> dict[str, Any]:
                    for name in YAW_FIELDS + SPEED_FIELDS},
         "autopilot_params": report.autopilot,
         "figures": report.figures,
+        "estimate_noise": (None if report.noise is None else
+                           {"position_m": report.noise.position_m,
+                            "yaw_rad": report.noise.yaw_rad, "samples": report.noise.samples,
+                            "still_s": report.noise.seconds}),
     }
 
 
@@ -200,6 +206,9 @@ def vehicle_file(report: Report, name: str) -> VehicleFile:
     # the profiles that fly it, named in the file: the log's autopilot, the steering kind its
     # parameters show (else the fitted model's)
     steering = report.priors.steering or profiles.steering_of_model(f.params)
+    n = report.noise
+    estimate = ({"position_noise_m": n.position_m, "yaw_noise_rad": n.yaw_rad,
+                 "still_s": n.seconds} if n is not None else {})
     return VehicleFile(params=f.params, name=name, header="\n".join(header), fit=fit_record,
                        source=source, determined=record, autopilot=report.profile.name,
-                       steering=steering.name)
+                       steering=steering.name, estimate=estimate)

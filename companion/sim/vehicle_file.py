@@ -36,6 +36,11 @@ A small TOML file, units in the key names, a header saying how it was made::
     gain_1_s = 5.0                # PX4's course loop: turn rate per rad of course error (0: none)
     min_turn_radius_m = 0.56      # wheel base / tan(max steering angle) (a car; 0: turns in place)
 
+    [estimate]                    # optional: the pose estimate's white noise at a stand still
+    position_noise_m = 0.004      # (calibrate measures it; the tuner then simulates at least
+    yaw_noise_rad = 0.001         # this much: companion.ident.noise)
+    still_s = 12.0                # s of stand still it was measured over
+
     [fit]                         # optional: how well the model reproduced the log
     speed_rms_m_s = 0.05
     yaw_rate_rms_rad_s = 0.04
@@ -96,6 +101,8 @@ _CHANNELS: dict[str, dict[str, tuple[str, str]]] = {
 }
 _OPTIONAL = ("course",)       # written only when one of its values is set
 _RECORDS = ("fit", "determined", "source")
+# [estimate]: key -> the largest value that is still a pose estimate worth tuning for
+_ESTIMATE = {"position_noise_m": 1.0, "yaw_noise_rad": 0.5, "still_s": math.inf}
 
 
 @dataclass(frozen=True)
@@ -109,6 +116,8 @@ class VehicleFile:
     determined: dict[str, Any] = field(default_factory=dict)
     autopilot: str = ""                                # a profile's name; "": not named
     steering: str = ""                                 # a steering kind's name; "": not named
+    # [estimate]: the pose estimate's white noise at a stand still (empty: not measured)
+    estimate: dict[str, float] = field(default_factory=dict)
 
 
 def _value(where: str, key: str, value: Any, kind: str) -> float:
@@ -132,7 +141,8 @@ def parse(data: dict[str, Any], where: str) -> VehicleFile:
     """A parsed vehicle table to a :class:`VehicleFile`; one-line UserError naming the key."""
     if data.get("schema") != SCHEMA:
         raise UserError(f"{where}: schema: must be \"{SCHEMA}\", not {data.get('schema')!r}")
-    known = {"schema", "name", "autopilot", "steering", "d_cen_m", *_CHANNELS, *_RECORDS}
+    known = {"schema", "name", "autopilot", "steering", "d_cen_m", "estimate", *_CHANNELS,
+             *_RECORDS}
     for key in data:
         if key not in known:
             raise UserError(f"{where}: unknown key '{key}'")
@@ -160,7 +170,23 @@ def parse(data: dict[str, Any], where: str) -> VehicleFile:
     defaults = RoverParams(w_c=1.0 / 0.05)
     return VehicleFile(params=defaults.with_(**kwargs), fit=dict(data.get("fit", {})),
                        source=dict(data.get("source", {})), path=where,
-                       determined=dict(data.get("determined", {})), **names)
+                       determined=dict(data.get("determined", {})),
+                       estimate=_estimate(data.get("estimate", {}), where), **names)
+
+
+def _estimate(table: Any, where: str) -> dict[str, float]:
+    if not isinstance(table, dict):
+        raise UserError(f"{where}: 'estimate' must be a table")
+    out = {}
+    for key, value in table.items():
+        if key not in _ESTIMATE:
+            raise UserError(f"{where}: unknown key 'estimate.{key}'")
+        number = _value(f"{where}: estimate", key, value, "nonneg")
+        if number > _ESTIMATE[key]:
+            raise UserError(f"{where}: estimate.{key}: must be at most {_ESTIMATE[key]:g}, "
+                            f"not {value!r}")
+        out[key] = number
+    return out
 
 
 def loads(text: str, where: str) -> VehicleFile:
@@ -210,6 +236,8 @@ def dumps(vehicle: VehicleFile) -> str:
             continue
         lines += ["", f"[{section}]"]
         lines += [f"{key} = {_fmt(values[name])}" for key, (name, _) in keys.items()]
+    if vehicle.estimate:
+        lines += ["", "[estimate]"] + [f"{k} = {_fmt(v)}" for k, v in vehicle.estimate.items()]
     for section in _RECORDS:
         record = getattr(vehicle, section)
         if record:
