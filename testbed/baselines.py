@@ -82,7 +82,7 @@ def follow(url: str, mission, rate: float = 40.0, arm: bool = True, velocity: bo
     by its own position control, fed the reference at ``rate`` Hz (module docstring); scored
     from its LOCAL_POSITION_NED (:func:`testbed.scoring.tracking_figures`), left in HOLD.
     ``trace`` (a list) gets (wall s of the sample's arrival, mission s, reference x, y,
-    estimate x, y) for each sample, to score against a simulator's truth."""
+    estimate x, y, vehicle s) for each sample, to score against a simulator's truth."""
     conn = mavutil.mavlink_connection(url, source_system=254, source_component=191,
                                       dialect="ardupilotmega")
     try:
@@ -118,7 +118,8 @@ def follow(url: str, mission, rate: float = 40.0, arm: bool = True, velocity: bo
             ref = traj.sample(t)
             errors.append((t, math.hypot(ref.x - msg.x, ref.y - msg.y)))
             if trace is not None:
-                trace.append((msg._timestamp, t, float(ref.x), float(ref.y), msg.x, msg.y))
+                trace.append((msg._timestamp, t, float(ref.x), float(ref.y), msg.x, msg.y,
+                              msg.time_boot_ms / 1000.0))
             ahead = traj.sample(t + 1.0 / rate)
             conn.mav.set_position_target_local_ned_send(
                 0, conn.target_system, conn.target_component, 1, mask,

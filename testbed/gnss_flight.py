@@ -16,7 +16,8 @@ its .tlog); :func:`score` gives the figures the benchmark prints:
   the truth from the path itself, shapely's) and ``after`` (the largest truth error over half a
   second, ``AFTER_S`` after the window).
 
-The truth is SIM_STATE on the injector's link, matched to a flight's samples by wall time.
+The truth is SIM_STATE on the injector's link, matched to a flight's samples on the vehicle's
+clock (:class:`Truth`), by wall time where a flight's samples do not carry it.
 """
 
 from __future__ import annotations
@@ -30,6 +31,7 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 from shapely import LineString, Point
 
 from .gnss import Scenario
@@ -61,11 +63,34 @@ def gnss_vehicle(sitl: Any, scenario: Scenario, seed: int, logs: Path,
 
 
 class Truth:
-    """The injector's truth (wall s, north, east), interpolated at a wall time."""
+    """The injector's truth (wall s, north, east), interpolated at a wall time, or (given the
+    injector's ``clock``) at a vehicle time.
 
-    def __init__(self, samples: list[tuple[float, float, float]]):
+    On the vehicle's clock is the sharper of the two: a flight's samples carry the vehicle time
+    of the estimate they answer (LOCAL_POSITION_NED's ``time_boot_ms``), and the truth gets its
+    vehicle time from the same message arriving beside it on the injector's link; by wall time,
+    each link's own delivery (the streams' send slots, the reader's wake-up) lands in the
+    match, centimetres at a metre a second."""
+
+    def __init__(self, samples: list[tuple[float, float, float]],
+                 clock: list[tuple[float, float]] | None = None):
         self.walls = [w for w, _, _ in samples]
         self.samples = samples
+        self.vehicle: np.ndarray | None = None
+        if clock and len(clock) >= 2:
+            walls, times = np.array(clock).T
+            vehicle = np.interp(self.walls, walls, times, left=np.nan, right=np.nan)
+            seen = np.isfinite(vehicle)           # the truth within the clock's span
+            self.vehicle = vehicle[seen]
+            self._north = np.array([n for _, n, _ in samples])[seen]
+            self._east = np.array([e for _, _, e in samples])[seen]
+
+    def at_vehicle(self, t: float) -> tuple[float, float] | None:
+        """The truth at vehicle time ``t`` (s; None outside what was seen or without a clock)."""
+        v = self.vehicle
+        if v is None or not len(v) or not (v[0] <= t <= v[-1]):
+            return None
+        return float(np.interp(t, v, self._north)), float(np.interp(t, v, self._east))
 
     def at(self, wall: float) -> tuple[float, float] | None:
         i = bisect.bisect_right(self.walls, wall)
@@ -76,9 +101,10 @@ class Truth:
         return n0 + a * (n1 - n0), e0 + a * (e1 - e0)
 
 
-def companion_trace(result: dict) -> list[tuple[float, float, float, float, float, float]]:
-    """(wall, mission s, reference x, y, estimate x, y) of each tracked cycle of a companion
-    run: its CSV's rows, timed by the arrival of their LOCAL_POSITION_NED in its .tlog."""
+def companion_trace(result: dict) -> list[tuple[float, ...]]:
+    """(wall, mission s, reference x, y, estimate x, y, vehicle s) of each tracked cycle of a
+    companion run: its CSV's rows, timed by the arrival of their LOCAL_POSITION_NED in its
+    .tlog and by that sample's own vehicle time."""
     frames, _ = read_tlog(Path(result["tlog"]))
     arrival = {}
     for wall, m in frames:
@@ -92,22 +118,26 @@ def companion_trace(result: dict) -> list[tuple[float, float, float, float, floa
             wall = arrival.get(round(float(row["vehicle_time"]) * 1000))
             if wall is not None:
                 out.append((wall, float(row["mission_time"]), float(row["x_ref"]),
-                            float(row["y_ref"]), float(row["x"]), float(row["y"])))
+                            float(row["y_ref"]), float(row["x"]), float(row["y"]),
+                            float(row["vehicle_time"])))
     return out
 
 
 def score(trace, truth: Truth, scenario: Scenario, duration: float, t0_wall: float,
           steady_s: float = STEADY_S) -> dict:
     """The figures of one flight (module docstring). ``t0_wall``: when the scenario's fixes
-    began (its windows are timed from there)."""
-    rows = [(r, truth.at(r[0])) for r in trace]
+    began (its windows are timed from there). ``trace``'s rows: (wall, mission s, reference
+    x, y, estimate x, y[, vehicle s]); with their vehicle times and the truth's clock the truth
+    is matched on the vehicle's clock (``matched``), else by wall time."""
+    on_clock = truth.vehicle is not None and all(len(r) > 6 for r in trace)
+    rows = [(r, truth.at_vehicle(r[6]) if on_clock else truth.at(r[0])) for r in trace]
     rows = [(r, p) for r, p in rows if p is not None]
     if not rows:
         return {"error": "no truth matched the flight's samples"}
-    (_, _, _, _, ex0, ey0), (tn0, te0) = rows[0]
+    (_, _, _, _, ex0, ey0, *_), (tn0, te0) = rows[0]
     path = LineString([(r[2], r[3]) for r, _ in rows])    # where the reference went
     truth_err, est_err, floor, by_wall, by_mt = [], [], [], [], []
-    for (wall, mt, xr, yr, xe, ye), (tn, te) in rows:
+    for (wall, mt, xr, yr, xe, ye, *_), (tn, te) in rows:
         xt, yt = tn - tn0 + ex0, te - te0 + ey0          # the truth in the estimate's frame
         e_truth = math.hypot(xr - xt, yr - yt)
         by_wall.append((wall - t0_wall, e_truth, path.distance(Point(xt, yt))))
@@ -128,4 +158,5 @@ def score(trace, truth: Truth, scenario: Scenario, duration: float, t0_wall: flo
                        "from_path": max((d for _, d in inside), default=math.nan),
                        "after": max(after, default=math.nan)})
     return {"truth": rms(truth_err), "estimate": rms(est_err), "floor": rms(floor),
-            "worst": max(by_mt), "faults": faults, "samples": len(rows)}
+            "worst": max(by_mt), "faults": faults, "samples": len(rows),
+            "matched": "vehicle time" if on_clock else "wall time"}

@@ -10,7 +10,8 @@ boot's); its windows (float, multipath) from each :meth:`GnssInjector.begin`, so
 where the scenario says into the flight that follows. Wall time is the clock: run SITL at
 speedup 1.
 The truth it saw is kept (``truth``: wall s, north / east metres from the first one) for
-scoring.
+scoring, and the vehicle's clock as this link saw it (``clock``: LOCAL_POSITION_NED's
+``time_boot_ms`` by wall time), which puts the truth on the vehicle's clock.
 """
 
 from __future__ import annotations
@@ -29,6 +30,7 @@ from .link_thread import LinkThread
 from .scoring import EARTH, north_east
 
 SIM_STATE = 108
+LOCAL_POSITION_NED = 32
 GPS_EPOCH_UNIX = 315964800             # 1980-01-06 in Unix seconds
 LEAP_SECONDS = 18                      # GPS - UTC since 2017
 TRUTH_HZ = 40.0                        # Rover's 50 Hz loop refuses 50 Hz (the notes)
@@ -61,6 +63,9 @@ class GnssInjector(LinkThread):
         self._walls: list[float] = []           # SIM_STATE arrivals (wall s)
         self._states: list[Any] = []
         self.truth: list[tuple[float, float, float]] = []   # wall s, north m, east m
+        # (wall s, vehicle s) of LOCAL_POSITION_NED on this same link: what puts the truth on
+        # the vehicle's clock (Truth.at_vehicle), free of the other links' latency
+        self.clock: list[tuple[float, float]] = []
         self.sent = 0
         self.t0: float | None = None            # wall s of the first fix
         self._origin: tuple[int, int] | None = None   # the first SIM_STATE (1e-7 degrees)
@@ -78,9 +83,10 @@ class GnssInjector(LinkThread):
         period = 1.0 / self.scenario.rate_hz
         while not self._stop.is_set():
             now = time.time()
-            if not self._states and now >= next_ask:      # until SIM_STATE flows
-                self.conn.mav.command_long_send(1, 1, 511, 0, SIM_STATE, 1e6 / TRUTH_HZ,
-                                                0, 0, 0, 0, 0)
+            if (not self._states or not self.clock) and now >= next_ask:   # until both flow
+                for msg_id in (SIM_STATE, LOCAL_POSITION_NED):
+                    self.conn.mav.command_long_send(1, 1, 511, 0, msg_id, 1e6 / TRUTH_HZ,
+                                                    0, 0, 0, 0, 0)
                 next_ask = now + 1.0
             if self._states and self.t0 is None:
                 self.t0 = now
@@ -99,7 +105,10 @@ class GnssInjector(LinkThread):
 
     def _read(self) -> None:
         while (msg := self.conn.recv_msg()) is not None:
-            if msg.get_type() == "SIM_STATE":
+            if msg.get_type() == "LOCAL_POSITION_NED" and msg.get_srcSystem() == 1:
+                if not self.clock or msg.time_boot_ms / 1000.0 > self.clock[-1][1]:
+                    self.clock.append((time.time(), msg.time_boot_ms / 1000.0))
+            elif msg.get_type() == "SIM_STATE":
                 wall = time.time()
                 self._walls.append(wall)
                 self._states.append(msg)

@@ -39,8 +39,8 @@ def _fly(ardupilot, tmp_path, scenario: Scenario) -> tuple[dict, dict, str]:
             code = comp.wait(DURATION + 120.0)
             r = comp.result()
         assert code == 0 and r["reason"] == "mission_done", comp.stderr[-3000:]
-        figures = score(companion_trace(r), Truth(list(inj.truth)), scenario, DURATION, began,
-                        steady_s=STEADY)
+        figures = score(companion_trace(r), Truth(list(inj.truth), list(inj.clock)), scenario,
+                        DURATION, began, steady_s=STEADY)
     print(f"\n{scenario.name}: truth {figures['truth']:.3f} m, floor {figures['floor']:.3f} m, "
           f"faults {figures['faults']}, gnss {r['gnss']['drop_log']}, "
           f"jumps ridden {r['gnss']['jumps_ridden']}")

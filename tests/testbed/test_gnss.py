@@ -70,3 +70,30 @@ def test_a_seed_repeats_and_another_differs():
     a, b = fixes(SCENARIOS["rtk-fixed"], 30.0, 7), fixes(SCENARIOS["rtk-fixed"], 30.0, 7)
     c = fixes(SCENARIOS["rtk-fixed"], 30.0, 8)
     assert np.array_equal(a.north, b.north) and not np.array_equal(a.north, c.north)
+
+
+def test_the_truth_on_the_vehicle_clock_is_free_of_each_links_delivery():
+    """A rover on a 5 m circle at 1 m/s; the truth's link delivers 5 ms after the vehicle's
+    clock, the companion's 35 ms, with jitter: matched by wall time the two disagree by the
+    30 ms (3 cm at 1 m/s, turning with the heading, so the anchoring cannot take it out), on
+    the vehicle's clock by nothing."""
+    from testbed.gnss import SCENARIOS
+    from testbed.gnss_flight import Truth, score
+
+    rng = np.random.default_rng(2)
+    vehicle = np.arange(0.0, 60.0, 0.025)                 # s, the vehicle's clock
+    north, east = 5.0 * np.cos(vehicle / 5.0), 5.0 * np.sin(vehicle / 5.0)
+    boot_wall = 1000.0
+    truth_walls = boot_wall + vehicle + 0.005 + rng.uniform(0, 0.004, len(vehicle))
+    samples = list(zip(truth_walls.tolist(), north.tolist(), east.tolist(), strict=True))
+    clock = [(w + rng.uniform(0, 0.001), float(t))
+             for w, t in zip(truth_walls, vehicle, strict=True)]
+    # the companion's samples: the estimate exact (the truth's frame), the reference on it
+    trace = [(boot_wall + t + 0.035 + rng.uniform(0, 0.004), t, n, e, n, e, t)
+             for t, n, e in zip(vehicle[100:-100], north[100:-100], east[100:-100],
+                                strict=True)]
+    on_clock = score(trace, Truth(samples, clock), SCENARIOS["none"], 55.0, boot_wall)
+    by_wall = score([r[:6] for r in trace], Truth(samples), SCENARIOS["none"], 55.0, boot_wall)
+    assert on_clock["matched"] == "vehicle time" and by_wall["matched"] == "wall time"
+    assert on_clock["floor"] < 0.002
+    assert 0.025 < by_wall["floor"] < 0.065
