@@ -4,8 +4,9 @@ SITL runs with ``GPS1_TYPE 14`` (its GPS driver takes ``GPS_INPUT`` from any lin
 ``GPS1_DELAY_MS`` set to the scenario's lag (:func:`sitl_params`). :class:`GnssInjector` holds
 its own link (SITL's SERIAL2, say), asks for ``SIM_STATE`` (the simulator's truth: its
 ``lat_int`` / ``lon_int`` extension, 1e-7 degree; the float fields are about 0.4 m coarse) at
-40 Hz, and at the scenario's rate sends the truth of ``lag`` seconds ago plus the scenario's
-error, with its fix type and claimed accuracy. Its noise and drift run from the first fix (the
+40 Hz, and at the scenario's rate sends the truth of ``lag`` seconds ago (on the vehicle's clock,
+between two SIM_STATEs: a fix exactly as old as ``GPS1_DELAY_MS`` tells the EKF) plus the
+scenario's error, with its fix type and claimed accuracy. Its noise and drift run from the first fix (the
 boot's); its windows (float, multipath) from each :meth:`GnssInjector.begin`, so they fall
 where the scenario says into the flight that follows. Wall time is the clock: run SITL at
 speedup 1.
@@ -62,6 +63,7 @@ class GnssInjector(LinkThread):
                                                dialect="ardupilotmega")
         self._walls: list[float] = []           # SIM_STATE arrivals (wall s)
         self._states: list[Any] = []
+        self._vehicle_t: list[float] = []       # each SIM_STATE's vehicle time (NaN: before any)
         self.truth: list[tuple[float, float, float]] = []   # wall s, north m, east m
         # (wall s, vehicle s) of LOCAL_POSITION_NED on this same link: what puts the truth on
         # the vehicle's clock (Truth.at_vehicle), free of the other links' latency
@@ -112,30 +114,56 @@ class GnssInjector(LinkThread):
                 wall = time.time()
                 self._walls.append(wall)
                 self._states.append(msg)
+                # its vehicle time: on from the last LOCAL_POSITION_NED of this link by the
+                # wall time between their arrivals (both ride the same link's delivery)
+                self._vehicle_t.append(self.clock[-1][1] + wall - self.clock[-1][0]
+                                       if self.clock else math.nan)
                 if self._origin is None:
                     self._origin = (msg.lat_int, msg.lon_int)
                 self.truth.append((wall, *north_east(msg.lat_int, msg.lon_int,
                                                      *self._origin)))
 
-    def _send(self, k: int, now: float) -> None:
-        """Fix ``k``: the truth of ``lag`` s ago (the last SIM_STATE by then) plus its error."""
-        measured = now - self.scenario.lag
-        i = bisect.bisect_right(self._walls, measured) - 1
+    def _taken(self, now: float) -> tuple[float, float, float, float, Any] | None:
+        """The truth ``lag`` s before the vehicle's now, as SITL will take the fix: (lat,
+        lon in degrees, vn, ve m/s, the SIM_STATE nearest). On the vehicle's clock, between
+        the two SIM_STATEs around it; before the clock flows, the last SIM_STATE by wall time
+        (which is older by the link's delivery and up to a sample: centimetres at 1 m/s)."""
+        vt, lag = self._vehicle_t, self.scenario.lag
+        if self.clock and vt and math.isfinite(vt[-1]):
+            when = self.clock[-1][1] + now - self.clock[-1][0] - lag
+            i = bisect.bisect_right(vt, when)
+            if 0 < i < len(vt) and math.isfinite(vt[i - 1]):
+                s0, s1 = self._states[i - 1], self._states[i]
+                a = (when - vt[i - 1]) / (vt[i] - vt[i - 1]) if vt[i] > vt[i - 1] else 0.0
+
+                def mix(x0: float, x1: float) -> float:
+                    return x0 + a * (x1 - x0)
+                return (mix(s0.lat_int, s1.lat_int) * 1e-7, mix(s0.lon_int, s1.lon_int) * 1e-7,
+                        mix(s0.vn, s1.vn), mix(s0.ve, s1.ve), s1 if a > 0.5 else s0)
+        i = bisect.bisect_right(self._walls, now - lag) - 1
         if i < 0:
-            return
+            return None
         s = self._states[i]
+        return s.lat_int * 1e-7, s.lon_int * 1e-7, s.vn, s.ve, s
+
+    def _send(self, k: int, now: float) -> None:
+        """Fix ``k``: the truth of ``lag`` s ago (:meth:`_taken`) plus its error."""
+        measured = now - self.scenario.lag
+        taken = self._taken(now)
+        if taken is None:
+            return
+        lat0, lon0, vn, ve, s = taken
         north, east = float(self.base.north[k]), float(self.base.east[k])
         fix_type, h_acc = int(self.base.fix_type[k]), float(self.base.h_acc[k])
         if self.k_begin is not None and 0 <= k - self.k_begin < len(self.spoilt.t):
             j = k - self.k_begin
             north, east = north + self.spoilt.north[j], east + self.spoilt.east[j]
             fix_type, h_acc = int(self.spoilt.fix_type[j]), float(self.spoilt.h_acc[j])
-        lat = s.lat_int * 1e-7 + math.degrees(north / EARTH)
-        lon = s.lon_int * 1e-7 + math.degrees(
-            east / (EARTH * math.cos(math.radians(s.lat_int * 1e-7))))
+        lat = lat0 + math.degrees(north / EARTH)
+        lon = lon0 + math.degrees(east / (EARTH * math.cos(math.radians(lat0))))
         week, week_ms = gps_time(measured)
         self.conn.mav.gps_input_send(
             int(measured * 1e6), 0, 0, week_ms, week, fix_type,
             int(round(lat * 1e7)), int(round(lon * 1e7)), s.alt, 0.8, 1.2,
-            s.vn, s.ve, s.vd, 0.05, h_acc, 2 * h_acc, 20, 0)
+            vn, ve, s.vd, 0.05, h_acc, 2 * h_acc, 20, 0)
         self.sent += 1
