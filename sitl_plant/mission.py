@@ -8,6 +8,9 @@ MISSION_SET_CURRENT and MISSION_CURRENT. Items are kept exactly as received (int
 degrees), so a download gives back what was uploaded. The plant's uploads are answered one
 request per item; an uploader that goes quiet simply leaves the old mission in place.
 
+Item 0 is the vehicle's home, as on ArduPilot: what was uploaded there until the vehicle has a
+home (its first GPS fix: the plant's origin set, ``home_e7``), the home itself from then on.
+
 ``drop_item`` (``--mission-drop-item N``): a fault for the tests, the plant never answers a
 request for item N (a link that loses it every time), so a download cannot complete.
 """
@@ -31,6 +34,7 @@ class MissionStore:
     _upload: list[Any] | None = None                     # items of an upload under way
     _upload_count: int = 0
     uploads: int = 0
+    home_e7: tuple[int, int] | None = None               # the vehicle's home, once it has one
 
     def handle(self, msg: Any, mav: Any, send: Callable[[Callable[..., None]], Callable[..., None]]
                ) -> bool:
@@ -53,10 +57,11 @@ class MissionStore:
                 send(mav.mission_ack_send)(*src, INVALID_SEQUENCE, MISSION_TYPE)
                 return True
             it = self.items[seq]
+            x, y = self.home_e7 if seq == 0 and self.home_e7 is not None else (it.x, it.y)
             send(mav.mission_item_int_send)(*src, seq, it.frame, it.command,
                                             int(seq == self.current), it.autocontinue,
                                             it.param1, it.param2, it.param3, it.param4,
-                                            it.x, it.y, it.z, MISSION_TYPE)
+                                            x, y, it.z, MISSION_TYPE)
         elif kind == "MISSION_COUNT":
             count = int(msg.count)
             if count > MAX_ITEMS:

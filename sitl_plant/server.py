@@ -210,6 +210,8 @@ class PlantServer:
     def _tick(self) -> None:
         """Send whatever is due at this instant: heartbeat, status, then pose telemetry."""
         t_us, v, link = self.t_us, self.vehicle, self.link
+        if self.mission.home_e7 is None and self.earth.origin_set(t_us):
+            self.mission.home_e7 = tuple(e7(d) for d in self.earth.home())  # type: ignore[assignment]
         sample = None
         for mid in self.streams.due(t_us):
             if mid == streams.HEARTBEAT:

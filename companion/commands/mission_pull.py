@@ -10,6 +10,7 @@ import time
 from pathlib import Path
 
 from ..app.arguments import BAUD_HELP, CONNECT_HELP, at_least_one, baud_rate, mavlink_id, positive
+from ..errors import UserError
 
 VEHICLE = "vehicle"      # companion run --mission vehicle
 
@@ -78,14 +79,41 @@ def vehicle_mission_file(options, log):
     from ..app.flight import signing_key
     from ..live.vehicle_mission import write_plan
     link = options.link
-    pulled = pull(link.url, link.sysid, link.baud, link.source_system,
-                  signing_key(options.signing_key_file), link.heartbeat_timeout, 1.5, 5, log)
+
+    def pulled_now():
+        return pull(link.url, link.sysid, link.baud, link.source_system,
+                    signing_key(options.signing_key_file), link.heartbeat_timeout, 1.5, 5, log)
+    pulled = pulled_now()
+    if pulled.homeless:
+        pulled = _wait_for_home(pulled, pulled_now, options.origin.timeout, log)
     folder = Path(options.log.folder or "logs") if options.log.enabled else \
         Path(tempfile.mkdtemp(prefix="pzc-vehicle-mission-"))
     folder.mkdir(parents=True, exist_ok=True)
     path = write_plan(pulled.plan, folder / time.strftime("vehicle-mission-%Y%m%d-%H%M%S.plan"))
     log(f"pulled the vehicle's mission: {pulled.count} items, kept as {path}")
     return path, pulled
+
+
+HOME_POLL = 2.0        # wall s between pulls while the vehicle has no home
+
+
+def _wait_for_home(pulled, pull_again, timeout: float, log):
+    """The mission pulled again until the vehicle's home is in it (ArduPilot writes it into item
+    0 at its first GPS fix, about 10 s after boot), at most ``timeout`` s: a home of 0, 0 is no
+    place to start from. A UserError (exit 2) naming what it waited for if it never came."""
+    log(f"the vehicle's mission has no home yet (0, 0: {pulled.profile.label} sets it at its "
+        f"first GPS fix): waiting up to {timeout:g} s (--origin-timeout) for it")
+    started = time.monotonic()
+    while pulled.homeless:
+        if time.monotonic() - started >= timeout:
+            raise UserError(f"--mission vehicle: the vehicle's mission still had no home after "
+                            f"{timeout:g} s (no GPS fix?): nowhere to place it")
+        time.sleep(HOME_POLL)
+        pulled = pull_again()
+    home = pulled.plan["mission"]["plannedHomePosition"]
+    log(f"the vehicle's home is set after {time.monotonic() - started:.0f} s of waiting: "
+        f"{home[0]:.7f}, {home[1]:.7f}")
+    return pulled
 
 
 def handover_plan(pulled):

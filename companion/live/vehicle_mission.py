@@ -31,6 +31,13 @@ class Pulled:
     def count(self) -> int:
         return len(self.items)
 
+    @property
+    def homeless(self) -> bool:
+        """The vehicle keeps its home in the mission (ArduPilot's item 0) and has none yet: 0, 0
+        until its first GPS fix. Such a home is no start point."""
+        home = self.plan["mission"].get("plannedHomePosition") or [0, 0]
+        return bool(self.profile.mission_home_item) and home[0] == 0 and home[1] == 0
+
 
 def pull_plan(config: LinkConfig, transfer: mt.TransferConfig = mt.DEFAULT,
               log: Callable[[str], None] = lambda text: None) -> Pulled:

@@ -116,7 +116,9 @@ def _parse_plan(text: str, source: str):
         problem = geo.check_latlon(lat, lon)
         if problem:
             raise fail(source, "mission.plannedHomePosition", problem)
-        home = (lat, lon)
+        # 0, 0 is an autopilot's home before its first GPS fix (ArduPilot's mission item 0):
+        # unset, as in a .waypoints file, not a point 16 000 km off to start from
+        home = None if (lat, lon) == (0.0, 0.0) else (lat, lon)
 
     speed = None
     if "cruiseSpeed" in mission and mission["cruiseSpeed"] is not None:

@@ -80,6 +80,51 @@ def test_a_mission_uploaded_by_a_gcs_is_pulled_identical_and_flown(tmp_path):
         print(f"\nwaypoint ({north:g}, {east:g}) passed within {miss:.3f} m")
 
 
+def test_a_mission_uploaded_at_boot_waits_for_the_vehicles_home_then_flies(tmp_path):
+    """Uploaded before the vehicle's first fix with the home a GCS knew then (0, 0), and run
+    at once (a systemd unit at power-on): the run waits for the vehicle's home (the plant's
+    origin 6 vehicle s after boot), places the mission there and flies it."""
+    gcs_port = free_udp_port()
+    items = square_items()
+    items[0].x, items[0].y = 0, 0
+    with PlantProcess("--speedup", "2", "--origin-delay", "6", "--gcs",
+                      f"udpout:127.0.0.1:{gcs_port}") as plant, \
+            GroundStation(f"udpin:127.0.0.1:{gcs_port}") as gcs:
+        gcs.wait_for(lambda: gcs.of("HEARTBEAT", (1, 1)), 10.0, "the plant's heartbeat")
+        gcs.upload(1, items)
+        comp = Companion(plant.port, "--arm", "--no-zenoh", "--json", "--mission", "vehicle",
+                         "--log-dir", str(tmp_path))
+        with comp:
+            code = comp.wait(90.0)
+    assert code == 0, comp.stderr
+    assert "has no home yet (0, 0" in comp.stderr and "home is set after" in comp.stderr
+    plan = json.loads(next(tmp_path.glob("vehicle-mission-*.plan")).read_text())
+    home = plan["mission"]["plannedHomePosition"]
+    assert geo.ne_from_latlon(home[0], home[1], ORIGIN) == pytest.approx((0.0, 0.0), abs=0.01)
+    rows = list(csv.DictReader(next(tmp_path.glob("*.csv")).open()))
+    track = [(float(r["x"]), float(r["y"])) for r in rows if r["x"]]
+    for north, east in LEG[1:]:
+        assert min(math.hypot(x - north, y - east) for x, y in track) < 1.0, (north, east)
+
+
+def test_a_vehicle_that_never_gets_a_home_is_refused_after_the_origin_timeout(tmp_path):
+    gcs_port = free_udp_port()
+    items = square_items()
+    items[0].x, items[0].y = 0, 0
+    with PlantProcess("--origin-delay", "100000", "--gcs",
+                      f"udpout:127.0.0.1:{gcs_port}") as plant, \
+            GroundStation(f"udpin:127.0.0.1:{gcs_port}") as gcs:
+        gcs.wait_for(lambda: gcs.of("HEARTBEAT", (1, 1)), 10.0, "the plant's heartbeat")
+        gcs.upload(1, items)
+        comp = Companion(plant.port, "--arm", "--no-zenoh", "--json", "--mission", "vehicle",
+                         "--origin-timeout", "3", "--log-dir", str(tmp_path))
+        with comp:
+            code = comp.wait(60.0)
+    assert code == 2, comp.stderr
+    last = comp.stderr.strip().splitlines()[-1]
+    assert "still had no home after 3 s" in last and "Traceback" not in comp.stderr
+
+
 def test_a_partial_transfer_writes_nothing_and_says_so(tmp_path):
     gcs_port = free_udp_port()
     with PlantProcess("--speedup", "2", "--gcs", f"udpout:127.0.0.1:{gcs_port}",
