@@ -11,9 +11,10 @@ its .tlog); :func:`score` gives the figures the benchmark prints:
 * ``estimate``: the same against LOCAL_POSITION_NED (what every figure before issue 44 used);
 * ``floor``: the estimate's RMS error against the truth over the same seconds, both taken
   relative to where they were when tracking began (the anchoring of the reference);
-* per window of the scenario: ``worst`` (the largest truth error against the reference point;
-  a held reference leaves the braking distance in it), ``from_path`` (the largest distance of
-  the truth from the path itself, shapely's) and ``after`` (the largest truth error over half a
+* per window of the scenario: ``worst`` (the largest truth error against the reference point
+  over the tracked cycles in it; a held reference leaves the braking distance in it),
+  ``from_path`` (the largest distance from the path itself, shapely's, of every truth sample in
+  the window: a rover held has no tracked cycles but a true place) and ``after`` (the largest truth error over half a
   second, ``AFTER_S`` after the window).
 
 The truth is SIM_STATE on the injector's link, matched to a flight's samples on the vehicle's
@@ -140,7 +141,7 @@ def score(trace, truth: Truth, scenario: Scenario, duration: float, t0_wall: flo
     for (wall, mt, xr, yr, xe, ye, *_), (tn, te) in rows:
         xt, yt = tn - tn0 + ex0, te - te0 + ey0          # the truth in the estimate's frame
         e_truth = math.hypot(xr - xt, yr - yt)
-        by_wall.append((wall - t0_wall, e_truth, path.distance(Point(xt, yt))))
+        by_wall.append((wall - t0_wall, e_truth))
         by_mt.append((e_truth, mt))
         if mt >= duration - steady_s:
             truth_err.append(e_truth)
@@ -151,11 +152,15 @@ def score(trace, truth: Truth, scenario: Scenario, duration: float, t0_wall: flo
         return math.sqrt(sum(x * x for x in v) / len(v)) if v else math.nan
     faults = []
     for w in scenario.windows:
-        inside = [(e, d) for t, e, d in by_wall if w.start <= t < w.start + w.duration]
-        end = w.start + w.duration
-        after = [e for t, e, _ in by_wall if end + AFTER_S <= t < end + AFTER_S + 0.5]
-        faults.append({"start": w.start, "worst": max((e for e, _ in inside), default=math.nan),
-                       "from_path": max((d for _, d in inside), default=math.nan),
+        end = w.start + w.duration                       # s from t0_wall
+        inside = [e for t, e in by_wall if w.start <= t < end]
+        # from the path: every truth sample in the window, the rover held or not (a held rover
+        # has no tracked cycles, but it has a true place)
+        away = [path.distance(Point(n - tn0 + ex0, e - te0 + ey0))
+                for wall, n, e in truth.samples if w.start <= wall - t0_wall < end]
+        after = [e for t, e in by_wall if end + AFTER_S <= t < end + AFTER_S + 0.5]
+        faults.append({"start": w.start, "worst": max(inside, default=math.nan),
+                       "from_path": max(away, default=math.nan),
                        "after": max(after, default=math.nan)})
     return {"truth": rms(truth_err), "estimate": rms(est_err), "floor": rms(floor),
             "worst": max(by_mt), "faults": faults, "samples": len(rows),

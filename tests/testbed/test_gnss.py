@@ -6,6 +6,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import pytest
 
 from testbed.gnss import (
     FIX_3D,
@@ -97,3 +98,24 @@ def test_the_truth_on_the_vehicle_clock_is_free_of_each_links_delivery():
     assert on_clock["matched"] == "vehicle time" and by_wall["matched"] == "wall time"
     assert on_clock["floor"] < 0.002
     assert 0.025 < by_wall["floor"] < 0.065
+
+
+def test_a_window_without_tracked_cycles_is_still_scored_from_the_truth():
+    """A rover held through the whole fault window has no tracked cycles in it; its distance
+    from the path is its true place all the same (here 0.2 m off the path, standing)."""
+    from testbed.gnss import SCENARIOS
+    from testbed.gnss_flight import score
+
+    float_ = SCENARIOS["rtk-float"]
+    w = float_.windows[0]
+    t0 = 1000.0
+    vehicle = np.arange(0.0, 60.0, 0.025)
+    held = (vehicle >= w.start) & (vehicle < w.start + w.duration + 2.0)
+    east = np.where(held, w.start, vehicle)                  # stands while held
+    north = np.where(held, 0.2, 0.0)                         # 0.2 m off the path
+    samples = list(zip((t0 + vehicle).tolist(), north.tolist(), east.tolist(), strict=True))
+    trace = [(t0 + t, t, 0.0, t, 0.0, t) for t in vehicle[~held]]      # tracked cycles only
+    from testbed.gnss_flight import Truth
+    fault = score(trace, Truth(samples), float_, 55.0, t0)["faults"][0]
+    assert math.isnan(fault["worst"])                         # nothing tracked inside
+    assert fault["from_path"] == pytest.approx(0.2, abs=1e-6)
