@@ -19,7 +19,9 @@ import pytest
 
 from companion.mav import mission_transfer as mt
 from companion.mission import geo
+from sitl_plant.earth import CMAC
 from testbed.ardupilot import CompanionProcess
+from testbed.marks import CANDIDATE
 from testbed.mission_gcs import COMPANION, GroundStation
 from testbed.process import companion_cli
 
@@ -104,6 +106,47 @@ def test_uploaded_pulled_identical_flown_within_1m_and_paused_from_the_gcs(ardup
     print(f"\nArduPilot SITL: mission of {len(items)} items pulled in {pull_wall:.2f} s wall, "
           f"identical past home; waypoints passed within {[round(m, 3) for m in misses]} m; "
           f"steady RMS {res['steady_rms']:.3f} m; GCS heard {len(texts)} texts: {texts}")
+    assert max(misses) < 1.0, misses
+
+
+@CANDIDATE
+@pytest.mark.sitl
+@pytest.mark.slow
+def test_a_mission_uploaded_while_booting_flies_once_the_vehicle_has_a_home(ardupilot, tmp_path):
+    """Issue 45: a mission uploaded while the autopilot boots (no GPS fix, its home 0, 0) and
+    `run --mission vehicle` started within 5 s of the boot (a systemd unit at power-on): the
+    run waits for the vehicle's home, then flies the mission from there."""
+    sitl = ardupilot(speedup=1)            # the first fix about 10 s after boot, as on a board
+    with GroundStation(sitl.url(0)) as gcs:
+        gcs.wait_for(lambda: gcs.of("HEARTBEAT", (1, 1)), 30.0, "the vehicle's heartbeat")
+        booted = time.monotonic()
+        home = CMAC[:2]                    # where SITL will be: the GCS drew around it
+        items = _items((0.0, 0.0))         # home unknown to the GCS yet
+        for item, (north, east) in zip(items[2:], LEG, strict=True):
+            lat, lon = geo.latlon_from_ne(north, east, home)
+            item.x, item.y = int(round(lat * 1e7)), int(round(lon * 1e7))
+        gcs.upload(1, items)
+        sitl.wait_log("SERIAL1 on TCP port", 15.0)
+        logs = tmp_path / "logs"
+        with CompanionProcess(sitl.url(1), "--mission", "vehicle", "--arm", "--no-zenoh",
+                              "--json", "--log-dir", str(logs), "--w-c", "1.2",
+                              "--max-speed", "2", "--max-yaw-rate", "1.5") as comp:
+            started = time.monotonic() - booted
+            code = comp.wait(300.0)
+    res = comp.result()
+    print(f"\nstarted {started:.1f} s after the boot; "
+          + "; ".join(line for line in comp.stderr.splitlines() if "home" in line))
+    assert started <= 5.0
+    assert code == 0 and res["reason"] == "mission_done", comp.stderr
+    assert "has no home yet (0, 0" in comp.stderr and "home is set after" in comp.stderr
+    rows = list(csv.DictReader(open(res["csv"], newline="")))
+    track = [(float(w["x"]), float(w["y"])) for w in rows if w["x"]]
+    origin = res["ekf_origin"]
+    misses = []
+    for north, east in LEG:
+        lat, lon = geo.latlon_from_ne(north, east, home)
+        n, e = geo.ne_from_latlon(lat, lon, (origin["lat"], origin["lon"]))
+        misses.append(min(math.hypot(x - n, y - e) for x, y in track))
     assert max(misses) < 1.0, misses
 
 
