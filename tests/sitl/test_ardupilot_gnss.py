@@ -65,7 +65,6 @@ def test_rtk_float_holds_on_the_path_and_the_mission_completes(ardupilot, tmp_pa
     assert window["from_path"] <= 0.1, f                       # held on the path in truth
 
 
-@CANDIDATE
 def test_a_multipath_jump_is_ridden_through_not_followed(ardupilot, tmp_path):
     r, f, stderr = _fly(ardupilot, tmp_path, JUMP)
     assert "riding through on the receiver less the jump" in stderr
