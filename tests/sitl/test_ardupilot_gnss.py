@@ -15,7 +15,6 @@ from testbed.ardupilot import CompanionProcess
 from testbed.gnss import SCENARIOS, Drift, Scenario, Window
 from testbed.gnss_flight import Truth, companion_trace, gnss_vehicle, score
 from testbed.gnss_input import sitl_params
-from testbed.marks import CANDIDATE
 from testbed.missions import ellipse_mission
 from testbed.process import ROOT
 
@@ -47,14 +46,12 @@ def _fly(ardupilot, tmp_path, scenario: Scenario) -> tuple[dict, dict, str]:
     return r, figures, comp.stderr
 
 
-@CANDIDATE
 def test_rtk_fixed_tracks_the_truth_to_centimetres(ardupilot, tmp_path):
     r, f, _ = _fly(ardupilot, tmp_path, RTK)
     assert r["gnss"]["run_fix"] == "RTK fixed" and not r["gnss"]["drop_log"], r["gnss"]
     assert f["truth"] <= f["floor"] + 0.02 and f["truth"] <= 0.06, f
 
 
-@CANDIDATE
 def test_rtk_float_holds_on_the_path_and_the_mission_completes(ardupilot, tmp_path):
     r, f, stderr = _fly(ardupilot, tmp_path, FLOAT)
     drops = r["gnss"]["drop_log"]
