@@ -11,12 +11,16 @@ from __future__ import annotations
 
 import math
 
+import pytest
+
 from testbed.ardupilot import CompanionProcess
 from testbed.gnss import SCENARIOS, Drift, Scenario, Window
 from testbed.gnss_flight import Truth, companion_trace, gnss_vehicle, score
 from testbed.gnss_input import sitl_params
 from testbed.missions import ellipse_mission
 from testbed.process import ROOT
+
+pytestmark = [pytest.mark.sitl, pytest.mark.slow]
 
 VEHICLE = ROOT / "companion" / "sim" / "vehicles" / "ardupilot_skid.toml"
 DURATION, STEADY = 40.0, 15.0           # mission s; the steady RMS's last seconds
