@@ -79,10 +79,11 @@ def vehicle_mission_file(options, log):
     from ..app.flight import signing_key
     from ..live.vehicle_mission import write_plan
     link = options.link
+    key = signing_key(options.signing_key_file)      # read once, however often it pulls
 
     def pulled_now():
-        return pull(link.url, link.sysid, link.baud, link.source_system,
-                    signing_key(options.signing_key_file), link.heartbeat_timeout, 1.5, 5, log)
+        return pull(link.url, link.sysid, link.baud, link.source_system, key,
+                    link.heartbeat_timeout, 1.5, 5, log)
     pulled = pulled_now()
     if pulled.homeless:
         pulled = _wait_for_home(pulled, pulled_now, options.origin.timeout, log)

@@ -70,19 +70,20 @@ class LagWindow:
         for i, v in enumerate((dn, de, vn, ve, dn * vn, de * ve, vn * vn, ve * ve)):
             s[i] += sign * v
 
-    def mean(self, i: int) -> float:
-        """The mean of the pairs' ``i``-th member (0 d_n, 1 d_e, 2 v_n, 3 v_e)."""
-        return self._sums[i] / len(self._pairs)
-
-    def solve(self) -> tuple[float, float, float] | None:
-        """(c_n, c_e, lag), or None when the velocities hardly vary (no lag to tell)."""
+    def lag(self) -> float | None:
+        """The least-squares lag, or None when the velocities hardly vary (no lag to tell)."""
         k = len(self._pairs)
         dn, de, vn, ve, dnvn, deve, vn2, ve2 = self._sums
         den = (vn2 - vn * vn / k) + (ve2 - ve * ve / k)
         if den <= 1e-6:
             return None
-        lag = -((dnvn - dn * vn / k) + (deve - de * ve / k)) / den
-        return dn / k + lag * vn / k, de / k + lag * ve / k, lag
+        return -((dnvn - dn * vn / k) + (deve - de * ve / k)) / den
+
+    def offset(self, lag: float) -> Vec:
+        """(c_n, c_e): the offset that, with ``lag``, fits the pairs best (their means)."""
+        k = len(self._pairs)
+        dn, de, vn, ve = self._sums[:4]
+        return (dn + lag * vn) / k, (de + lag * ve) / k
 
 
 @dataclass
@@ -218,18 +219,12 @@ class JumpGuard:
         """receiver - estimate = c - lag x velocity, least squares over the pairs kept."""
         if len(self._pairs) < self.min_fit_fixes:
             return
-        got = self._pairs.solve()
-        if got is None:               # no spread of velocity to tell a lag from an offset by
+        lag = self._pairs.lag()
+        if lag is None:               # no spread of velocity to tell a lag from an offset by
             lag = self._fit[2] if self._fit else 0.0
-            self._fit = (self._pairs.mean(0) + lag * self._pairs.mean(2),
-                         self._pairs.mean(1) + lag * self._pairs.mean(3), lag)
-            return
-        cn, ce, lag = got
-        if abs(lag) > 0.5:            # (negative: the fix is younger than the estimate's sample)
-            lag = min(max(lag, -0.5), 0.5)
-            cn = self._pairs.mean(0) + lag * self._pairs.mean(2)
-            ce = self._pairs.mean(1) + lag * self._pairs.mean(3)
-        self._fit = (cn, ce, lag)
+        # (negative: the fix is younger than the estimate's sample it arrived with)
+        lag = min(max(lag, -0.5), 0.5)
+        self._fit = (*self._pairs.offset(lag), lag)
 
     # --- the estimate ---------------------------------------------------------------------------
     def _estimate_at(self, when: float) -> Vec | None:

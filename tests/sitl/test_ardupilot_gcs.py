@@ -31,6 +31,19 @@ BOOT_WALL = 120.0 / TRACK_SPEEDUP + 30.0
 LEG = [(15.0, 0.0), (15.0, 12.0), (0.0, 12.0)]      # north, east of home (m)
 
 
+def _waypoint_misses(res: dict, home: tuple[float, float]) -> list[float]:
+    """How close a run (its JSON: the CSV, the EKF origin) came to each waypoint of LEG, m."""
+    rows = list(csv.DictReader(open(res["csv"], newline="")))
+    track = [(float(w["x"]), float(w["y"])) for w in rows if w["x"]]
+    origin = (res["ekf_origin"]["lat"], res["ekf_origin"]["lon"])
+    misses = []
+    for north, east in LEG:
+        lat, lon = geo.latlon_from_ne(north, east, home)
+        n, e = geo.ne_from_latlon(lat, lon, origin)
+        misses.append(min(math.hypot(x - n, y - e) for x, y in track))
+    return misses
+
+
 def _items(home: tuple[float, float]) -> list:
     out = [mt.item(0, 16, 0, (0.0, 0.0, 0.0, 0.0), int(round(home[0] * 1e7)),
                    int(round(home[1] * 1e7)), 0.0)]
@@ -95,14 +108,7 @@ def test_uploaded_pulled_identical_flown_within_1m_and_paused_from_the_gcs(ardup
         assert any(t.startswith(want) for t in texts), (want, texts)
     names = {m.name for m in gcs.of("NAMED_VALUE_FLOAT", me)}
     assert names == {"pzc_err", "pzc_state", "pzc_prog", "pzc_mt"}
-    rows = list(csv.DictReader(open(res["csv"], newline="")))
-    track = [(float(w["x"]), float(w["y"])) for w in rows if w["x"]]
-    origin = res["ekf_origin"]
-    misses = []
-    for north, east in LEG:
-        lat, lon = geo.latlon_from_ne(north, east, home)
-        n, e = geo.ne_from_latlon(lat, lon, (origin["lat"], origin["lon"]))
-        misses.append(min(math.hypot(x - n, y - e) for x, y in track))
+    misses = _waypoint_misses(res, home)
     print(f"\nArduPilot SITL: mission of {len(items)} items pulled in {pull_wall:.2f} s wall, "
           f"identical past home; waypoints passed within {[round(m, 3) for m in misses]} m; "
           f"steady RMS {res['steady_rms']:.3f} m; GCS heard {len(texts)} texts: {texts}")
@@ -121,10 +127,8 @@ def test_a_mission_uploaded_while_booting_flies_once_the_vehicle_has_a_home(ardu
         gcs.wait_for(lambda: gcs.of("HEARTBEAT", (1, 1)), 30.0, "the vehicle's heartbeat")
         booted = time.monotonic()
         home = CMAC[:2]                    # where SITL will be: the GCS drew around it
-        items = _items((0.0, 0.0))         # home unknown to the GCS yet
-        for item, (north, east) in zip(items[2:], LEG, strict=True):
-            lat, lon = geo.latlon_from_ne(north, east, home)
-            item.x, item.y = int(round(lat * 1e7)), int(round(lon * 1e7))
+        items = _items(home)
+        items[0].x, items[0].y = 0, 0      # home unknown to the GCS yet
         while True:     # its mission storage refuses uploads for the first moments of the boot
             try:
                 gcs.upload(1, items)
@@ -146,14 +150,7 @@ def test_a_mission_uploaded_while_booting_flies_once_the_vehicle_has_a_home(ardu
     assert started <= 5.0
     assert code == 0 and res["reason"] == "mission_done", comp.stderr
     assert "has no home yet (0, 0" in comp.stderr and "home is set after" in comp.stderr
-    rows = list(csv.DictReader(open(res["csv"], newline="")))
-    track = [(float(w["x"]), float(w["y"])) for w in rows if w["x"]]
-    origin = res["ekf_origin"]
-    misses = []
-    for north, east in LEG:
-        lat, lon = geo.latlon_from_ne(north, east, home)
-        n, e = geo.ne_from_latlon(lat, lon, (origin["lat"], origin["lon"]))
-        misses.append(min(math.hypot(x - n, y - e) for x, y in track))
+    misses = _waypoint_misses(res, home)
     assert max(misses) < 1.0, misses
 
 
