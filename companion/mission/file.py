@@ -136,7 +136,8 @@ class Mission:
                       "turn rate " + against(p.peak_turn_rate, lim.max_yaw_rate, "rad/s")]
         else:
             parts.append(f"{self.duration:.1f} s")
-        return ", ".join(parts)
+        note = getattr(getattr(self.trajectory, "inner", self.trajectory), "note", "")
+        return ", ".join(parts) + (f"; {note}" if note else "")
 
 
 # --------------------------------------------------------------------------- entry points
@@ -219,7 +220,8 @@ def _from_table(top: Table, base: Path, origin: tuple[float, float] | None) -> M
     limits = _read_limits(top.table("limits"))
     vehicle, vehicle_file, vehicle_keys = _read_vehicle(top.table("vehicle"), base)
     spec = top.table("trajectory", required=True)
-    traj, warnings, datum = build(spec, base, laps, origin)
+    traj, warnings, datum = build(spec, base, laps, origin,
+                                  start=(0.0, 0.0) if frame == "start" else None)
     top.done()
 
     kind = spec.data["kind"]

@@ -10,9 +10,11 @@ Items policy (documented in docs/missions.md): an item the tracker cannot follow
 warning line per item (``ImportedPlan.warnings``), and left out of the path: takeoff, land,
 loiter, return-to-launch, jumps, camera and other DO commands, a waypoint's hold time, a waypoint
 at the same place as the previous point. The first ``DO_CHANGE_SPEED`` before any waypoint sets
-the speed (later ones are reported). What cannot be turned into a path at all is an *error*:
-ComplexItems (survey, corridor scan: their path is not in the file), a waypoint without a
-position or in a local frame, a malformed file.
+the speed (later ones are reported). A QGroundControl Survey (a ComplexItem) is read by
+:mod:`companion.mission.survey` and flown as a field, its waypoints before it leading there
+and those after it leading on; a plan holds one survey. What cannot be turned into a path at all is an *error*: other ComplexItems
+(corridor and structure scans), a waypoint without a position or in a local frame, a
+malformed file.
 """
 
 from __future__ import annotations
@@ -26,6 +28,7 @@ from typing import Any
 from ..errors import UserError
 from . import geo
 from .schema import check_number, fail, short
+from .survey import Survey
 
 NAV_WAYPOINT = 16
 DO_CHANGE_SPEED = 178
@@ -51,6 +54,8 @@ class ImportedPlan:
     home: tuple[float, float] | None
     waypoint_count: int
     warnings: tuple[str, ...]
+    survey: Survey | None = None                # a QGroundControl Survey: flown as a field
+    survey_at: int = 0                          # points[:survey_at] lead to it, the rest after
 
 
 @dataclass(frozen=True)
@@ -59,17 +64,19 @@ class _Item:
     command: int
     frame: int
     params: tuple[float, ...]   # p1..p4, lat, lon, alt (NaN where the file has null)
+    index: int = -1             # place in the file's item list
 
 
 def read(path: str | Path, origin: tuple[float, float] | None = None) -> ImportedPlan:
     """Read a ``.plan`` or ``.waypoints`` file (chosen by suffix)."""
     path = Path(path)
     text = _read_text(path)
+    survey = None
     if path.suffix.lower() == ".plan":
-        home, speed, items = _parse_plan(text, str(path))
+        home, speed, items, survey = _parse_plan(text, str(path))
     else:
         home, speed, items = _parse_wpl(text, str(path))
-    return _build(str(path), home, speed, items, origin)
+    return _build(str(path), home, speed, items, origin, survey)
 
 
 def _read_text(path: Path) -> str:
@@ -129,16 +136,24 @@ def _parse_plan(text: str, source: str):
     if not isinstance(items_value, list):
         raise fail(source, "mission.items", f"must be a list of items, not {short(items_value)}")
     items = []
+    survey = None
     for i, item in enumerate(items_value):
         where = f"mission.items[{i}]"
         if not isinstance(item, dict):
             raise fail(source, where, f"must be an object, not {short(item)}")
         kind = item.get("type")
+        if kind == "ComplexItem" and item.get("complexItemType") == "survey":
+            if survey is not None:
+                raise fail(source, where, f"a second survey (the first is {survey.where}): "
+                                          "a plan holds one field; save each in its own plan")
+            from . import survey as surveys
+            survey = surveys.parse(item, source, where, i)
+            continue
         if kind == "ComplexItem":
             what = item.get("complexItemType", "a complex item")
             raise fail(source, where, (
-                f"{short(what)} is a ComplexItem (survey, corridor or structure scan): its path "
-                "is not in the file; convert it to waypoints in QGroundControl first"))
+                f"{short(what)} is a ComplexItem this companion does not fly (a survey it "
+                "does); convert it to waypoints in QGroundControl first"))
         if kind != "SimpleItem":
             raise fail(source, f"{where}.type",
                        f"must be \"SimpleItem\" or \"ComplexItem\", not {short(kind)}")
@@ -153,8 +168,8 @@ def _parse_plan(text: str, source: str):
             # QGroundControl writes null for an unused parameter (NaN in MAVLink).
             values.append(math.nan if p is None else
                           check_number(p, source, f"{where}.params[{k}]"))
-        items.append(_Item(where, command, frame, tuple(values)))
-    return home, speed, items
+        items.append(_Item(where, command, frame, tuple(values), i))
+    return home, speed, items, survey
 
 
 def _integer(value: Any, source: str, path: str) -> int:
@@ -222,7 +237,7 @@ def _parse_wpl(text: str, source: str):
 
 
 def _build(source: str, home, speed, items: list[_Item],
-           origin: tuple[float, float] | None) -> ImportedPlan:
+           origin: tuple[float, float] | None, survey: Survey | None = None) -> ImportedPlan:
     if origin is None:
         if home is None:
             raise UserError(f"{source}: the file has no home position; give the vehicle's EKF "
@@ -237,7 +252,10 @@ def _build(source: str, home, speed, items: list[_Item],
     if home is not None:
         points.append(geo.ne_from_latlon(home[0], home[1], origin))
     count = 0
+    survey_at = None
     for item in items:
+        if survey is not None and survey_at is None and item.index > survey.index:
+            survey_at = len(points)
         p1, p2 = item.params[0], item.params[1]
         if item.command == DO_CHANGE_SPEED:
             if count == 0 and math.isfinite(p2) and p2 > 0 and speed is None:
@@ -248,7 +266,8 @@ def _build(source: str, home, speed, items: list[_Item],
             continue
         if item.command != NAV_WAYPOINT:
             warnings.append(f"{source}: {item.where}: {_name(item.command)} is not followed: "
-                            "only NAV_WAYPOINT items make the path")
+                            + ("the survey makes the path" if survey is not None else
+                               "only NAV_WAYPOINT items make the path"))
             continue
         if item.frame not in GLOBAL_FRAMES:
             raise UserError(f"{source}: {item.where}: NAV_WAYPOINT in MAV_FRAME {item.frame}: "
@@ -270,6 +289,9 @@ def _build(source: str, home, speed, items: list[_Item],
                             "previous point, skipped")
             continue
         points.append(point)
+    if survey is not None:
+        return ImportedPlan(tuple(points), speed, origin, home, count, tuple(warnings), survey,
+                            len(points) if survey_at is None else survey_at)
     if count == 0:
         raise UserError(f"{source}: no NAV_WAYPOINT items: there is no path to follow")
     if len(points) < 2:

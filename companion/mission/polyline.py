@@ -121,7 +121,7 @@ class Polyline:
     _radii: tuple[float, ...] = field(init=False, repr=False, compare=False)
 
     def __post_init__(self):
-        pieces, radii = _build_pieces(self.points, self.corner_radius, self.closed,
+        pieces, radii = build_pieces(self.points, self.corner_radius, self.closed,
                                       self.shrink_corners)
         length = pieces[-1].s0 + pieces[-1].length
         if self.closed:
@@ -181,7 +181,7 @@ class Polyline:
         return Reference(x, y, c * ds, sn * ds, c * dds - sn * k, sn * dds + c * k)
 
 
-def _build_pieces(points: Sequence[tuple[float, float]], radius: float, closed: bool,
+def build_pieces(points: Sequence[tuple[float, float]], radius: float, closed: bool,
                   shrink: bool) -> tuple[list[_Piece], list[float]]:
     n = len(points)
     if n < (3 if closed else 2):

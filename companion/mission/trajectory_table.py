@@ -18,7 +18,7 @@ from .profile import measure
 from .schema import Table, check_rows, short
 from .spline import TimedWaypoints
 
-KINDS = ("ellipse", "circle", "figure8", "line", "polyline", "waypoints", "plan")
+KINDS = ("ellipse", "circle", "figure8", "line", "polyline", "waypoints", "plan", "field")
 MAX_DURATION = 86400.0     # s: one day of tracking is plenty; bounds the checks' cost
 MAX_DISTANCE = 1e6         # m
 MAX_SPEED = 100.0          # m/s
@@ -27,10 +27,11 @@ PLAN_CORNER_RADIUS = 2.0   # m: ArduPilot Rover's WP_RADIUS default, shrunk to f
 DEFAULT_ACCEL = 0.5        # m/s^2, peak along-path acceleration of line / polyline / plans
 
 
-def build(spec: Table, base: Path, laps: float | None, origin: tuple[float, float] | None
-          ) -> tuple[Any, tuple[str, ...], Any]:
+def build(spec: Table, base: Path, laps: float | None, origin: tuple[float, float] | None,
+          start: tuple[float, float] | None = None) -> tuple[Any, tuple[str, ...], Any]:
     """(the trajectory (a dataclass: Ellipse, a path), warnings, the datum of one placed by lat / lon) of a ``[trajectory]``
-    table; every problem a one-line error naming the key."""
+    table; every problem a one-line error naming the key. ``start``: where the rover is known
+    to start (frame "start": the frame's origin), for a field's entry corner."""
     kind = spec.string("kind", required=True, choices=KINDS)
     speed: dict[str, Any] = {"positive": True, "maximum": MAX_SPEED}
     warnings: tuple[str, ...] = ()
@@ -81,6 +82,8 @@ def build(spec: Table, base: Path, laps: float | None, origin: tuple[float, floa
                                                            f"s, not {row[0]!r}")
                 _bounded(spec, f"waypoints[{i}]", row[1:])
             traj = TimedWaypoints(tuple((t, n, e) for t, n, e in rows), closed=spec.boolean("closed", False))
+        elif kind == "field":
+            traj = _field(spec, start)
         else:  # plan
             name = spec.string("file", required=True)
             path = file_key(spec, "file", name, base)
@@ -98,6 +101,32 @@ def build(spec: Table, base: Path, laps: float | None, origin: tuple[float, floa
         raise spec.error(exc.key, str(exc)) from None
     spec.done()
     return traj, warnings, datum
+
+
+def _field(spec: Table, start: tuple[float, float] | None) -> Trajectory:
+    """``kind = "field"``: a boundary covered by swaths (companion.mission.field)."""
+    from . import field
+    rows = check_rows(spec.require("boundary"), 2, spec.source, spec.key("boundary"),
+                      "[north, east]", 3, 10000)
+    boundary = [_bounded(spec, f"boundary[{i}]", p) for i, p in enumerate(rows)]
+    angle = spec.number("angle_deg", None, minimum=-360.0, maximum=360.0)
+    plan = field.plan(
+        boundary, spacing=spec.number("spacing", required=True, minimum=0.01, maximum=1000.0),
+        headland=spec.number("headland", required=True, minimum=0.0, maximum=1000.0),
+        angle=None if angle is None else math.radians(angle), limits=route_limits(spec),
+        start=start)
+    return plan.route
+
+
+def route_limits(spec: Table, speed: float | None = None):
+    """A route's time law from a table's ``speed``, ``turn_rate``, ``lateral_accel``, ``accel``."""
+    from .route import RouteLimits
+    return RouteLimits(
+        speed=speed if speed is not None else spec.number("speed", required=True,
+                                                          positive=True, maximum=MAX_SPEED),
+        turn_rate=spec.number("turn_rate", 0.5, positive=True, maximum=100.0),
+        lateral_accel=spec.number("lateral_accel", 0.5, positive=True, maximum=100.0),
+        accel=spec.number("accel", DEFAULT_ACCEL, positive=True, maximum=100.0))
 
 
 def file_key(table: Table, key: str, name: str, base: Path) -> Path:
@@ -170,8 +199,48 @@ def read_plan(path: Path, *, origin: tuple[float, float] | None, speed: float | 
         if speed is None:
             speed = plan_import.DEFAULT_SPEED
             warnings.append(f"{path}: the file gives no speed: using {speed:g} m/s")
-    traj, duration, profile = waypoint_path(plan.points, speed, corner_radius, str(path))
     where = "home" if plan.home is not None and plan.origin == plan.home else "the EKF origin"
+    if plan.survey is not None:
+        return _survey_path(path, plan, speed, warnings, where)
+    traj, duration, profile = waypoint_path(plan.points, speed, corner_radius, str(path))
     return PlanPath(traj, duration, profile, tuple(warnings), plan.origin,
                     f"imported from {path.name}: {plan.waypoint_count} waypoints at {speed:g} "
                     f"m/s, relative to {where} {plan.origin[0]:.7f}, {plan.origin[1]:.7f}")
+
+
+def _survey_path(path: Path, plan, speed: float, warnings: list[str], where: str) -> PlanPath:
+    """A plan's QGroundControl Survey as a field (companion.mission.survey), entered where
+    QGroundControl's first transect begins, at the straight ``speed``."""
+    from . import field, geo, survey
+    from .route import RouteLimits
+    sv = plan.survey
+
+    def local(p: tuple[float, float]) -> tuple[float, float]:
+        return geo.ne_from_latlon(p[0], p[1], plan.origin)
+
+    transects = [(local(a), local(b)) for a, b in sv.transects]
+    try:
+        planned = field.plan([local(p) for p in sv.polygon], spacing=sv.spacing,
+                             limits=RouteLimits(speed=speed), angle=math.radians(sv.angle_deg),
+                             headland=0.0, turn_room=sv.turnaround,
+                             start=(plan.points[plan.survey_at - 1] if plan.survey_at else
+                                    transects[0][0] if transects else None), kind="survey",
+                             lead_in=plan.points[:plan.survey_at],
+                             lead_out=plan.points[plan.survey_at:],
+                             through=transects[0][0] if transects else None)
+    except paths.PathError as exc:
+        raise UserError(f"{path}: {sv.where}: {exc.key}: {exc}") from None
+    traj = planned.route
+    duration = traj.motion_end
+    traj = replace(traj, duration=duration)
+    try:
+        profile = measure(traj, duration, motion_end=duration)
+    except (ArithmeticError, ValueError) as exc:
+        raise UserError(f"{path}: {exc}") from None
+    said, agree = survey.compare(planned.swaths, transects, sv.spacing)
+    if not agree:
+        warnings.append(f"{path}: {sv.where}: {said}")
+    return PlanPath(traj, duration, profile, tuple(warnings), plan.origin,
+                    f"imported from {path.name}: a QGroundControl survey flown as a field at "
+                    f"{speed:g} m/s, relative to {where} {plan.origin[0]:.7f}, "
+                    f"{plan.origin[1]:.7f}; {said}")

@@ -44,7 +44,9 @@ def test_the_promised_missions_are_shipped():
 def test_every_shipped_mission_passes_check():
     proc = companion_cli("mission", "check", *SHIPPED, timeout=120)
     assert proc.returncode == 0, proc.stderr
-    assert proc.stderr == ""
+    # warnings only: a QGroundControl survey's camera items are not followed
+    assert all(line.startswith("companion mission: warning: ")
+               for line in proc.stderr.splitlines()), proc.stderr
     lines = proc.stdout.strip().splitlines()
     assert len(lines) == len(SHIPPED)
     for name, line in zip(SHIPPED, lines, strict=True):
