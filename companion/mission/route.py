@@ -9,12 +9,12 @@ slowly. The speed law is the classic forward-backward pass of time-optimal path 
 (Bobrow, Dubowsky and Gibson 1985; Shin and McKay 1985) with piecewise-constant limits, solved
 exactly per piece: the speed at each joint is the lower of its two pieces' limits, lowered
 forwards and backwards until the along-path acceleration limit can reach it; within a piece
-the speed rises at +accel, cruises at the piece's limit, and falls at -accel (a trapezoid, or a
-triangle on a short piece). The route starts and ends at rest.
-
-The along-path acceleration steps between +accel, 0 and -accel (the reference's acceleration
-is piecewise constant): the trackers feed the reference's velocity forward, and a step of 0.5
-m/s^2 in its acceleration is a ramp in the setpoint, not a step.
+the speed rises, cruises at the piece's limit, and falls (a trapezoid in time, or a
+triangle on a short piece), each change of speed along half a cosine so the along-path
+acceleration is continuous (a step in it, from a trapezoid, left the skid-steer rover on ArduPilot
+SITL 6 cm behind its reference for two seconds after each turn). The route starts and ends at
+rest. Where an arc meets a straight the curvature, and so the lateral acceleration v^2 kappa,
+still steps: it is small at the turns' speeds.
 """
 
 from __future__ import annotations
@@ -49,44 +49,63 @@ class RouteLimits:
 
 @dataclass(frozen=True)
 class _Phase:
-    """Constant along-path acceleration from time t0: s = s0 + v0 tau + a tau^2 / 2."""
+    """From time ``t0`` for ``duration`` s: the speed goes from ``v0`` to ``v0 + dv`` along half
+    a cosine, v = v0 + dv/2 (1 - cos(pi tau / T)), so the acceleration (peak pi dv / 2T) is
+    continuous and zero where the phase begins and ends; dv = 0 is a cruise."""
 
     t0: float
     s0: float
     v0: float
-    a: float
+    dv: float
+    duration: float
+
+    def at(self, tau: float) -> tuple[float, float, float]:
+        """(s, s', s'') ``tau`` s into the phase."""
+        if self.dv == 0.0:
+            return self.s0 + self.v0 * tau, self.v0, 0.0
+        k = math.pi / self.duration
+        half = 0.5 * self.dv
+        return (self.s0 + self.v0 * tau + half * (tau - math.sin(k * tau) / k),
+                self.v0 + half * (1.0 - math.cos(k * tau)), half * k * math.sin(k * tau))
 
 
 def speed_law(lengths: Sequence[float], limits: Sequence[float], accel: float
               ) -> tuple[list[_Phase], list[float]]:
-    """The phases of the time law over pieces of these ``lengths`` and speed ``limits``, and the
-    peak speed reached on each piece (see the module docstring)."""
+    """The phases of the time law over pieces of these ``lengths`` and speed ``limits`` with a
+    peak along-path acceleration ``accel``, and the peak speed reached on each piece (see the
+    module docstring).
+
+    A raised-cosine change of speed by dv at peak acceleration A takes T = pi dv / (2 A) and
+    covers (v0 + v1) / 2 T: exactly what a constant acceleration of 2 A / pi would, so the pass
+    runs at that mean acceleration and each change is then shaped as the cosine."""
     n = len(lengths)
+    mean = 2.0 * accel / math.pi
     joint = [0.0] + [min(limits[k - 1], limits[k]) for k in range(1, n)] + [0.0]
     for k in range(1, n + 1):                         # forwards: what accel can reach
-        joint[k] = min(joint[k], math.sqrt(joint[k - 1] ** 2 + 2.0 * accel * lengths[k - 1]))
+        joint[k] = min(joint[k], math.sqrt(joint[k - 1] ** 2 + 2.0 * mean * lengths[k - 1]))
     for k in range(n - 1, -1, -1):                    # backwards: what accel can stop from
-        joint[k] = min(joint[k], math.sqrt(joint[k + 1] ** 2 + 2.0 * accel * lengths[k]))
+        joint[k] = min(joint[k], math.sqrt(joint[k + 1] ** 2 + 2.0 * mean * lengths[k]))
     phases: list[_Phase] = []
     peaks: list[float] = []
     t = s = end = 0.0
     for k in range(n):
         v0, v1, length = joint[k], joint[k + 1], lengths[k]
-        top = min(limits[k], math.sqrt(accel * length + 0.5 * (v0 * v0 + v1 * v1)))
+        top = min(limits[k], math.sqrt(mean * length + 0.5 * (v0 * v0 + v1 * v1)))
         peaks.append(top)
-        d_up = (top * top - v0 * v0) / (2.0 * accel)
-        d_down = (top * top - v1 * v1) / (2.0 * accel)
+        d_up = (top * top - v0 * v0) / (2.0 * mean)
+        d_down = (top * top - v1 * v1) / (2.0 * mean)
         cruise = max(0.0, length - d_up - d_down)
-        for a, duration, distance in ((accel, (top - v0) / accel, d_up),
-                                      (0.0, cruise / top if top > 0 else 0.0, cruise),
-                                      (-accel, (top - v1) / accel, d_down)):
+        for v_from, dv, duration, distance in (
+                (v0, top - v0, (top - v0) / mean, d_up),
+                (top, 0.0, cruise / top if top > 0 else 0.0, cruise),
+                (top, v1 - top, (top - v1) / mean, d_down)):
             if duration > 1e-12:
-                phases.append(_Phase(t, s, top if a < 0 else (v0 if a > 0 else top), a))
+                phases.append(_Phase(t, s, v_from, dv, duration))
                 t += duration
                 s += distance
         end += length
         s = end           # the pieces' own lengths fix where the next begins (no drift)
-    phases.append(_Phase(t, end, 0.0, 0.0))   # at rest at the end, for ever
+    phases.append(_Phase(t, end, 0.0, 0.0, math.inf))   # at rest at the end, for ever
     return phases, peaks
 
 
@@ -149,11 +168,7 @@ class Route:
         if t <= 0.0:
             return 0.0, 0.0, 0.0
         phase = self._phases[bisect.bisect_right(self._times, t) - 1]
-        tau = t - phase.t0
-        if phase.a == 0.0 and phase.v0 == 0.0:         # at rest at the end
-            return phase.s0, 0.0, 0.0
-        return (phase.s0 + tau * (phase.v0 + 0.5 * phase.a * tau), phase.v0 + phase.a * tau,
-                phase.a)
+        return phase.at(min(t - phase.t0, phase.duration))
 
     def sample(self, t: float) -> Reference:
         s, ds, dds = self.along(t)

@@ -18,22 +18,26 @@ def _walk(route: Route, dt: float = 0.002):
         t += dt
 
 
-def test_a_straight_is_a_trapezoid_of_the_analytic_length_and_time():
+def test_a_straight_ramps_up_and_down_along_half_cosines():
     lim = RouteLimits(speed=2.0, accel=0.5)
     route = Route(((0.0, 0.0), (20.0, 0.0)), lim)
-    # 4 s up (4 m), 12 m at 2 m/s (6 s), 4 s down (4 m): 14 s
-    assert route.motion_end == pytest.approx(14.0)
-    assert route.along(2.0) == pytest.approx((1.0, 1.0, 0.5))
-    assert route.along(7.0) == pytest.approx((10.0, 2.0, 0.0))
+    ramp = math.pi * 2.0 / (2 * 0.5)              # T = pi V / (2 A): 6.28 s, V T / 2 = 6.28 m
+    cruise = (20.0 - 2.0 * ramp) / 2.0            # the rest at 2 m/s
+    assert route.motion_end == pytest.approx(2 * ramp + cruise)
+    s, v, a = route.along(ramp / 2)               # half way up: half the speed, peak accel
+    assert (v, a) == pytest.approx((1.0, 0.5))
+    assert s == pytest.approx(ramp / 2 - ramp / math.pi)
+    assert route.along(ramp)[1:] == pytest.approx((2.0, 0.0))   # no step in the acceleration
     assert route.along(100.0) == (20.0, 0.0, 0.0)
-    r = route.sample(7.0)
+    r = route.sample(ramp + cruise / 2)
     assert (r.x, r.y, r.vx, r.vy) == pytest.approx((10.0, 0.0, 2.0, 0.0))
 
 
 def test_a_short_piece_is_a_triangle():
+    mean = 2 * 0.5 / math.pi                      # a raised cosine's mean acceleration
     phases, peaks = speed_law([1.0], [5.0], accel=0.5)
-    assert peaks == [pytest.approx(math.sqrt(0.5))]          # sqrt(a L)
-    assert phases[-1].t0 == pytest.approx(2 * math.sqrt(0.5) / 0.5)
+    assert peaks == [pytest.approx(math.sqrt(mean))]          # sqrt(a L)
+    assert phases[-1].t0 == pytest.approx(2 * math.sqrt(mean) / mean)
 
 
 @pytest.mark.parametrize("turn_rate,lateral", [(0.5, 0.5), (2.0, 0.3), (0.2, 5.0)])
@@ -42,6 +46,7 @@ def test_the_law_keeps_every_limit_and_is_continuous(turn_rate, lateral):
     # a zig-zag with right-angle and sharp corners
     route = Route(((0, 0), (10, 0), (10, 1), (0, 1), (0, 2), (6, 8)), lim, corner_radius=0.5)
     prev = prev_ref = None
+    pa = 0.0
     for t, (s, v, a), ref in _walk(route):
         assert -1e-9 <= v <= lim.speed + 1e-9
         assert abs(a) <= lim.accel + 1e-9
@@ -55,8 +60,10 @@ def test_the_law_keeps_every_limit_and_is_continuous(turn_rate, lateral):
             ps, pv, pt = prev
             assert s >= ps - 1e-12                          # never backwards
             assert abs(v - pv) <= lim.accel * (t - pt) + 1e-9   # no jump in speed
+            # nor in the acceleration (a short change of speed is a quick half cosine: small)
+            assert abs(a - pa) <= lim.accel * math.pi * (t - pt) + 0.05 * lim.accel
             assert math.hypot(ref.x - prev_ref.x, ref.y - prev_ref.y) <= v * (t - pt) + 0.01
-        prev, prev_ref = (s, v, t), ref
+        prev, prev_ref, pa = (s, v, t), ref, a
     assert route.along(route.motion_end) == pytest.approx((route.length, 0.0, 0.0), abs=1e-6)
     peak_speed, peak_rate = route.peaks()
     assert peak_rate <= lim.turn_rate * (1 + 1e-9) and peak_speed <= lim.speed
