@@ -151,7 +151,9 @@ def main() -> int:
           f"{'wall s':>7s}")
     for name, f in rows.items():
         print(f"{name:16s} {f['cross_p50']:6.3f} {f['cross_p95']:6.3f} {f['cross_max']:6.3f} "
-              f"{f['excursion']:9.3f} {100 * f['missed']:6.2f}% {f['wall_s']:7.1f}")
+              f"{f['excursion']:9.3f} {100 * f['missed']:6.2f}% {f['wall_s']:7.1f}   mean to "
+              "the right, swaths out / back: "
+              + " / ".join(f"{b:+.3f}" for b in f["bias_even_odd"]))
     return 0
 
 

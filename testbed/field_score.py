@@ -15,21 +15,29 @@ Pt = tuple[float, float]
 
 
 def cross_track(points: Sequence[Pt], swaths: Sequence[tuple[Pt, Pt]], spacing: float,
-                margin: float = 1.0) -> np.ndarray:
-    """The distance to the side of its swath of every sample on a swath interior (m)."""
+                margin: float = 1.0, signed: bool = False) -> np.ndarray:
+    """The distance to the side of its swath of every sample on a swath interior (m); with
+    ``signed``, (swath index, signed distance: + to the right of the swath as driven)."""
     lines = [LineString(s) for s in swaths]
     out = []
     for p in points:
         pt = Point(p)
         best = None
-        for line in lines:
+        for k, line in enumerate(lines):
             at = line.project(pt)
             if margin <= at <= line.length - margin:
                 d = line.distance(pt)
-                if d < 0.5 * spacing and (best is None or d < best):
-                    best = d
+                if d < 0.5 * spacing and (best is None or d < best[1]):
+                    best = (k, d)
         if best is not None:
-            out.append(best)
+            if not signed:
+                out.append(best[1])
+                continue
+            (ax, ay), (bx, by) = swaths[best[0]]
+            length = float(np.hypot(bx - ax, by - ay))
+            # north-east axes: (b - a) x (p - a) > 0 is to the right of the way driven
+            side = ((bx - ax) * (p[1] - ay) - (by - ay) * (p[0] - ax)) / length
+            out.append((best[0], side))
     return np.array(out)
 
 
@@ -56,6 +64,20 @@ def figures(points: Sequence[Pt], swaths: Sequence[tuple[Pt, Pt]], spacing: floa
             "cross_p95": float(np.percentile(xt, 95)) if len(xt) else float("nan"),
             "cross_max": float(xt.max()) if len(xt) else float("nan"),
             "on_swaths": int(len(xt)), "samples": len(points),
+            "bias_even_odd": _bias(points, swaths, spacing),
             "excursion": excursion(points, boundary),
             "missed": missed_share(points, area, spacing + 0.1)}
 
+
+
+def _bias(points, swaths, spacing: float) -> list[float]:
+    """The mean signed cross-track on the swaths driven one way and on those driven back: equal
+    and opposite means a constant offset of the positions (the truth's origin against the
+    estimate's), equal a lean of the tracking."""
+    signed = cross_track(points, swaths, spacing, signed=True)
+    if not len(signed):
+        return [float("nan"), float("nan")]
+    even = signed[signed[:, 0] % 2 == 0, 1]
+    odd = signed[signed[:, 0] % 2 == 1, 1]
+    return [float(even.mean()) if len(even) else float("nan"),
+            float(odd.mean()) if len(odd) else float("nan")]
