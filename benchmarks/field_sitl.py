@@ -34,25 +34,16 @@ from shapely import Polygon
 
 from testbed.field_score import figures
 from testbed.gnss import SCENARIOS
-from testbed.gnss_flight import gnss_vehicle
+from testbed.gnss_flight import gnss_vehicle, truth_between
 from testbed.gnss_input import sitl_params
+from testbed.missions import FIELD_BOUNDARY as BOUNDARY
+from testbed.missions import FIELD_HEADLAND as HEADLAND
+from testbed.missions import FIELD_SPACING as SPACING
+from testbed.missions import FIELD_SPEED as SPEED
+from testbed.missions import field_mission
 from testbed.process import ROOT, companion_json
 
 VEHICLES = {"rover-skid": ROOT / "companion" / "sim" / "vehicles" / "ardupilot_skid.toml"}
-BOUNDARY = [(-2.5, -3.5), (17.5, -3.5), (17.5, 8.5), (-2.5, 8.5)]   # north, east from boot
-SPACING, HEADLAND, SPEED = 1.0, 3.0, 1.0
-
-
-def field_mission(path: Path, turn_rate: float) -> Path:
-    path.write_text(f'name = "field"\nframe = "local"\n[trajectory]\nkind = "field"\n'
-                    f"boundary = {[list(p) for p in BOUNDARY]}\nspacing = {SPACING}\n"
-                    f"headland = {HEADLAND}\nangle_deg = 0\nspeed = {SPEED}\n"
-                    f"turn_rate = {turn_rate}\n")
-    return path
-
-
-def truth_between(inj, t0: float, t1: float) -> list[tuple[float, float]]:
-    return [(n, e) for w, n, e in list(inj.truth) if t0 <= w <= t1]
 
 
 def fly_auto(url: str, swaths, speed: float, timeout: float = 900.0) -> tuple[float, float]:

@@ -165,3 +165,8 @@ def score(trace, truth: Truth, scenario: Scenario, duration: float, t0_wall: flo
     return {"truth": rms(truth_err), "estimate": rms(est_err), "floor": rms(floor),
             "worst": max(by_mt), "faults": faults, "samples": len(rows),
             "matched": "vehicle time" if on_clock else "wall time"}
+
+
+def truth_between(inj: GnssInjector, t0: float, t1: float) -> list[tuple[float, float]]:
+    """The injector's true (north, east) between wall times ``t0`` and ``t1`` (time.time())."""
+    return [(n, e) for w, n, e in list(inj.truth) if t0 <= w <= t1]

@@ -66,3 +66,17 @@ def wait_ready(url: str, folder: Path, timeout: float = 300) -> float:
     t0 = time.monotonic()
     companion_json(ready_argv(url, folder), timeout)
     return time.monotonic() - t0
+
+
+# missions/field.toml's field placed in the local frame where a rover boots (its route starts at
+# the origin heading north): the field benchmark's and the field SITL test's
+FIELD_BOUNDARY = [(-2.5, -3.5), (17.5, -3.5), (17.5, 8.5), (-2.5, 8.5)]   # north, east
+FIELD_SPACING, FIELD_HEADLAND, FIELD_SPEED = 1.0, 3.0, 1.0
+
+
+def field_mission(path: Path, turn_rate: float) -> Path:
+    path.write_text(f'name = "field"\nframe = "local"\n[trajectory]\nkind = "field"\n'
+                    f"boundary = {[list(p) for p in FIELD_BOUNDARY]}\nspacing = {FIELD_SPACING}\n"
+                    f"headland = {FIELD_HEADLAND}\nangle_deg = 0\nspeed = {FIELD_SPEED}\n"
+                    f"turn_rate = {turn_rate}\n")
+    return path
