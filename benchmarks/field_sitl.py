@@ -10,9 +10,10 @@ takes exact fixes from the injector (scenario ``none`` of :mod:`testbed.gnss`: t
 2. ArduPilot's AUTO flies the swaths' end points uploaded as waypoints (what a user does
    without the companion), at ``WP_SPEED`` = the field's straight speed.
 
-Each is scored from the truth over its flight (:mod:`testbed.field_score`): cross-track on the
-swath interiors (p50, p95, max), the farthest excursion beyond the boundary, the share of the
-swath area missed by a tool of the spacing + 0.1 m, and the wall time.
+Each is scored from the truth over its flight (:mod:`companion.mission.coverage`, as a run's
+JSON scores its estimate): cross-track on the swath interiors (p50, p95, max; the mean to the
+right of the swaths driven out and back), the farthest excursion beyond the boundary, the share
+of the swath area missed by a tool of the spacing + 0.1 m, and the wall time.
 
     python -m benchmarks.field_sitl [--model rover-skid] [--vehicle FILE] [--no-native]
         [--turn-rate 0.5] [--json]
@@ -24,20 +25,16 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import sys
 import tempfile
 import time
 from pathlib import Path
 
-from shapely import Polygon
-
 from testbed.field_score import figures
+
 from testbed.gnss import SCENARIOS
 from testbed.gnss_flight import gnss_vehicle, truth_between
 from testbed.gnss_input import sitl_params
-from testbed.missions import FIELD_BOUNDARY as BOUNDARY
-from testbed.missions import FIELD_HEADLAND as HEADLAND
 from testbed.missions import FIELD_SPACING as SPACING
 from testbed.missions import FIELD_SPEED as SPEED
 from testbed.missions import field_mission
@@ -110,8 +107,8 @@ def main() -> int:
         work.mkdir(parents=True, exist_ok=True)
         mission = field_mission(work / "field.toml", args.turn_rate)
         m = missions.load(mission)
-        swaths = [s for s in m.trajectory.straights() if math.dist(*s) > 5.0]
-        area = Polygon(BOUNDARY).buffer(-HEADLAND, join_style="mitre")
+        cover = m.trajectory.cover
+        tool = SPACING + 0.1
         sitl = ArduPilotSITL(work / "sitl", speedup=1.0, params=sitl_params(scenario),
                              model=args.model).start()
         try:
@@ -122,14 +119,12 @@ def main() -> int:
                                     "--mission", str(mission), "--arm", "--json", "--no-zenoh",
                                     "--log-dir", str(work / "logs")], timeout=900)
                 t1 = time.time()
-                rows["companion"] = figures(truth_between(inj, t0, t1), swaths, SPACING,
-                                            BOUNDARY, area)
+                rows["companion"] = figures(truth_between(inj, t0, t1), cover, tool)
                 rows["companion"].update(reason=r["reason"], wall_s=t1 - t0)
                 print(json.dumps(rows), file=sys.stderr, flush=True)
                 if not args.no_native:
-                    a0, a1 = fly_auto(url, swaths, SPEED)
-                    rows["ardupilot_auto"] = figures(truth_between(inj, a0, a1), swaths,
-                                                     SPACING, BOUNDARY, area)
+                    a0, a1 = fly_auto(url, cover.swaths, SPEED)
+                    rows["ardupilot_auto"] = figures(truth_between(inj, a0, a1), cover, tool)
                     rows["ardupilot_auto"].update(wall_s=a1 - a0)
         finally:
             sitl.stop()
@@ -141,10 +136,10 @@ def main() -> int:
     print(f"{'':16s} {'p50':>6s} {'p95':>6s} {'max':>6s} {'excursion':>9s} {'missed':>7s} "
           f"{'wall s':>7s}")
     for name, f in rows.items():
-        print(f"{name:16s} {f['cross_p50']:6.3f} {f['cross_p95']:6.3f} {f['cross_max']:6.3f} "
-              f"{f['excursion']:9.3f} {100 * f['missed']:6.2f}% {f['wall_s']:7.1f}   mean to "
-              "the right, swaths out / back: "
-              + " / ".join(f"{b:+.3f}" for b in f["bias_even_odd"]))
+        print(f"{name:16s} {f['cross_track_p50']:6.3f} {f['cross_track_p95']:6.3f} "
+              f"{f['cross_track_max']:6.3f} {f['excursion']:9.3f} {100 * f['missed']:6.2f}% "
+              f"{f['wall_s']:7.1f}   mean to the right, swaths out / back: "
+              + " / ".join(f"{b:+.3f}" for b in f["lean_out_back"]))
     return 0
 
 

@@ -183,6 +183,7 @@ class Flight:
         """Fly ``mission``: the RunResult. ``vehicle``: what the policy knows of it (a
         KnownVehicle); ``loaded``: its vehicle file, for the flight record; ``sinks`` besides
         the flight log and the bus."""
+        from ..live.coverage import CoverageSink
         from ..live.session import fly
         from ..progress import ProgressSink
         all_sinks = list(self.log_sinks) + list(sinks)
@@ -190,12 +191,29 @@ class Flight:
             all_sinks.append(ProgressSink(mission.duration, mission.name))
         if self.bus is not None:
             all_sinks.append(self.bus)
+        cover = field_cover(mission)
+        covered = CoverageSink(cover, mission.frame) if cover is not None else None
+        if covered is not None:
+            all_sinks.append(covered)
         result = fly(self.settings(mission, vehicle), sinks=all_sinks, log=self.log,
                      switch=self.switch, control=self.bus.control if self.bus else None,
                      make_tracker=make_tracker)
+        if covered is not None:
+            result.extra["coverage"] = covered.figures()
         if self.paths is not None:
             write_record(self.paths, result, loaded)
         return result
+
+
+def field_cover(mission: Any) -> Any:
+    """What a field mission's route is meant to cover (companion.mission.coverage.FieldCover),
+    in the frame the mission is flown in (moved as its trajectory is), or None."""
+    traj = mission.trajectory
+    inner = getattr(traj, "inner", traj)
+    cover = getattr(inner, "cover", None)
+    if cover is not None and inner is not traj:
+        cover = cover.placed(traj.x, traj.y, traj.yaw)
+    return cover
 
 
 RECORD_SCHEMA = "pzc-rover/flight-record/1"

@@ -30,6 +30,7 @@ import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 
+from .coverage import FieldCover
 from .paths import PathError
 from .route import Route, RouteLimits
 
@@ -106,13 +107,13 @@ def plan(boundary: Sequence[tuple[float, float]], *, spacing: float, limits: Rou
             + (f" ({slivers} corner slivers shorter than the spacing left out)" if slivers
                else ""))
     route = Route(tuple(points), limits, corner_radius=turn_radius, kind=kind, note=note)
-    if lead_in or lead_out:
-        driven = list(lead_in) + points + list(lead_out)
-        joined = [p for i, p in enumerate(driven) if i == 0 or math.dist(p, driven[i - 1]) > 0.01]
-        whole = Route(tuple(joined), limits, corner_radius=turn_radius, kind=kind, note=note)
-    else:
-        whole = route
     allowed = area.buffer(room + 1e-3, join_style="mitre")
+    cover = FieldCover(tuple(swaths), spacing, tuple(area.exterior.coords),
+                       tuple(allowed.exterior.coords))
+    driven = list(lead_in) + points + list(lead_out)
+    joined = [p for i, p in enumerate(driven) if i == 0 or math.dist(p, driven[i - 1]) > 0.01]
+    whole = Route(tuple(joined), limits, corner_radius=turn_radius, kind=kind, note=note,
+                  cover=cover)
     path = LineString(route.outline())
     if not allowed.contains(path):
         out = path.difference(allowed).length

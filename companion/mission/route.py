@@ -25,6 +25,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 from ..core.signals import Reference
+from .coverage import FieldCover
 from .paths import PathError
 from .polyline import build_pieces
 
@@ -122,6 +123,7 @@ class Route:
     kind: str = "route"
     duration: float | None = None
     note: str = field(default="", compare=False)   # what planned it said (mission check)
+    cover: FieldCover | None = field(default=None, compare=False)   # a field's: what to cover
     _pieces: tuple = field(init=False, repr=False, compare=False)
     _starts: tuple[float, ...] = field(init=False, repr=False, compare=False)
     _phases: tuple[_Phase, ...] = field(init=False, repr=False, compare=False)
