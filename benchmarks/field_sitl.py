@@ -30,8 +30,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from testbed.field_score import figures
-
+from companion.mission.coverage import figures
 from testbed.gnss import SCENARIOS
 from testbed.gnss_flight import gnss_vehicle, truth_between
 from testbed.gnss_input import sitl_params
