@@ -191,7 +191,7 @@ class Flight:
             all_sinks.append(ProgressSink(mission.duration, mission.name))
         if self.bus is not None:
             all_sinks.append(self.bus)
-        cover = field_cover(mission)
+        cover = mission.field_cover()
         covered = CoverageSink(cover, mission.frame) if cover is not None else None
         if covered is not None:
             all_sinks.append(covered)
@@ -203,17 +203,6 @@ class Flight:
         if self.paths is not None:
             write_record(self.paths, result, loaded)
         return result
-
-
-def field_cover(mission: Any) -> Any:
-    """What a field mission's route is meant to cover (companion.mission.coverage.FieldCover),
-    in the frame the mission is flown in (moved as its trajectory is), or None."""
-    traj = mission.trajectory
-    inner = getattr(traj, "inner", traj)
-    cover = getattr(inner, "cover", None)
-    if cover is not None and inner is not traj:
-        cover = cover.placed(traj.x, traj.y, traj.yaw)
-    return cover
 
 
 RECORD_SCHEMA = "pzc-rover/flight-record/1"

@@ -59,6 +59,7 @@ from ..errors import UserError
 from ..sim import gains as _gains
 from ..sim.plant import RoverParams
 from . import paths
+from .coverage import FieldCover
 from .polyline import Polyline
 from .profile import MotionProfile, limit_problem, measure
 from .schema import Table, short
@@ -119,6 +120,16 @@ class Mission:
         if self.frame == "local" or (x0, y0, yaw0) == (0.0, 0.0, 0.0):
             return self.trajectory
         return paths.Placed(self.trajectory, float(x0), float(y0), float(yaw0))
+
+    def field_cover(self) -> FieldCover | None:
+        """What a field's route is meant to cover, in the frame the mission is flown in (moved
+        as its trajectory is; a "start" frame's anchoring is the run's), or None."""
+        traj = self.trajectory
+        inner = getattr(traj, "inner", traj)
+        cover = getattr(inner, "cover", None)
+        if cover is not None and isinstance(traj, paths.Placed):
+            cover = cover.placed(traj.x, traj.y, traj.yaw)
+        return cover
 
     def summary(self) -> str:
         """One line: kind, length, duration, peak speed and turn rate against the limits."""

@@ -11,10 +11,10 @@ warning line per item (``ImportedPlan.warnings``), and left out of the path: tak
 loiter, return-to-launch, jumps, camera and other DO commands, a waypoint's hold time, a waypoint
 at the same place as the previous point. The first ``DO_CHANGE_SPEED`` before any waypoint sets
 the speed (later ones are reported). A QGroundControl Survey (a ComplexItem) is read by
-:mod:`companion.mission.survey` and flown as a field, its waypoints before it leading there
-and those after it leading on; a plan holds one survey. What cannot be turned into a path at all is an *error*: other ComplexItems
-(corridor and structure scans), a waypoint without a position or in a local frame, a
-malformed file.
+:mod:`companion.mission.survey` and flown as a field, the waypoints before it leading there
+and those after it leading on; a plan holds one survey. What cannot be turned into a path at
+all is an *error*: other ComplexItems (corridor and structure scans), a waypoint without a
+position or in a local frame, a malformed file.
 """
 
 from __future__ import annotations

@@ -118,12 +118,11 @@ def _field(spec: Table, start: tuple[float, float] | None) -> Trajectory:
     return plan.route
 
 
-def route_limits(spec: Table, speed: float | None = None):
+def route_limits(spec: Table):
     """A route's time law from a table's ``speed``, ``turn_rate``, ``lateral_accel``, ``accel``."""
     from .route import RouteLimits
     return RouteLimits(
-        speed=speed if speed is not None else spec.number("speed", required=True,
-                                                          positive=True, maximum=MAX_SPEED),
+        speed=spec.number("speed", required=True, positive=True, maximum=MAX_SPEED),
         turn_rate=spec.number("turn_rate", 0.5, positive=True, maximum=100.0),
         lateral_accel=spec.number("lateral_accel", 0.5, positive=True, maximum=100.0),
         accel=spec.number("accel", DEFAULT_ACCEL, positive=True, maximum=100.0))

@@ -97,3 +97,18 @@ def test_bad_field_keys_are_one_line_errors(tmp_path, body, text):
         missions.load(path)
     line = str(err.value)
     assert "\n" not in line and str(path) in line and text in line
+
+
+def test_the_cover_moves_with_a_mission_placed_around_another_origin(tmp_path):
+    path = tmp_path / "g.toml"
+    path.write_text('frame = "geodetic"\norigin = [-35.363261, 149.165230]\n[trajectory]\n'
+                    'kind = "field"\n'
+                    f"boundary = {[list(p) for p in FIELD]}\n"
+                    "spacing = 1.0\nheadland = 3.0\nangle_deg = 0\nspeed = 1.0\n")
+    m = missions.load(path, origin=(-35.3633, 149.1652))      # the EKF origin elsewhere
+    cover = m.field_cover()
+    assert cover is not None
+    first = m.trajectory.sample(m.duration * 0.05)              # on the first swath
+    (a, b) = cover.swaths[0]
+    side = ((b[0] - a[0]) * (first.y - a[1]) - (b[1] - a[1]) * (first.x - a[0])) / math.dist(a, b)
+    assert abs(side) < 1e-6 and math.dist(a, (3.0, 3.5)) > 1.0   # moved, and on the route
