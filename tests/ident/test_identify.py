@@ -417,9 +417,12 @@ def test_a_run_log_with_a_failsafe_in_it_records_the_stop_and_still_identifies(v
     assert p.returncode == 0, p.stderr
     r = json.loads(p.stdout)
     check_recovered(r["params"], turning_speeds=turning_speeds(flown["csv"], 3.0))
-    # as the run without a failsafe (test above); holding the tracker's setpoint through the
-    # stop made these 0.18 m/s and 0.29-0.31 rad/s
-    assert r["check"]["speed_m_s"] < 0.05 and r["check"]["yaw_rate_rad_s"] < 0.15, r["check"]
+    # Holding the tracker's setpoint through the stop made these 0.18 m/s and 0.29-0.31 rad/s.
+    # With the stop recorded the speed is 0.007-0.044 m/s (2026-12-07: five runs alone, four
+    # side by side) and 0.063 once in a fresh clone's `make test`: the SIGSTOP lands at a
+    # different point of the lockstep exchange each time, so the rover coasts differently
+    # through the 0.6 s before tracking resumes. 0.1 still tells the two apart.
+    assert r["check"]["speed_m_s"] < 0.1 and r["check"]["yaw_rate_rad_s"] < 0.15, r["check"]
 
 
 @pytest.mark.slow   # long: started first under workers (conftest.py)
