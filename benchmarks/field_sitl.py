@@ -45,22 +45,14 @@ VEHICLES = {"rover-skid": ROOT / "companion" / "sim" / "vehicles" / "ardupilot_s
 def fly_auto(url: str, swaths, speed: float, timeout: float = 900.0) -> tuple[float, float]:
     """ArduPilot's AUTO along the swaths' end points: (start, end) of the field on the
     truth's clock (time.time()), from reaching the first swath's start to the last end."""
-    from companion.mav import mission_transfer as mt
-    from companion.mission import geo
-    from testbed.mission_gcs import GroundStation
+    from testbed.mission_gcs import GroundStation, waypoint_mission
     with GroundStation(url) as gcs:
         asked = time.monotonic()
         gcs.command((1, 1), 512, 49)          # MAV_CMD_REQUEST_MESSAGE: GPS_GLOBAL_ORIGIN
         origin = gcs.wait_for(lambda: gcs.of("GPS_GLOBAL_ORIGIN", (1, 1), asked), 10.0,
                               "the EKF origin")[-1]
         home = (origin.latitude / 1e7, origin.longitude / 1e7)
-        items = [mt.item(0, 16, 0, (0.0, 0.0, 0.0, 0.0), int(round(home[0] * 1e7)),
-                         int(round(home[1] * 1e7)), 0.0),
-                 mt.item(1, 178, 2, (1.0, speed, -1.0, 0.0), 0, 0, 0.0)]
-        for a, b in swaths:
-            for north, east in (a, b):
-                lat, lon = geo.latlon_from_ne(north, east, home)
-                items.append(mt.waypoint(len(items), lat, lon, 0.0))
+        items = waypoint_mission(home, [p for swath in swaths for p in swath], speed)
         gcs.upload(1, items)
         gcs.mav.param_set_send(1, 1, b"WP_SPEED", speed, 9)
         deadline = time.monotonic() + 120

@@ -13,6 +13,7 @@ from typing import Any
 from pymavlink import mavutil
 
 from companion.mav import mission_transfer as mt
+from companion.mission import geo
 
 from .link_thread import LinkThread
 
@@ -93,3 +94,15 @@ class GroundStation(LinkThread):
             mt.push(self.conn, sysid, 1, items)
         finally:
             self._paused.clear()
+
+
+def waypoint_mission(home: tuple[float, float], points, speed: float) -> list[Any]:
+    """A mission as a ground station uploads it: item 0 the home, a DO_CHANGE_SPEED to
+    ``speed`` m/s, then a NAV_WAYPOINT at each (north, east) metres from ``home``."""
+    out = [mt.item(0, 16, 0, (0.0, 0.0, 0.0, 0.0), int(round(home[0] * 1e7)),
+                   int(round(home[1] * 1e7)), 0.0),
+           mt.item(1, 178, 2, (1.0, speed, -1.0, 0.0), 0, 0, 0.0)]
+    for north, east in points:
+        lat, lon = geo.latlon_from_ne(north, east, home)
+        out.append(mt.waypoint(len(out), lat, lon, 0.0))
+    return out

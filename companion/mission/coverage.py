@@ -88,6 +88,7 @@ def figures(points: Sequence[Pt], cover: FieldCover, tool_width: float | None = 
     equal: the tracking leans), samples on swaths of all, the excursion beyond the boundary,
     and the share of the swath area missed by a tool ``tool_width`` wide (default: the
     spacing)."""
+    tool = tool_width or cover.spacing
     signed = cross_track(points, cover.swaths, cover.spacing)
     xt = np.abs(signed[:, 1])
     out_back = [signed[signed[:, 0] % 2 == k, 1] for k in (0, 1)]
@@ -101,5 +102,4 @@ def figures(points: Sequence[Pt], cover: FieldCover, tool_width: float | None = 
             "lean_out_back": [stat(v, np.mean) for v in out_back],
             "on_swaths": int(len(xt)), "samples": len(points),
             "excursion": excursion(points, cover.boundary),
-            "tool_width": tool_width or cover.spacing,
-            "missed": missed_share(points, cover.area, tool_width or cover.spacing)}
+            "tool_width": tool, "missed": missed_share(points, cover.area, tool)}

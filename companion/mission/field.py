@@ -46,9 +46,7 @@ class FieldPlan:
     swaths: tuple[tuple[tuple[float, float], tuple[float, float]], ...]   # as driven
     angle: float               # swath heading, radians from north towards east
     spacing: float
-    headland: float
     turn_radius: float
-    field_area: float          # m^2 of the field polygon
     covered: float             # share of the swath area the swaths cover at the spacing's width
 
 
@@ -106,7 +104,6 @@ def plan(boundary: Sequence[tuple[float, float]], *, spacing: float, limits: Rou
             f"{area.area:.0f} m^2 swath area covered at the spacing"
             + (f" ({slivers} corner slivers shorter than the spacing left out)" if slivers
                else ""))
-    route = Route(tuple(points), limits, corner_radius=turn_radius, kind=kind, note=note)
     allowed = area.buffer(room + 1e-3, join_style="mitre")
     cover = FieldCover(tuple(swaths), spacing, tuple(area.exterior.coords),
                        tuple(allowed.exterior.coords))
@@ -114,13 +111,15 @@ def plan(boundary: Sequence[tuple[float, float]], *, spacing: float, limits: Rou
     joined = [p for i, p in enumerate(driven) if i == 0 or math.dist(p, driven[i - 1]) > 0.01]
     whole = Route(tuple(joined), limits, corner_radius=turn_radius, kind=kind, note=note,
                   cover=cover)
+    # the room is checked on the field's own part (a lead-in from home may come from anywhere)
+    route = (whole if not (lead_in or lead_out) else
+             Route(tuple(points), limits, corner_radius=turn_radius))
     path = LineString(route.outline())
     if not allowed.contains(path):
         out = path.difference(allowed).length
         raise PathError("headland", f"the turns leave the room given for them by {out:.2f} m "
                                     "of path: widen the headland (a survey: the turnaround)")
-    return FieldPlan(whole, tuple(swaths), angle, spacing, headland, turn_radius, field.area,
-                     covered)
+    return FieldPlan(whole, tuple(swaths), angle, spacing, turn_radius, covered)
 
 
 def _segments(flat, spacing: float, phase: float | None

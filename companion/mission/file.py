@@ -125,8 +125,7 @@ class Mission:
         """What a field's route is meant to cover, in the frame the mission is flown in (moved
         as its trajectory is; a "start" frame's anchoring is the run's), or None."""
         traj = self.trajectory
-        inner = getattr(traj, "inner", traj)
-        cover = getattr(inner, "cover", None)
+        cover = getattr(_unplaced(traj), "cover", None)
         if cover is not None and isinstance(traj, paths.Placed):
             cover = cover.placed(traj.x, traj.y, traj.yaw)
         return cover
@@ -147,7 +146,7 @@ class Mission:
                       "turn rate " + against(p.peak_turn_rate, lim.max_yaw_rate, "rad/s")]
         else:
             parts.append(f"{self.duration:.1f} s")
-        note = getattr(getattr(self.trajectory, "inner", self.trajectory), "note", "")
+        note = getattr(_unplaced(self.trajectory), "note", "")
         return ", ".join(parts) + (f"; {note}" if note else "")
 
 
@@ -339,8 +338,13 @@ def _period(traj) -> float | None:
     return getattr(traj, "period", None)
 
 
+def _unplaced(traj):
+    """The trajectory inside a :class:`paths.Placed` (itself when it is not placed)."""
+    return getattr(traj, "inner", traj)
+
+
 def _kind_name(traj) -> str:
-    inner = getattr(traj, "inner", traj)
+    inner = _unplaced(traj)
     return "ellipse" if isinstance(inner, Ellipse) else inner.kind
 
 

@@ -172,13 +172,19 @@ class Polyline:
         s, ds, dds = self._profile.at(t)
         if self.closed:
             s = s % self.length
-        i = max(0, bisect.bisect_right(self._starts, s) - 1)
-        piece = self._pieces[i]
-        u = min(s - piece.s0, piece.length)
-        x, y, h = piece.at(u)
-        c, sn = math.cos(h), math.sin(h)
-        k = piece.kappa * ds * ds
-        return Reference(x, y, c * ds, sn * ds, c * dds - sn * k, sn * dds + c * k)
+        return reference_at(self._pieces, self._starts, s, ds, dds)
+
+
+def reference_at(pieces: Sequence[_Piece], starts: Sequence[float], s: float, ds: float,
+                 dds: float) -> Reference:
+    """The reference ``s`` metres along ``pieces`` (their ``s0`` in ``starts``), moving at
+    ``ds`` and speeding up at ``dds`` along the path: the tangent's velocity and acceleration
+    plus the curvature's ds^2 kappa across it."""
+    piece = pieces[max(0, bisect.bisect_right(starts, s) - 1)]
+    x, y, h = piece.at(min(max(s - piece.s0, 0.0), piece.length))
+    c, sn = math.cos(h), math.sin(h)
+    k = piece.kappa * ds * ds
+    return Reference(x, y, c * ds, sn * ds, c * dds - sn * k, sn * dds + c * k)
 
 
 def build_pieces(points: Sequence[tuple[float, float]], radius: float, closed: bool,

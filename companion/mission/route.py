@@ -11,9 +11,8 @@ exactly per piece: the speed at each joint is the lower of its two pieces' limit
 forwards and backwards until the along-path acceleration limit can reach it; within a piece
 the speed rises, cruises at the piece's limit, and falls (a trapezoid in time, or a
 triangle on a short piece), each change of speed along half a cosine so the along-path
-acceleration is continuous (a step in it, from a trapezoid, left the skid-steer rover on ArduPilot
-SITL 6 cm behind its reference for two seconds after each turn). The route starts and ends at
-rest. Where an arc meets a straight the curvature, and so the lateral acceleration v^2 kappa,
+acceleration is continuous (what the steps of a plain trapezoid cost on ArduPilot SITL:
+docs/benchmarks.md, the field). The route starts and ends at rest. Where an arc meets a straight the curvature, and so the lateral acceleration v^2 kappa,
 still steps: it is small at the turns' speeds.
 """
 
@@ -27,7 +26,7 @@ from dataclasses import dataclass, field
 from ..core.signals import Reference
 from .coverage import FieldCover
 from .paths import PathError
-from .polyline import build_pieces
+from .polyline import build_pieces, reference_at
 
 
 @dataclass(frozen=True)
@@ -173,14 +172,7 @@ class Route:
         return phase.at(min(t - phase.t0, phase.duration))
 
     def sample(self, t: float) -> Reference:
-        s, ds, dds = self.along(t)
-        i = max(0, bisect.bisect_right(self._starts, s) - 1)
-        piece = self._pieces[i]
-        u = min(max(s - piece.s0, 0.0), piece.length)
-        x, y, h = piece.at(u)
-        c, sn = math.cos(h), math.sin(h)
-        k = piece.kappa * ds * ds
-        return Reference(x, y, c * ds, sn * ds, c * dds - sn * k, sn * dds + c * k)
+        return reference_at(self._pieces, self._starts, *self.along(t))
 
     def straights(self) -> list[tuple[tuple[float, float], tuple[float, float]]]:
         """The straight pieces as (start, end) points, in the order driven."""

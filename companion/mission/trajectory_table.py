@@ -164,8 +164,14 @@ def waypoint_path(points, speed: float, corner_radius: float | None, source: str
                         accel=DEFAULT_ACCEL, shrink_corners=True)
     except paths.PathError as exc:
         raise UserError(f"{source}: {exc}") from None
+    return _to_its_end(traj, source)
+
+
+def _to_its_end(traj, source: str):
+    """(trajectory, duration, profile) of an open path (a plan's, a survey's) flown until it
+    comes to rest at its end."""
     duration = traj.motion_end
-    assert duration is not None   # an open path (a plan's) comes to a stop
+    assert duration is not None   # an open path comes to a stop
     traj = replace(traj, duration=duration)
     try:
         profile = measure(traj, duration, motion_end=duration)
@@ -229,13 +235,7 @@ def _survey_path(path: Path, plan, speed: float, warnings: list[str], where: str
                              through=transects[0][0] if transects else None)
     except paths.PathError as exc:
         raise UserError(f"{path}: {sv.where}: {exc.key}: {exc}") from None
-    traj = planned.route
-    duration = traj.motion_end
-    traj = replace(traj, duration=duration)
-    try:
-        profile = measure(traj, duration, motion_end=duration)
-    except (ArithmeticError, ValueError) as exc:
-        raise UserError(f"{path}: {exc}") from None
+    traj, duration, profile = _to_its_end(planned.route, str(path))
     said, agree = survey.compare(planned.swaths, transects, sv.spacing)
     if not agree:
         warnings.append(f"{path}: {sv.where}: {said}")

@@ -22,7 +22,7 @@ from companion.mission import geo
 from sitl_plant.earth import CMAC
 from testbed.ardupilot import CompanionProcess
 from testbed.marks import CANDIDATE
-from testbed.mission_gcs import COMPANION, GroundStation
+from testbed.mission_gcs import COMPANION, GroundStation, waypoint_mission
 from testbed.process import companion_cli
 
 SPEEDUP = 5
@@ -45,13 +45,7 @@ def _waypoint_misses(res: dict, home: tuple[float, float]) -> list[float]:
 
 
 def _items(home: tuple[float, float]) -> list:
-    out = [mt.item(0, 16, 0, (0.0, 0.0, 0.0, 0.0), int(round(home[0] * 1e7)),
-                   int(round(home[1] * 1e7)), 0.0)]
-    out.append(mt.item(1, 178, 2, (1.0, 1.0, -1.0, 0.0), 0, 0, 0.0))    # DO_CHANGE_SPEED 1
-    for north, east in LEG:
-        lat, lon = geo.latlon_from_ne(north, east, home)
-        out.append(mt.waypoint(len(out), lat, lon, 0.0))
-    return out
+    return waypoint_mission(home, LEG, 1.0)
 
 
 @pytest.mark.sitl
